@@ -1,0 +1,39 @@
+"""Install tactile_descriptors_ros (ament_python; also plain pip)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "tactile_descriptors_ros"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),
+    package_data={PACKAGE: ["sim/models/*.json"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
+        ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
+        ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=["numpy", "scipy", "scikit-learn", "PyYAML", "python-can", "pyserial",
+                      "rosbags", "matplotlib", "tqdm"],
+    python_requires=">=3.10",
+    zip_safe=True,
+    maintainer="tactile_descriptors_ros maintainers",
+    maintainer_email="tactile@example.org",
+    description="Robust tactile descriptors and online material recognition for ROS 2",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "tactile = tactile_descriptors_ros.tools.cli:main",
+            "biotac_driver = tactile_descriptors_ros.nodes.biotac_driver:main",
+            "skin_driver = tactile_descriptors_ros.nodes.skin_driver:main",
+            "window_node = tactile_descriptors_ros.nodes.window_node:main",
+            "classifier_node = tactile_descriptors_ros.nodes.classifier_node:main",
+        ],
+    },
+)

@@ -1,0 +1,3 @@
+"""The ``tactile`` command and the library functions behind its subcommands."""
+
+__all__: list[str] = []
