@@ -1,0 +1,463 @@
+"""From one window of cell signals to the robot's descriptor.
+
+Pipeline (Kaboli et al. 2018, section III):
+
+1. per cell: Hjorth Activity, Mobility, Complexity of every vibration (S) and
+   deformation (V) channel (eq. 1-3), and the linear (Pearson, eq. 4) and
+   nonlinear (Spearman, eq. 5) correlation of every S channel with every V
+   channel, V held onto S's time base (:mod:`.alignment`);
+2. contact gate lambda (eq. 13, 16, 27): a cell counts only if its mean normal
+   force over the window is at least F_t;
+3. per body part: the average over the cells in contact and, in the paper's
+   ``averaged`` mode, over the channels of each axis (eq. 6-10, 14-15,
+   19-26), giving eq. 11's layout
+   ``[A_S, A_V, M_S, M_V, C_S, C_V, L_SV, N_SV]`` -- 8 values for a BioTac
+   finger (eq. 17), 18 for a skin body part (eq. 28), 24 for two 3-axis
+   modalities (eq. 11); in ``per_channel`` mode each channel is kept (98
+   values per BioTac);
+4. whole robot: body parts concatenated in the configured order (eq. 12, 18,
+   29), or ``pooled``: the mean over the body parts in contact of one cell
+   type, which transfers across hands and finger subsets.
+
+A body part with no cell in contact yields zeros, ``contact = False`` and the
+``NO_CONTACT`` flag.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import SignalError
+from .alignment import hold_indices
+from .descriptors import Quality, hjorth, pearson, spearman
+from .robot import BodyPart, CellType, RobotDescription
+
+__all__ = [
+    "CellSignals",
+    "CellFeatures",
+    "BodyPartDescriptor",
+    "RobotDescriptor",
+    "cell_features",
+    "contact_gate",
+    "body_part_layout",
+    "reduce_body_part",
+    "describe_window",
+    "pool_body_parts",
+]
+
+_QUANTITIES = ("A", "M", "C")
+
+
+@dataclass
+class CellSignals:
+    """One cell's samples in one window.
+
+    Attributes
+    ----------
+    vibration : numpy.ndarray, shape (n_vibration_channels, n_fast)
+        Vibration samples S (counts or SI; integer counts are ranked exactly).
+    vibration_t_ns : numpy.ndarray of int64, shape (n_fast,)
+        Their time stamps.
+    deformation : numpy.ndarray, shape (n_deformation_channels, n_slow)
+        Deformation samples V.
+    deformation_t_ns : numpy.ndarray of int64, shape (n_slow,)
+        Their time stamps.  For the correlations the window should include the
+        last V sample at or before the first S sample; S samples before the
+        first V sample are not paired.
+    force_n : numpy.ndarray, shape (n_force,)
+        Normal force samples in newtons over the window (for the gate).
+    valid : bool
+        False when the window holds invalid samples (parity errors, lost
+        frames) for this cell: the cell is left out and flagged ``INVALID``.
+    """
+
+    vibration: np.ndarray
+    vibration_t_ns: np.ndarray
+    deformation: np.ndarray
+    deformation_t_ns: np.ndarray
+    force_n: np.ndarray
+    valid: bool = True
+
+
+@dataclass
+class CellFeatures:
+    """Per-channel quantities of a batch of cells (before any averaging).
+
+    Arrays are indexed ``[cell, channel]`` (``[cell, s_channel, v_channel]``
+    for the correlations); ``quality`` is the per-cell OR of every flag.
+    """
+
+    act_s: np.ndarray
+    mob_s: np.ndarray
+    com_s: np.ndarray
+    act_v: np.ndarray
+    mob_v: np.ndarray
+    com_v: np.ndarray
+    lin: np.ndarray
+    nonlin: np.ndarray
+    quality: np.ndarray
+
+
+@dataclass
+class BodyPartDescriptor:
+    """Descriptor of one body part in one window (eq. 11, 17, 28)."""
+
+    name: str
+    cell_type: str
+    values: np.ndarray
+    labels: tuple[str, ...]
+    contact: bool
+    cells_in_contact: int
+    cells_total: int
+    mean_force_n: float
+    quality: int
+
+
+@dataclass
+class RobotDescriptor:
+    """Whole-robot descriptor of one window (eq. 12, 18, 29, or pooled)."""
+
+    robot: str
+    layout: str
+    channels: str
+    body_parts: tuple[BodyPartDescriptor, ...]
+    values: np.ndarray
+    labels: tuple[str, ...]
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def contact(self) -> bool:
+        """True when any body part was in contact."""
+        return any(bp.contact for bp in self.body_parts)
+
+
+def _stack_times(times: list[np.ndarray]) -> np.ndarray:
+    return np.stack([np.asarray(t, dtype=np.int64) for t in times])
+
+
+def cell_features(
+    vibration: np.ndarray,
+    vibration_t_ns: np.ndarray,
+    deformation: np.ndarray,
+    deformation_t_ns: np.ndarray,
+    vibration_rate_hz: float,
+    deformation_rate_hz: float,
+) -> CellFeatures:
+    """Hjorth parameters and correlations of a batch of cells (eq. 1-5).
+
+    Parameters
+    ----------
+    vibration : array_like, shape (n_cells, n_s, n_fast)
+        S samples of each cell.
+    vibration_t_ns : array_like of int64, shape (n_fast,) or (n_cells, n_fast)
+        S sample times (shared by all cells, or per cell).
+    deformation : array_like, shape (n_cells, n_v, n_slow)
+        V samples of each cell.
+    deformation_t_ns : array_like of int64, shape (n_slow,) or (n_cells, n_slow)
+        V sample times.
+    vibration_rate_hz, deformation_rate_hz : float
+        Sampling rates, for the derivative per second (Mobility in rad/s).
+
+    Returns
+    -------
+    CellFeatures
+    """
+    s = np.asarray(vibration)
+    v = np.asarray(deformation)
+    if s.ndim != 3 or v.ndim != 3 or s.shape[0] != v.shape[0]:
+        raise SignalError(
+            f"vibration and deformation must be (n_cells, channels, samples) with the same n_cells; "
+            f"got {s.shape} and {v.shape}"
+        )
+    n_cells = s.shape[0]
+    ts = np.asarray(vibration_t_ns, dtype=np.int64)
+    tv = np.asarray(deformation_t_ns, dtype=np.int64)
+    ts = np.broadcast_to(ts, (n_cells, s.shape[2])) if ts.ndim == 1 else ts
+    tv = np.broadcast_to(tv, (n_cells, v.shape[2])) if tv.ndim == 1 else tv
+    if ts.shape != (n_cells, s.shape[2]) or tv.shape != (n_cells, v.shape[2]):
+        raise SignalError(
+            f"time stamps do not match samples: {ts.shape} vs {s.shape}, {tv.shape} vs {v.shape}"
+        )
+
+    hs = hjorth(s, vibration_rate_hz)
+    hv = hjorth(v, deformation_rate_hz)
+    quality = np.bitwise_or.reduce(hs.quality, axis=1) | np.bitwise_or.reduce(hv.quality, axis=1)
+
+    lin = np.zeros((n_cells, s.shape[1], v.shape[1]))
+    nonlin = np.zeros_like(lin)
+    corr_quality = np.zeros(n_cells, dtype=np.uint32)
+    shared = n_cells > 0 and bool(np.all(ts == ts[0])) and bool(np.all(tv == tv[0]))
+    groups = [np.arange(n_cells)] if shared else [np.array([c]) for c in range(n_cells)]
+    for cells in groups:
+        if cells.size == 0:
+            continue
+        c0 = int(cells[0])
+        idx = hold_indices(tv[c0], ts[c0])
+        paired = idx >= 0
+        if v.shape[2] == 0:
+            paired[:] = False
+        s_p = s[cells][:, :, paired]  # (k, n_s, n_pair)
+        v_p = v[cells][:, :, idx[paired]]  # (k, n_v, n_pair), held
+        r, qr = pearson(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
+        rho, qn = spearman(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
+        lin[cells] = r
+        nonlin[cells] = rho
+        corr_quality[cells] = np.bitwise_or.reduce((qr | qn).reshape(len(cells), -1), axis=1)
+    return CellFeatures(
+        hs.activity, hs.mobility, hs.complexity, hv.activity, hv.mobility, hv.complexity,
+        lin, nonlin, quality | corr_quality,
+    )
+
+
+def contact_gate(force_n: np.ndarray, threshold_n: float) -> np.ndarray:
+    """Contact gate lambda of eq. 13/16/27: mean force over the window >= F_t.
+
+    Parameters
+    ----------
+    force_n : array_like, shape (n_cells, n_samples) or a list of 1-D arrays
+        Normal force per cell in newtons.  Non-finite samples are ignored; a
+        cell without finite samples is not in contact.
+    threshold_n : float
+        F_t in newtons (0.2 N in the paper).
+
+    Returns
+    -------
+    numpy.ndarray of bool, shape (n_cells,)
+    """
+    out = []
+    for f in force_n:
+        f = np.asarray(f, dtype=np.float64)
+        f = f[np.isfinite(f)]
+        out.append(bool(f.size) and float(f.mean()) >= threshold_n)
+    return np.array(out, dtype=bool)
+
+
+def _axis_suffix(name: str) -> str:
+    return f"_{name}" if name else ""
+
+
+def body_part_layout(cell_type: CellType, channels: str = "averaged") -> tuple[str, ...]:
+    """Labels of a body part's values, in eq. 11 order.
+
+    Averaged (eq. 11/17/28): ``A_<S>[_axis]`` per S axis, ``A_<V>[_axis]``
+    per V axis, the same for M and C, then ``L_<S>_<V>[_axis]`` and
+    ``N_<S>_<V>[_axis]`` per correlation pair.  Per channel: one label per
+    S channel, V channel and (S channel, V channel) pair.
+    """
+    vib, dfm = cell_type.vibration, cell_type.deformation
+    pairs = cell_type.correlation_pairs()
+    labels: list[str] = []
+    if channels == "averaged":
+        for q in _QUANTITIES:
+            labels += [f"{q}_{vib.symbol}{_axis_suffix(a)}" for a in vib.axis_names]
+            labels += [f"{q}_{dfm.symbol}{_axis_suffix(a)}" for a in dfm.axis_names]
+        multi_v = len(dfm.axes) > 1 and cell_type.correlate != "pairwise"
+        for q in ("L", "N"):
+            for i, j in pairs:
+                suffix = _axis_suffix(vib.axis_names[i]) + (_axis_suffix(dfm.axis_names[j]) if multi_v else "")
+                labels.append(f"{q}_{vib.symbol}_{dfm.symbol}{suffix}")
+    elif channels == "per_channel":
+        for q in _QUANTITIES:
+            labels += [f"{q}_{ch}" for ch in vib.channels]
+            labels += [f"{q}_{ch}" for ch in dfm.channels]
+        for q in ("L", "N"):
+            for i, j in pairs:
+                labels += [f"{q}_{sc}_{vc}" for sc in vib.axes[i] for vc in dfm.axes[j]]
+    else:
+        raise SignalError(f"channels must be 'averaged' or 'per_channel', got {channels!r}")
+    return tuple(labels)
+
+
+def _channel_slices(axes: tuple[tuple[str, ...], ...]) -> list[slice]:
+    out, start = [], 0
+    for axis in axes:
+        out.append(slice(start, start + len(axis)))
+        start += len(axis)
+    return out
+
+
+def reduce_body_part(features: CellFeatures, in_contact: np.ndarray, cell_type: CellType,
+                     channels: str = "averaged") -> np.ndarray:
+    """Average per-cell quantities over the cells in contact (eq. 6-10, 14-15, 19-26).
+
+    Parameters
+    ----------
+    features : CellFeatures
+        Quantities of the body part's cells.
+    in_contact : array_like of bool, shape (n_cells,)
+        The gate lambda per cell.
+    cell_type : CellType
+        Gives the axes (channels averaged within an axis) and correlation pairs.
+    channels : {"averaged", "per_channel"}
+
+    Returns
+    -------
+    numpy.ndarray
+        Values in the order of :func:`body_part_layout`; zeros when no cell is
+        in contact.
+    """
+    labels = body_part_layout(cell_type, channels)
+    mask = np.asarray(in_contact, dtype=bool)
+    if not mask.any():
+        return np.zeros(len(labels))
+    s_axes = _channel_slices(cell_type.vibration.axes)
+    v_axes = _channel_slices(cell_type.deformation.axes)
+    pairs = cell_type.correlation_pairs()
+
+    def cells_mean(a: np.ndarray) -> np.ndarray:
+        return a[mask].mean(axis=0)
+
+    parts: list[np.ndarray] = []
+    for s_arr, v_arr in ((features.act_s, features.act_v), (features.mob_s, features.mob_v),
+                         (features.com_s, features.com_v)):
+        s_m, v_m = cells_mean(s_arr), cells_mean(v_arr)
+        if channels == "averaged":
+            parts.append(np.array([s_m[sl].mean() for sl in s_axes]))
+            parts.append(np.array([v_m[sl].mean() for sl in v_axes]))
+        else:
+            parts += [s_m, v_m]
+    for corr in (features.lin, features.nonlin):
+        c_m = cells_mean(corr)
+        if channels == "averaged":
+            parts.append(np.array([c_m[s_axes[i], v_axes[j]].mean() for i, j in pairs]))
+        else:
+            parts.append(np.concatenate([c_m[s_axes[i], v_axes[j]].ravel() for i, j in pairs]))
+    values = np.concatenate(parts)
+    assert values.shape[0] == len(labels)
+    return values
+
+
+def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[int, CellSignals],
+                          threshold_n: float, channels: str) -> BodyPartDescriptor:
+    labels = body_part_layout(cell_type, channels)
+    present = [c for c in part.cells if c.id in cells]
+    quality = 0
+    if len(present) < len(part.cells):
+        quality |= int(Quality.GAP)
+    usable = [c for c in present if cells[c.id].valid]
+    if len(usable) < len(present):
+        quality |= int(Quality.INVALID)
+    gate = contact_gate([cells[c.id].force_n for c in usable], threshold_n) if usable else np.zeros(0, bool)
+    touching = [c for c, g in zip(usable, gate) if g]
+    if not touching:
+        return BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
+                                  len(part.cells), 0.0, quality | int(Quality.NO_CONTACT))
+    values_sum = np.zeros(len(labels))
+    n_sum = 0
+    # Batch cells whose windows have identical shapes (the common case).
+    groups: dict[tuple, list[int]] = {}
+    for c in touching:
+        sig = cells[c.id]
+        key = (np.shape(sig.vibration), np.shape(sig.deformation))
+        groups.setdefault(key, []).append(c.id)
+    for ids in groups.values():
+        sigs = [cells[i] for i in ids]
+        _check_channels(sigs, cell_type, ids)
+        feats = cell_features(
+            np.stack([sg.vibration for sg in sigs]), _stack_times([sg.vibration_t_ns for sg in sigs]),
+            np.stack([sg.deformation for sg in sigs]), _stack_times([sg.deformation_t_ns for sg in sigs]),
+            cell_type.vibration.rate_hz, cell_type.deformation.rate_hz,
+        )
+        values_sum += reduce_body_part(feats, np.ones(len(ids), bool), cell_type, channels) * len(ids)
+        n_sum += len(ids)
+        quality |= int(np.bitwise_or.reduce(feats.quality)) if len(ids) else 0
+        quality |= _saturation(sigs, cell_type)
+    forces = [float(np.mean(np.asarray(cells[c.id].force_n, dtype=float)[np.isfinite(cells[c.id].force_n)]))
+              for c in touching]
+    return BodyPartDescriptor(part.name, part.cell_type, values_sum / n_sum, labels, True, len(touching),
+                              len(part.cells), float(np.mean(forces)), quality)
+
+
+def _check_channels(sigs: list[CellSignals], cell_type: CellType, ids: list[int]) -> None:
+    n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
+    for sig, cid in zip(sigs, ids):
+        if np.shape(sig.vibration)[0] != n_s or np.shape(sig.deformation)[0] != n_v:
+            raise SignalError(
+                f"cell {cid}: expected {n_s} vibration and {n_v} deformation channels for cell type "
+                f"{cell_type.name!r}, got {np.shape(sig.vibration)[0]} and {np.shape(sig.deformation)[0]}"
+            )
+
+
+def _saturation(sigs: list[CellSignals], cell_type: CellType) -> int:
+    """SATURATED when an integer signal touches its ADC limits in over 1 % of samples."""
+    for sig in sigs:
+        for arr, mod in ((sig.vibration, cell_type.vibration), (sig.deformation, cell_type.deformation)):
+            a = np.asarray(arr)
+            if a.size and np.issubdtype(a.dtype, np.integer):
+                lo, hi = mod.adc_range
+                if np.count_nonzero((a <= lo) & (lo != 0) | (a >= hi)) > 0.01 * a.size:
+                    return int(Quality.SATURATED)
+    return 0
+
+
+def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ...]
+                    ) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Pooled descriptor: per cell type, the mean over its body parts in contact.
+
+    Cell types appear in the order of their first body part; a cell type
+    with no body part in contact contributes zeros.
+    """
+    values, labels = [], []
+    order: list[str] = []
+    for p in robot.body_parts:
+        if p.cell_type not in order:
+            order.append(p.cell_type)
+    for ct in order:
+        mine = [bp for bp in parts if bp.cell_type == ct]
+        touching = [bp.values for bp in mine if bp.contact]
+        values.append(np.mean(touching, axis=0) if touching else np.zeros(len(mine[0].labels)))
+        labels += [f"{ct}/{lab}" for lab in mine[0].labels]
+    return np.concatenate(values), tuple(labels)
+
+
+def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
+                    layout: str | None = None, channels: str | None = None,
+                    force_threshold_n: float | None = None) -> RobotDescriptor:
+    """Compute the robot's descriptor of one window.
+
+    Parameters
+    ----------
+    robot : RobotDescription
+        Body parts, cells and cell types.
+    cells : mapping of cell id to CellSignals
+        The window's data; a configured cell missing here is treated as not
+        in contact and flags its body part ``GAP``.
+    layout : {"concat", "pooled"}, optional
+        Defaults to the robot description's.
+    channels : {"averaged", "per_channel"}, optional
+        Defaults to the robot description's.
+    force_threshold_n : float, optional
+        F_t; defaults to the robot description's contact threshold.
+
+    Returns
+    -------
+    RobotDescriptor
+
+    Raises
+    ------
+    SignalError
+        For a cell id not in the robot description, or channel counts that do
+        not match the cell type.
+    """
+    layout = layout or robot.descriptor.layout
+    channels = channels or robot.descriptor.channels
+    threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
+    index = robot.cell_index()
+    unknown = sorted(set(cells) - set(index))
+    if unknown:
+        raise SignalError(f"cells {unknown} are not in robot description {robot.name!r}")
+    parts = tuple(
+        _body_part_descriptor(p, robot.cell_types[p.cell_type], cells, threshold, channels)
+        for p in robot.body_parts
+    )
+    if layout == "concat":
+        values = np.concatenate([bp.values for bp in parts])
+        labels = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
+    elif layout == "pooled":
+        values, labels = pool_body_parts(robot, parts)
+    else:
+        raise SignalError(f"layout must be 'concat' or 'pooled', got {layout!r}")
+    return RobotDescriptor(robot.name, layout, channels, parts, values, labels)

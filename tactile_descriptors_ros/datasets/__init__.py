@@ -1,0 +1,3 @@
+"""Readers for public tactile data sets (no ROS)."""
+
+__all__: list[str] = []
