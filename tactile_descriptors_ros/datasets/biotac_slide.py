@@ -57,7 +57,8 @@ class BiotacRecording:
     pac : numpy.ndarray of int64, shape (n_frames * 22,)
         PAC counts at 2.2 kHz, in time order.
     pac_t_ns : numpy.ndarray of int64, shape (n_frames * 22,)
-        PAC sample times, spread evenly over each 10 ms frame.
+        PAC sample times, spread evenly over each frame's interval
+        (strictly increasing).
     pdc, tac, tdc : numpy.ndarray of int64, shape (n_frames,)
     electrodes : numpy.ndarray of int64, shape (19, n_frames)
     path : str
@@ -135,8 +136,14 @@ def read_biotac_csv(path: str | Path) -> BiotacRecording:
     period_ns = np.int64(round(1e9 / 100.0))
     if frame_t_ns.shape[0] > 1:
         period_ns = np.int64(np.median(np.diff(frame_t_ns)))
-    offsets = (np.arange(PAC_PER_FRAME, dtype=np.int64) * period_ns) // PAC_PER_FRAME
-    pac_t_ns = (frame_t_ns[:, None] + offsets[None, :]).ravel()
+    # Spread each frame's 22 PAC samples evenly over that frame's actual
+    # interval (to the next frame's stamp; the median period for the last), so
+    # PAC stamps stay increasing even when frame stamps jitter.
+    if np.any(np.diff(frame_t_ns) <= 0):
+        raise DataFormatError(f"{path}: frame time stamps are not increasing")
+    intervals = np.append(np.diff(frame_t_ns), period_ns)
+    steps = np.arange(PAC_PER_FRAME, dtype=np.int64)
+    pac_t_ns = (frame_t_ns[:, None] + (intervals[:, None] * steps[None, :]) // PAC_PER_FRAME).ravel()
     return BiotacRecording(
         material=int(match.group(1)),
         trial=int(match.group(2)),

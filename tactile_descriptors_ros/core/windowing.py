@@ -1,0 +1,410 @@
+"""Windows over streaming cell data: fixed (length, hop) or one exploration.
+
+The window node feeds :class:`Windower` with :class:`CellChunk` objects (one
+per received message) and asks it for finished windows.  Everything runs on
+the *sensor time stamps*, never the wall clock, so live data, simulated time
+and replayed bags give the same windows.
+
+* Fixed mode: windows ``[t0 + k hop, t0 + k hop + length)``; a window is
+  emitted once data of a later time has arrived (plus ``lateness_s``).
+* Exploration mode (what the paper evaluates): an exploration starts when
+  any cell's normal force reaches F_t (contact onset) and ends when every
+  cell has stayed below the release threshold for ``release_s`` (release) or
+  when it reaches ``max_duration_s``; shorter than ``min_duration_s`` it is
+  dropped and counted.  Each exploration gets an id (1, 2, ...) that labels
+  refer to.
+
+Faults are counted, never hidden: chunks older than data already received
+(out of order) or repeating a time stamp (duplicates) are dropped and
+counted; a time jump backwards by more than ``clock_jump_s`` resets the
+cell's buffer and is counted as a clock jump.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError, SignalError
+from .aggregation import CellSignals
+from .robot import RobotDescription
+
+__all__ = ["CellChunk", "Window", "Windower", "SampleStream"]
+
+
+@dataclass
+class CellChunk:
+    """Samples of one cell from one message.
+
+    Attributes
+    ----------
+    vibration : numpy.ndarray, shape (n_s, n)
+    vibration_t_ns : numpy.ndarray of int64, shape (n,)
+    deformation : numpy.ndarray, shape (n_v, m)
+    deformation_t_ns : numpy.ndarray of int64, shape (m,)
+    force_n : numpy.ndarray, shape (k,)
+        Normal force in newtons (NaN where invalid).
+    force_t_ns : numpy.ndarray of int64, shape (k,)
+    vibration_valid, deformation_valid : numpy.ndarray of bool, optional
+        Per-sample validity (False for parity errors, lost words).
+    """
+
+    vibration: np.ndarray
+    vibration_t_ns: np.ndarray
+    deformation: np.ndarray
+    deformation_t_ns: np.ndarray
+    force_n: np.ndarray
+    force_t_ns: np.ndarray
+    vibration_valid: np.ndarray | None = None
+    deformation_valid: np.ndarray | None = None
+
+
+@dataclass
+class Window:
+    """One finished window, ready for :func:`~.aggregation.describe_window`."""
+
+    start_ns: int
+    end_ns: int
+    exploration_id: int
+    mode: str
+    cells: dict[int, CellSignals] = field(default_factory=dict)
+
+
+class SampleStream:
+    """A growable, trimmable buffer of time-stamped multichannel samples.
+
+    Parameters
+    ----------
+    n_channels : int
+    dtype : numpy dtype
+    """
+
+    def __init__(self, n_channels: int, dtype: np.dtype) -> None:
+        self.n_channels = int(n_channels)
+        cap = 256
+        self._t = np.empty(cap, dtype=np.int64)
+        self._v = np.empty((self.n_channels, cap), dtype=dtype)
+        self._ok = np.empty(cap, dtype=bool)
+        self._lo = 0
+        self._hi = 0
+
+    def __len__(self) -> int:
+        return self._hi - self._lo
+
+    @property
+    def last_t_ns(self) -> int | None:
+        return int(self._t[self._hi - 1]) if self._hi > self._lo else None
+
+    def append(self, t_ns: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None) -> None:
+        n = t_ns.shape[0]
+        if values.shape != (self.n_channels, n):
+            raise SignalError(f"expected samples of shape ({self.n_channels}, {n}), got {values.shape}")
+        if self._hi + n > self._t.shape[0]:
+            self._compact(n)
+        self._t[self._hi:self._hi + n] = t_ns
+        self._v[:, self._hi:self._hi + n] = values
+        self._ok[self._hi:self._hi + n] = True if valid is None else valid
+        self._hi += n
+
+    def _compact(self, extra: int) -> None:
+        size = self._hi - self._lo
+        cap = self._t.shape[0]
+        if size + extra > cap // 2:
+            cap = max(2 * cap, 2 * (size + extra))
+        t = np.empty(cap, dtype=np.int64)
+        v = np.empty((self.n_channels, cap), dtype=self._v.dtype)
+        ok = np.empty(cap, dtype=bool)
+        t[:size] = self._t[self._lo:self._hi]
+        v[:, :size] = self._v[:, self._lo:self._hi]
+        ok[:size] = self._ok[self._lo:self._hi]
+        self._t, self._v, self._ok, self._lo, self._hi = t, v, ok, 0, size
+
+    def trim_before(self, t_ns: int, keep_one: bool = False) -> None:
+        """Drop samples older than ``t_ns`` (keeping the last one before it if asked)."""
+        t = self._t[self._lo:self._hi]
+        i = int(np.searchsorted(t, t_ns, side="left"))
+        if keep_one and i > 0:
+            i -= 1
+        self._lo += i
+
+    def clear(self) -> None:
+        self._lo = self._hi = 0
+
+    def between(self, start_ns: int, end_ns: int, hold_before: bool = False
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Samples with ``start <= t < end`` (plus the last one before ``start`` when ``hold_before``)."""
+        t = self._t[self._lo:self._hi]
+        i = int(np.searchsorted(t, start_ns, side="left"))
+        j = int(np.searchsorted(t, end_ns, side="left"))
+        if hold_before and i > 0:
+            i -= 1
+        sl = slice(self._lo + i, self._lo + j)
+        return self._t[sl].copy(), self._v[:, sl].copy(), self._ok[sl].copy()
+
+
+class _CellState:
+    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype) -> None:
+        self.vib = SampleStream(n_s, dtype_s)
+        self.dfm = SampleStream(n_v, dtype_v)
+        self.force = SampleStream(1, np.float64)
+        self.last_force_n = 0.0
+        self.below_since_ns: int | None = None
+
+
+class Windower:
+    """Cut per-cell streams into windows (fixed or exploration mode).
+
+    Parameters
+    ----------
+    robot : RobotDescription
+        Cells and their types; window and contact parameters default to it.
+    mode : {"fixed", "exploration"}, optional
+    length_s, hop_s : float, optional
+        Fixed mode.
+    min_duration_s, max_duration_s, release_s : float, optional
+        Exploration mode.
+    force_threshold_n, release_threshold_n : float, optional
+        Onset (F_t) and release thresholds.
+    lateness_s : float, default 0.05
+        How long after a fixed window's end to wait for late cells.
+    clock_jump_s : float, default 1.0
+        A stamp this far behind a cell's last one is a clock jump (buffer reset).
+    """
+
+    def __init__(self, robot: RobotDescription, *, mode: str | None = None, length_s: float | None = None,
+                 hop_s: float | None = None, min_duration_s: float | None = None,
+                 max_duration_s: float | None = None, release_s: float | None = None,
+                 force_threshold_n: float | None = None, release_threshold_n: float | None = None,
+                 lateness_s: float = 0.05, clock_jump_s: float = 1.0) -> None:
+        w, c = robot.window, robot.contact
+        self.robot = robot
+        self.mode = mode or w.mode
+        if self.mode not in ("fixed", "exploration"):
+            raise ConfigError(f"window mode must be 'fixed' or 'exploration', got {self.mode!r}", key="window.mode")
+        self.length_ns = _ns(length_s if length_s is not None else w.length_s, "window.length_s")
+        self.hop_ns = _ns(hop_s if hop_s is not None else w.hop_s, "window.hop_s")
+        self.min_ns = _ns(min_duration_s if min_duration_s is not None else w.min_duration_s,
+                          "window.min_duration_s", allow_zero=True)
+        self.max_ns = _ns(max_duration_s if max_duration_s is not None else w.max_duration_s, "window.max_duration_s")
+        if self.min_ns > self.max_ns:
+            raise ConfigError("min_duration_s must not exceed max_duration_s", key="window.min_duration_s")
+        self.release_ns = _ns(release_s if release_s is not None else w.release_s, "window.release_s", allow_zero=True)
+        self.onset_n = float(force_threshold_n if force_threshold_n is not None else c.force_threshold_n)
+        self.release_n = float(release_threshold_n if release_threshold_n is not None else c.release_threshold_n)
+        if self.release_n > self.onset_n:
+            raise ConfigError("release threshold must not exceed the onset threshold", key="contact.release_threshold_n")
+        self.lateness_ns = _ns(lateness_s, "lateness_s", allow_zero=True)
+        self.clock_jump_ns = _ns(clock_jump_s, "clock_jump_s")
+        self.faults: Counter[str] = Counter()
+        self._cells: dict[int, _CellState] = {}
+        self._index = robot.cell_index()
+        self._latest_ns: int | None = None
+        self._next_start_ns: int | None = None
+        self._exploration_id = 0
+        self._onset_ns: int | None = None
+        self._emitted_current = False
+        self._released_since: int | None = None
+        self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + 1_000_000_000
+
+    # ------------------------------------------------------------------ input
+    def add(self, cell_id: int, chunk: CellChunk) -> bool:
+        """Buffer one chunk; return False (and count why) when it was dropped."""
+        if cell_id not in self._index:
+            self.faults["unknown_cell"] += 1
+            return False
+        part, _ = self._index[cell_id]
+        ct = self.robot.cell_types[part.cell_type]
+        vib = np.asarray(chunk.vibration)
+        dfm = np.asarray(chunk.deformation)
+        if vib.ndim != 2 or vib.shape[0] != len(ct.vibration.channels) or \
+                dfm.ndim != 2 or dfm.shape[0] != len(ct.deformation.channels):
+            self.faults["bad_shape"] += 1
+            return False
+        st = self._cells.get(cell_id)
+        if st is None:
+            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype)
+        t_v = np.asarray(chunk.vibration_t_ns, dtype=np.int64)
+        if t_v.size == 0:
+            self.faults["empty"] += 1
+            return False
+        last = st.vib.last_t_ns
+        if last is not None and t_v[0] <= last:
+            if last - t_v[0] > self.clock_jump_ns:
+                self.faults["clock_jump"] += 1
+                for s in (st.vib, st.dfm, st.force):
+                    s.clear()
+                self._reset_time()
+            elif t_v[0] == last or (t_v[-1] <= last):
+                self.faults["duplicate" if t_v[0] == last or np.any(t_v == last) else "out_of_order"] += 1
+                return False
+            else:
+                self.faults["out_of_order"] += 1
+                return False
+        if np.any(np.diff(t_v) <= 0):
+            self.faults["unsorted_stamps"] += 1
+            return False
+        st.vib.append(t_v, vib, chunk.vibration_valid)
+        t_d = np.asarray(chunk.deformation_t_ns, dtype=np.int64)
+        if t_d.size:
+            keep = np.ones(t_d.size, bool)
+            if st.dfm.last_t_ns is not None:
+                keep = t_d > st.dfm.last_t_ns
+            dv = None if chunk.deformation_valid is None else np.asarray(chunk.deformation_valid)[keep]
+            st.dfm.append(t_d[keep], dfm[:, keep], dv)
+        t_f = np.asarray(chunk.force_t_ns, dtype=np.int64)
+        f = np.asarray(chunk.force_n, dtype=np.float64)
+        if t_f.size:
+            keep = np.ones(t_f.size, bool) if st.force.last_t_ns is None else t_f > st.force.last_t_ns
+            st.force.append(t_f[keep], f[None, keep])
+            finite = f[np.isfinite(f)]
+            if finite.size:
+                st.last_force_n = float(finite[-1])
+        end = int(t_v[-1])
+        self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
+        return True
+
+    def _reset_time(self) -> None:
+        self._next_start_ns = None
+        self._onset_ns = None
+        self._emitted_current = False
+        self._latest_ns = None
+
+    # ----------------------------------------------------------------- output
+    def poll(self) -> list[Window]:
+        """Windows finished by the data received so far."""
+        if self._latest_ns is None:
+            return []
+        out = self._poll_fixed() if self.mode == "fixed" else self._poll_exploration()
+        self._trim()
+        return out
+
+    def flush(self) -> list[Window]:
+        """End of stream: close an open exploration (if long enough)."""
+        if self.mode == "exploration" and self._onset_ns is not None and not self._emitted_current \
+                and self._latest_ns is not None:
+            w = self._close_exploration(self._latest_ns + 1)
+            return [w] if w else []
+        return []
+
+    def _poll_fixed(self) -> list[Window]:
+        out = []
+        if self._next_start_ns is None:
+            firsts = [st.vib._t[st.vib._lo] for st in self._cells.values() if len(st.vib)]
+            self._next_start_ns = int(min(firsts))
+        while self._next_start_ns + self.length_ns + self.lateness_ns <= self._latest_ns:
+            start = self._next_start_ns
+            out.append(self._make_window(start, start + self.length_ns, 0, "fixed"))
+            self._next_start_ns += self.hop_ns
+        return out
+
+    def _contact_now(self) -> tuple[bool, bool]:
+        """(any cell at or above onset, all cells below release) from the latest force."""
+        forces = [st.last_force_n for st in self._cells.values()]
+        if not forces:
+            return False, True
+        return max(forces) >= self.onset_n, max(forces) < self.release_n
+
+    def _poll_exploration(self) -> list[Window]:
+        out: list[Window] = []
+        now = self._latest_ns
+        touching, released = self._contact_now()
+        if self._onset_ns is None:
+            if touching:
+                self._onset_ns = self._onset_time()
+                self._exploration_id += 1
+                self._emitted_current = False
+                self._released_since = None
+            return out
+        if not self._emitted_current and now - self._onset_ns >= self.max_ns:
+            w = self._close_exploration(self._onset_ns + self.max_ns)
+            self._emitted_current = True
+            if w:
+                out.append(w)
+        if released:
+            if self._released_since is None:
+                self._released_since = self._release_time()
+            if now - self._released_since >= self.release_ns:
+                if not self._emitted_current:
+                    w = self._close_exploration(self._released_since)
+                    if w:
+                        out.append(w)
+                self._onset_ns = None
+                self._emitted_current = False
+        else:
+            self._released_since = None
+        return out
+
+    def _onset_time(self) -> int:
+        """First force stamp at or above the onset threshold in the recent data."""
+        best = self._latest_ns
+        for st in self._cells.values():
+            t, f, _ = st.force.between(self._latest_ns - self._retain_ns, self._latest_ns + 1)
+            above = np.nonzero(f[0] >= self.onset_n)[0]
+            if above.size:
+                # the start of the last run of samples at or above the threshold
+                run_start = above[-1]
+                while run_start > 0 and f[0, run_start - 1] >= self.onset_n:
+                    run_start -= 1
+                best = min(best, int(t[run_start]))
+        return best
+
+    def _release_time(self) -> int:
+        """Latest stamp at which any cell was still at or above the release threshold."""
+        best = self._onset_ns
+        for st in self._cells.values():
+            t, f, _ = st.force.between(self._onset_ns, self._latest_ns + 1)
+            above = np.nonzero(f[0] >= self.release_n)[0]
+            if above.size and above[-1] + 1 < t.size:
+                best = max(best, int(t[above[-1] + 1]))
+            elif above.size:
+                best = max(best, int(t[above[-1]]))
+        return best
+
+    def _close_exploration(self, end_ns: int) -> Window | None:
+        start = self._onset_ns
+        if end_ns - start < self.min_ns:
+            self.faults["exploration_too_short"] += 1
+            return None
+        return self._make_window(start, end_ns, self._exploration_id, "exploration")
+
+    def _make_window(self, start: int, end: int, exploration_id: int, mode: str) -> Window:
+        w = Window(start, end, exploration_id, mode)
+        for cid, st in self._cells.items():
+            tv, v, okv = st.vib.between(start, end)
+            if tv.size == 0:
+                continue
+            td, d, okd = st.dfm.between(start, end, hold_before=True)
+            tf, f, _ = st.force.between(start, end)
+            valid = bool(okv.all() and okd.all())
+            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid)
+        return w
+
+    def _trim(self) -> None:
+        horizon = self._latest_ns - self._retain_ns
+        if self.mode == "fixed" and self._next_start_ns is not None:
+            horizon = min(horizon, self._next_start_ns)
+        if self.mode == "exploration" and self._onset_ns is not None:
+            horizon = min(horizon, self._onset_ns)
+        for st in self._cells.values():
+            st.vib.trim_before(horizon)
+            st.dfm.trim_before(horizon, keep_one=True)
+            st.force.trim_before(horizon)
+
+    @property
+    def exploration_id(self) -> int:
+        """Id of the current (or last) exploration; 0 before the first."""
+        return self._exploration_id
+
+    @property
+    def in_contact(self) -> bool:
+        """True while an exploration is open."""
+        return self._onset_ns is not None
+
+
+def _ns(seconds: float, key: str, allow_zero: bool = False) -> int:
+    value = float(seconds)
+    if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
+        raise ConfigError(f"must be a {'non-negative' if allow_zero else 'positive'} duration in seconds, got {seconds!r}", key=key)
+    return int(round(value * 1e9))
