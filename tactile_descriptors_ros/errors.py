@@ -15,6 +15,7 @@ __all__ = [
     "CodecError",
     "ParityError",
     "ErrorWordError",
+    "WordFormatError",
     "FrameError",
     "ChecksumError",
     "TransportError",
@@ -73,6 +74,10 @@ class ErrorWordError(CodecError):
     def __init__(self, message: str, word: int) -> None:
         self.word = word
         super().__init__(message)
+
+
+class WordFormatError(CodecError):
+    """A BioTac reply word passed parity but its two must-be-zero bits (low byte bits 2..1) are set."""
 
 
 class FrameError(CodecError):

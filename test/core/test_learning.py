@@ -1,0 +1,112 @@
+"""Online PA-I (eq. 30-32), feature scaling, atomic model files."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from tactile_descriptors_ros.core.learning import OnlineClassifier, PassiveAggressive
+from tactile_descriptors_ros.core.scaling import FeatureScaler, RunningStandardizer, activity_mask
+from tactile_descriptors_ros.errors import ModelError, SignalError
+
+
+def test_pa_first_update_by_hand():
+    pa = PassiveAggressive(2)
+    pa.add_class("a")
+    pa.add_class("b")
+    x = np.array([1.0, 2.0])  # with bias: [1, 2, 1], ||x||^2 = 6
+    loss = pa.partial_fit(x, "b")  # scores tie at 0: a tie is a mistake
+    assert loss == 1.0
+    theta = min(1.0, 1.0 / (2 * 6.0))
+    np.testing.assert_allclose(pa.weights[1], theta * np.array([1, 2, 1]))
+    np.testing.assert_allclose(pa.weights[0], -theta * np.array([1, 2, 1]))
+    assert pa.predict(x) == "b"
+    assert pa.partial_fit(x, "b") == 0.0  # correct now: passive
+
+
+def test_pa_step_is_capped_by_eta():
+    pa = PassiveAggressive(1, eta=0.01)
+    pa.add_class("a")
+    pa.partial_fit(np.array([0.1]), "b")
+    pa.partial_fit(np.array([0.1]), "a")
+    assert np.all(np.abs(pa.weights) <= 0.01 * 1.1 + 1e-12)
+
+
+def test_pa_learns_separable_classes_online_and_open_ended():
+    rng = np.random.default_rng(0)
+    centres = rng.normal(size=(5, 8)) * 4
+    pa = PassiveAggressive(8)
+    for t in range(200):
+        k = t % 5 if t < 150 else t % 6  # a sixth class appears at run time
+        c = centres[k] if k < 5 else np.full(8, 6.0)
+        pa.partial_fit(c + rng.normal(size=8) * 0.3, f"class{k}")
+    correct = sum(pa.predict(centres[k] + rng.normal(size=8) * 0.3) == f"class{k}" for k in range(5) for _ in range(20))
+    assert correct >= 98 and "class5" in pa.classes
+
+
+def test_pa_rejects_bad_input():
+    pa = PassiveAggressive(3)
+    with pytest.raises(SignalError):
+        pa.partial_fit(np.ones(4), "a")
+    with pytest.raises(SignalError):
+        pa.partial_fit(np.array([1.0, np.nan, 0.0]), "a")
+
+
+def test_running_standardizer_equals_batch_statistics():
+    rng = np.random.default_rng(1)
+    x = rng.normal(5, 3, size=(500, 4))
+    s = RunningStandardizer(4)
+    for row in x:
+        s.partial_fit(row)
+    np.testing.assert_allclose(s.mean, x.mean(axis=0))
+    np.testing.assert_allclose(s.std, x.std(axis=0))
+    np.testing.assert_allclose(s.transform(x).std(axis=0), 1.0)
+
+
+def test_log_activity_only_touches_activity():
+    labels = ["index/A_pac", "index/M_pac", "A_E", "L_pac_E"]
+    assert activity_mask(labels).tolist() == [True, False, True, False]
+    sc = FeatureScaler(labels, standardize=False)
+    np.testing.assert_allclose(sc.transform(np.array([np.e - 1, 5.0, 0.0, 0.5])), [1.0, 5.0, 0.0, 0.5])
+
+
+def test_model_round_trip_and_layout_check(tmp_path):
+    labels = ["A_x", "M_x"]
+    clf = OnlineClassifier(labels)
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        v = rng.normal(size=2)
+        clf.observe(v)
+        clf.learn(v, "pos" if v[0] > 0 else "neg")
+    path = tmp_path / "model.json"
+    clf.save(path)
+    back = OnlineClassifier.load(path, labels)
+    v = rng.normal(size=2)
+    assert back.predict(v)[0] == clf.predict(v)[0]
+    np.testing.assert_allclose(back.predict(v)[1], clf.predict(v)[1])
+    assert back.version == clf.version == 20
+    with pytest.raises(ModelError, match="another descriptor layout"):
+        OnlineClassifier.load(path, ["A_x"])
+    path.write_text("{not json")
+    with pytest.raises(ModelError):
+        OnlineClassifier.load(path)
+
+
+def test_failed_save_keeps_previous_model(tmp_path, monkeypatch):
+    clf = OnlineClassifier(["A_x"])
+    path = tmp_path / "model.json"
+    clf.save(path)
+    before = path.read_text()
+    clf.learn(np.array([1.0]), "a")
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full_disk)
+    with pytest.raises(ModelError, match="No space left"):
+        clf.save(path)
+    assert path.read_text() == before and json.loads(before)["version"] == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["model.json"]  # no temp file left behind

@@ -1,0 +1,100 @@
+"""Fixed and exploration windows on sensor stamps, and counted stream faults."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactile_descriptors_ros.core.robot import load_robot
+from tactile_descriptors_ros.core.windowing import CellChunk, Windower
+from tactile_descriptors_ros.errors import ConfigError
+
+MS = 1_000_000
+
+
+def _chunk(t0_ns: int, force_n: float, rng, n_frames: int = 10) -> CellChunk:
+    """10 BioTac frames (100 ms) starting at t0."""
+    frame_t = t0_ns + np.arange(n_frames, dtype=np.int64) * 10 * MS
+    pac_t = (frame_t[:, None] + (np.arange(22) * 10 * MS) // 22).ravel()
+    return CellChunk(rng.integers(0, 4096, (1, pac_t.size)), pac_t, rng.integers(0, 4096, (19, n_frames)),
+                     frame_t, np.full(n_frames, force_n), frame_t)
+
+
+def _feed(w: Windower, schedule, rng, cell_id: int = 1):
+    """schedule: list of (duration_s, force_n); returns windows emitted."""
+    out, t = [], 0
+    for duration_s, force in schedule:
+        for _ in range(int(round(duration_s * 10))):
+            w.add(cell_id, _chunk(t, force, rng))
+            out += w.poll()
+            t += 100 * MS
+    return out + w.flush()
+
+
+def test_exploration_windows_run_from_onset_to_release():
+    rng = np.random.default_rng(0)
+    w = Windower(load_robot("shadow_hand"), mode="exploration")
+    wins = _feed(w, [(1.0, 0.0), (3.0, 1.0), (1.0, 0.0), (2.5, 2.0), (1.0, 0.0)], rng)
+    assert [x.exploration_id for x in wins] == [1, 2]
+    assert (wins[0].end_ns - wins[0].start_ns) / 1e9 == pytest.approx(3.0, abs=0.02)
+    assert wins[0].start_ns == 1000 * MS
+    assert (wins[1].end_ns - wins[1].start_ns) / 1e9 == pytest.approx(2.5, abs=0.02)
+    cell = wins[0].cells[1]
+    assert cell.vibration.shape[1] == pytest.approx(3.0 * 2200, abs=25)
+    assert cell.deformation_t_ns[0] <= cell.vibration_t_ns[0]  # held sample before the window
+
+
+def test_exploration_too_short_is_dropped_and_counted_and_too_long_is_cut():
+    rng = np.random.default_rng(1)
+    w = Windower(load_robot("shadow_hand"), mode="exploration", min_duration_s=1.0, max_duration_s=2.0)
+    wins = _feed(w, [(0.5, 0.0), (0.5, 1.0), (1.0, 0.0), (4.0, 1.0), (1.0, 0.0)], rng)
+    assert w.faults["exploration_too_short"] == 1
+    assert len(wins) == 1 and (wins[0].end_ns - wins[0].start_ns) == 2000 * MS
+    assert wins[0].exploration_id == 2
+
+
+def test_fixed_windows_have_length_and_hop():
+    rng = np.random.default_rng(2)
+    w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=2.0, hop_s=0.5)
+    wins = _feed(w, [(5.0, 1.0)], rng)
+    starts = [x.start_ns for x in wins]
+    assert np.all(np.diff(starts) == 500 * MS)
+    assert all(x.end_ns - x.start_ns == 2000 * MS and x.exploration_id == 0 for x in wins)
+    assert len(wins) == 6  # windows ending by 4.9 s + lateness
+
+
+def test_faults_are_counted_not_hidden():
+    rng = np.random.default_rng(3)
+    w = Windower(load_robot("shadow_hand"), mode="fixed")
+    assert w.add(1, _chunk(0, 1.0, rng))
+    assert not w.add(1, _chunk(0, 1.0, rng))  # duplicate stamps
+    assert w.add(1, _chunk(100 * MS, 1.0, rng))
+    assert not w.add(1, _chunk(50 * MS, 1.0, rng))  # out of order
+    assert not w.add(77, _chunk(200 * MS, 1.0, rng))  # unknown cell
+    bad = _chunk(200 * MS, 1.0, rng)
+    bad.deformation = bad.deformation[:5]
+    assert not w.add(1, bad)
+    assert w.add(1, _chunk(200 * MS, 1.0, rng))
+    assert w.add(1, _chunk(-5_000 * MS, 1.0, rng))  # clock jumped back 5 s: buffers reset
+    assert dict(w.faults) == {"duplicate": 1, "out_of_order": 1, "unknown_cell": 1, "bad_shape": 1,
+                              "clock_jump": 1}
+
+
+def test_invalid_samples_mark_the_cell_invalid():
+    rng = np.random.default_rng(4)
+    w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=1.0)
+    for k in range(25):
+        c = _chunk(k * 100 * MS, 1.0, rng)
+        if k == 3:
+            c.vibration_valid = np.ones(c.vibration.shape[1], bool)
+            c.vibration_valid[5] = False
+        w.add(1, c)
+    wins = w.poll()
+    assert [x.cells[1].valid for x in wins] == [False, True]
+
+
+def test_bad_parameters_name_the_key():
+    with pytest.raises(ConfigError, match="window.length_s"):
+        Windower(load_robot("nao"), length_s=0.0)
+    with pytest.raises(ConfigError, match="window.min_duration_s"):
+        Windower(load_robot("nao"), min_duration_s=5.0, max_duration_s=2.0)
