@@ -1,0 +1,457 @@
+"""Turn the public BioTac sliding recordings into a bag the live graph can replay.
+
+Each CSV trial (``raw_data/mat<M>/mat<M>_<N>_bio.csv``, one 10 ms frame a
+row, see :mod:`tactile_descriptors_ros.datasets.biotac_slide`) becomes a run
+of ``BioTacFrameBatch`` messages, as the BioTac driver would publish them:
+
+* ``frames_per_batch`` frames a message (10 = 100 ms), PAC at full rate
+  (22 samples a frame) with per-sample offsets, slow channels one sample a
+  frame; ``header.stamp`` is the first PAC sample's time (the CSV stamp of
+  the batch's first frame), the log time is the end of the batch (when a
+  driver would have it complete);
+* trials follow each other: trial k keeps its CSV time stamps relative to
+  its own start and starts ``release_s`` after trial k-1 ended, so every
+  trial is one exploration (contact onset to release).  The gap is filled
+  with *release frames* (PDC, PAC, TAC and electrodes 0, TDC held: the
+  recordings are tared and clipped at 0, so 0 is "no contact") so that a
+  windowing node sees the force drop and closes the exploration, exactly as
+  it would on the robot; ``release_fill=False`` leaves a silent gap instead;
+* a ``Label`` (``class_name`` = material name, ``exploration_id`` 0 = the
+  most recent exploration) is logged ``label_delay_s`` after each trial
+  ends, inside the gap, after the window node's release time has passed;
+* scales come from the robot description (``config/shadow_hand.yaml``):
+  ``pac_pa_per_count`` = the vibration modality's ``si_per_count``,
+  ``force_n_per_count`` = the force spec's ``n_per_count``;
+  ``pdc_pa_per_count`` is the BioTac manual's 36.5 Pa/count (the robot
+  description has no PDC pressure scale).  The data are already tared:
+  ``pdc_tare_counts`` 0 and no electrode tares.
+
+The contact gate of the descriptor (paper eq. 13, mean force over a window
+at least F_t) reads force = PDC x ``force_n_per_count``: :class:`ImportReport`
+says how many frames and trials pass it, so that a recording which would be
+gated out is seen before it is replayed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.robot import RobotDescription, load_robot
+from ..datasets.biotac_slide import N_ELECTRODES, PAC_PER_FRAME, BiotacRecording, find_recordings, read_biotac_csv
+from ..errors import ConfigError, DataFormatError
+from .io import BagWriter
+from .qos import make_qos
+from .types import tactile_typestore
+
+__all__ = [
+    "DEFAULT_BIOTAC_TOPIC",
+    "DEFAULT_LABEL_TOPIC",
+    "BIOTAC_PDC_PA_PER_COUNT",
+    "BIOTAC_QOS",
+    "LABEL_QOS",
+    "ImportOptions",
+    "TrialStats",
+    "ImportReport",
+    "import_biotac_slide",
+    "parse_index_ranges",
+]
+
+#: Default topic of BioTac frame batches (remap on replay if the graph uses another).
+DEFAULT_BIOTAC_TOPIC = "/tactile/biotac"
+#: Default topic of true labels.
+DEFAULT_LABEL_TOPIC = "/tactile/label"
+#: BioTac static-pressure resolution from the SynTouch product manual (0..100 kPa over 12 bit).
+BIOTAC_PDC_PA_PER_COUNT = 36.5
+#: Offered QoS of the imported frames: reliable (matches reliable and best-effort subscribers).
+BIOTAC_QOS = make_qos("reliable", "volatile", 50)
+#: Offered QoS of the imported labels.
+LABEL_QOS = make_qos("reliable", "volatile", 10)
+
+_MAX_COUNT = 4095
+_BATCH = "tactile_descriptors_msgs/msg/BioTacFrameBatch"
+_LABEL = "tactile_descriptors_msgs/msg/Label"
+
+
+@dataclass(frozen=True)
+class ImportOptions:
+    """How recordings become messages (see the module docstring).
+
+    Attributes
+    ----------
+    robot : str
+        Robot description name or path; gives scales, sensor name and thresholds.
+    body_part : str
+        Body part the BioTac is mounted on (``"index"``).
+    frames_per_batch : int
+        Frames per ``BioTacFrameBatch`` (10 = 100 ms at 100 Hz).
+    release_s : float
+        Gap between trials, in seconds.
+    release_fill : bool
+        Fill the gap with no-contact frames (else publish nothing in it).
+    label_delay_s : float
+        Label time after a trial's end; must lie inside the gap.
+    order : {"trial", "material"}
+        ``"trial"``: trial 1 of every material, then trial 2, ... (interleaved, the
+        natural order for online learning); ``"material"``: all trials of one
+        material, then the next.
+    max_frames : int or None
+        Crop every trial to its first ``max_frames`` frames (the data set's
+        README asks for a common length so duration cannot give the class away).
+    biotac_topic, label_topic : str
+    frame_id : str or None
+        ``header.frame_id``; the sensor name when None.
+    """
+
+    robot: str = "shadow_hand"
+    body_part: str = "index"
+    frames_per_batch: int = 10
+    release_s: float = 1.0
+    release_fill: bool = True
+    label_delay_s: float = 0.5
+    order: str = "trial"
+    max_frames: int | None = None
+    biotac_topic: str = DEFAULT_BIOTAC_TOPIC
+    label_topic: str = DEFAULT_LABEL_TOPIC
+    frame_id: str | None = None
+
+    def validate(self) -> None:
+        if self.frames_per_batch < 1:
+            raise ConfigError("frames_per_batch must be at least 1", key="frames_per_batch")
+        if not self.release_s > 0:
+            raise ConfigError("release_s must be positive", key="release_s")
+        if not 0 <= self.label_delay_s < self.release_s:
+            raise ConfigError(
+                f"label_delay_s ({self.label_delay_s}) must lie inside the gap [0, release_s={self.release_s})",
+                key="label_delay_s",
+            )
+        if self.order not in ("trial", "material"):
+            raise ConfigError(f"order must be 'trial' or 'material', not {self.order!r}", key="order")
+        if self.max_frames is not None and self.max_frames < 1:
+            raise ConfigError("max_frames must be at least 1", key="max_frames")
+
+
+@dataclass(frozen=True)
+class TrialStats:
+    """Contact-gate check of one imported trial."""
+
+    material: int
+    material_name: str
+    trial: int
+    frames: int
+    frames_in_contact: int
+    mean_force_n: float
+    min_force_n: float
+    max_force_n: float
+    start_ns: int
+    end_ns: int
+
+    @property
+    def contact_fraction(self) -> float:
+        return self.frames_in_contact / self.frames if self.frames else 0.0
+
+
+@dataclass
+class ImportReport:
+    """What :func:`import_biotac_slide` wrote and how the data meet the contact gate."""
+
+    bag: str
+    storage: str
+    force_threshold_n: float
+    force_n_per_count: float
+    batches: int = 0
+    labels: int = 0
+    release_frames: int = 0
+    trials: list[TrialStats] = field(default_factory=list)
+
+    @property
+    def frames(self) -> int:
+        return sum(t.frames for t in self.trials)
+
+    @property
+    def frames_in_contact(self) -> int:
+        return sum(t.frames_in_contact for t in self.trials)
+
+    @property
+    def contact_fraction(self) -> float:
+        """Fraction of recorded frames whose force is at least F_t."""
+        return self.frames_in_contact / self.frames if self.frames else 0.0
+
+    @property
+    def trials_passing_gate(self) -> int:
+        """Trials whose mean force over the whole trial is at least F_t (eq. 13 on one exploration)."""
+        return sum(t.mean_force_n >= self.force_threshold_n for t in self.trials)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "bag": self.bag,
+            "storage": self.storage,
+            "trials": len(self.trials),
+            "batches": self.batches,
+            "labels": self.labels,
+            "frames": self.frames,
+            "release_frames": self.release_frames,
+            "force_threshold_n": self.force_threshold_n,
+            "force_n_per_count": self.force_n_per_count,
+            "frames_in_contact": self.frames_in_contact,
+            "contact_fraction": self.contact_fraction,
+            "trials_passing_gate": self.trials_passing_gate,
+            "per_trial": [
+                {
+                    "material": t.material,
+                    "material_name": t.material_name,
+                    "trial": t.trial,
+                    "frames": t.frames,
+                    "contact_fraction": t.contact_fraction,
+                    "mean_force_n": t.mean_force_n,
+                    "min_force_n": t.min_force_n,
+                    "max_force_n": t.max_force_n,
+                    "start_ns": t.start_ns,
+                    "end_ns": t.end_ns,
+                }
+                for t in self.trials
+            ],
+        }
+
+
+def parse_index_ranges(text: str) -> list[int]:
+    """``"1-5,8,10-12"`` -> ``[1, 2, 3, 4, 5, 8, 10, 11, 12]``.
+
+    Raises
+    ------
+    ConfigError
+        For anything but positive integers and ascending ranges.
+    """
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        lo, sep, hi = part.partition("-")
+        try:
+            a = int(lo)
+            b = int(hi) if sep else a
+        except ValueError:
+            raise ConfigError(f"not a number or range: {part!r} (use e.g. 1-30 or 1,3,5)") from None
+        if a < 1 or b < a:
+            raise ConfigError(f"bad range {part!r}: numbers start at 1 and ranges ascend")
+        out.extend(range(a, b + 1))
+    if not out:
+        raise ConfigError(f"empty selection {text!r}")
+    return sorted(set(out))
+
+
+def _ns_time(t_ns: int) -> dict[str, int]:
+    return {"sec": int(t_ns // 1_000_000_000), "nanosec": int(t_ns % 1_000_000_000)}
+
+
+def _check_counts(rec: BiotacRecording) -> None:
+    for name, arr in (("pac", rec.pac), ("pdc", rec.pdc), ("tac", rec.tac), ("tdc", rec.tdc),
+                      ("electrodes", rec.electrodes)):
+        if arr.size and (int(arr.min()) < 0 or int(arr.max()) > _MAX_COUNT):
+            raise DataFormatError(
+                f"{rec.path}: {name} counts outside the 12-bit range 0..{_MAX_COUNT} "
+                f"(min {int(arr.min())}, max {int(arr.max())})"
+            )
+    if rec.n_frames > 1 and np.any(np.diff(rec.frame_t_ns) <= 0):
+        raise DataFormatError(f"{rec.path}: frame time stamps do not increase")
+
+
+class _BatchFactory:
+    """Builds rosbags ``BioTacFrameBatch`` / ``Label`` objects with fixed metadata."""
+
+    def __init__(self, store: Any, sensor_name: str, body_part: str, frame_id: str,
+                 pac_scale: float, pdc_scale: float, force_scale: float) -> None:
+        self.store = store
+        self.batch_cls = store.types[_BATCH]
+        self.label_cls = store.types[_LABEL]
+        self.header_cls = store.types["std_msgs/msg/Header"]
+        self.time_cls = store.types["builtin_interfaces/msg/Time"]
+        self.sensor_name = sensor_name
+        self.body_part = body_part
+        self.frame_id = frame_id
+        self.pac_scale = pac_scale
+        self.pdc_scale = pdc_scale
+        self.force_scale = force_scale
+
+    def header(self, stamp_ns: int) -> Any:
+        return self.header_cls(stamp=self.time_cls(**_ns_time(stamp_ns)), frame_id=self.frame_id)
+
+    def batch(self, seq: int, frame_t_ns: np.ndarray, pac_t_ns: np.ndarray, pac: np.ndarray,
+              pdc: np.ndarray, tac: np.ndarray, tdc: np.ndarray, electrodes_fm: np.ndarray) -> Any:
+        stamp = int(pac_t_ns[0])
+        return self.batch_cls(
+            header=self.header(stamp),
+            sensor_name=self.sensor_name,
+            body_part=self.body_part,
+            serial_number="",
+            chip_select=0,
+            first_frame_sequence=seq & 0xFFFFFFFF,
+            frame_count=int(frame_t_ns.shape[0]),
+            electrode_count=N_ELECTRODES,
+            pac=pac.astype(np.uint16),
+            pac_offset_ns=(pac_t_ns - stamp).astype(np.int64),
+            frame_offset_ns=(frame_t_ns - stamp).astype(np.int64),
+            pdc=pdc.astype(np.uint16),
+            tac=tac.astype(np.uint16),
+            tdc=tdc.astype(np.uint16),
+            electrodes=electrodes_fm.astype(np.uint16).ravel(),
+            pac_pa_per_count=float(self.pac_scale),
+            pdc_pa_per_count=float(self.pdc_scale),
+            force_n_per_count=float(self.force_scale),
+            pdc_tare_counts=0.0,
+            electrode_tare_counts=np.zeros(0, dtype=np.float64),
+            bad_words=0,
+        )
+
+    def label(self, stamp_ns: int, class_name: str) -> Any:
+        return self.label_cls(header=self.header(stamp_ns), exploration_id=0, class_name=class_name)
+
+
+def _ordered(paths: list[Path], order: str) -> list[Path]:
+    if order == "material":
+        return paths  # find_recordings sorts by material, then trial
+    from ..datasets.biotac_slide import _NAME  # same file-name pattern as the reader
+
+    keyed = []
+    for p in paths:
+        m = _NAME.match(p.name)
+        assert m is not None
+        keyed.append((int(m.group(2)), int(m.group(1)), p))
+    return [p for _, _, p in sorted(keyed)]
+
+
+def import_biotac_slide(
+    data_dir: str | os.PathLike[str],
+    bag_path: str | os.PathLike[str],
+    trials: Sequence[int] | None = None,
+    materials: Sequence[int] | None = None,
+    options: ImportOptions | None = None,
+    storage: str = "mcap",
+    progress: Callable[[Iterable[Path]], Iterable[Path]] | None = None,
+) -> ImportReport:
+    """Convert BioTac sliding recordings into a bag of ``BioTacFrameBatch`` and ``Label`` messages.
+
+    Parameters
+    ----------
+    data_dir : path
+        Folder holding ``raw_data/`` (or ``raw_data`` itself).
+    bag_path : path
+        Bag directory to create.
+    trials, materials : sequence of int, optional
+        Which trials and materials (default: all found).
+    options : ImportOptions, optional
+    storage : {"mcap", "sqlite3"}
+    progress : callable, optional
+        Wraps the list of files (e.g. ``tqdm``).
+
+    Returns
+    -------
+    ImportReport
+
+    Raises
+    ------
+    DataFormatError
+        For a malformed recording (nothing is silently skipped).
+    ConfigError
+        For bad options or an unknown body part.
+    """
+    opts = options or ImportOptions()
+    opts.validate()
+    robot: RobotDescription = load_robot(opts.robot)
+    part = robot.body_part(opts.body_part)
+    cell_type = robot.cell_types[part.cell_type]
+    if cell_type.force.channels != ("pdc",):
+        raise ConfigError(
+            f"body part {part.name!r} is a {part.cell_type!r} cell, not a BioTac (force from PDC)",
+            key="body_part", source=robot.source,
+        )
+    if not part.cells:
+        raise ConfigError(f"body part {part.name!r} has no cells", key="body_part", source=robot.source)
+    sensor_name = part.cells[0].name
+    force_scale = float(cell_type.force.n_per_count)
+    threshold_n = float(robot.contact.force_threshold_n)
+
+    paths = _ordered(find_recordings(data_dir, trials=trials, materials=materials), opts.order)
+    store = tactile_typestore()
+    factory = _BatchFactory(store, sensor_name, part.name, opts.frame_id or sensor_name,
+                            float(cell_type.vibration.si_per_count), BIOTAC_PDC_PA_PER_COUNT, force_scale)
+    report = ImportReport(bag=str(bag_path), storage=storage, force_threshold_n=threshold_n,
+                          force_n_per_count=force_scale)
+    release_ns = int(round(opts.release_s * 1e9))
+    label_delay_ns = int(round(opts.label_delay_s * 1e9))
+    custom = {
+        "tactile.source": "BioTac_slide_20_50 (import)",
+        "tactile.robot": robot.name,
+        "tactile.body_part": part.name,
+        "tactile.release_s": repr(opts.release_s),
+        "tactile.frames_per_batch": str(opts.frames_per_batch),
+    }
+    seq = 0
+    next_start_ns: int | None = None
+    with BagWriter(bag_path, storage=storage, typestore=store, custom_data=custom) as bag:
+        bag.add_topic(opts.biotac_topic, _BATCH, [BIOTAC_QOS])
+        bag.add_topic(opts.label_topic, _LABEL, [LABEL_QOS])
+        for path in (progress(paths) if progress else paths):
+            rec = read_biotac_csv(path)
+            if opts.max_frames is not None:
+                rec = rec.crop_frames(0, opts.max_frames)
+            _check_counts(rec)
+            period_ns = int(np.median(np.diff(rec.frame_t_ns))) if rec.n_frames > 1 else 10_000_000
+            shift = 0 if next_start_ns is None else next_start_ns - int(rec.frame_t_ns[0])
+            frame_t = rec.frame_t_ns + shift
+            pac_t = rec.pac_t_ns + shift
+            electrodes_fm = rec.electrodes.T  # (n_frames, 19), frame-major
+            n = rec.n_frames
+            fpb = opts.frames_per_batch
+            for s in range(0, n, fpb):
+                e = min(n, s + fpb)
+                msg = factory.batch(seq, frame_t[s:e], pac_t[s * PAC_PER_FRAME:e * PAC_PER_FRAME],
+                                    rec.pac[s * PAC_PER_FRAME:e * PAC_PER_FRAME], rec.pdc[s:e], rec.tac[s:e],
+                                    rec.tdc[s:e], electrodes_fm[s:e])
+                bag.write(opts.biotac_topic, int(frame_t[e - 1]) + period_ns, msg)
+                seq += e - s
+                report.batches += 1
+            end_ns = int(frame_t[-1]) + period_ns
+            force = rec.pdc.astype(np.float64) * force_scale
+            report.trials.append(TrialStats(
+                material=rec.material, material_name=rec.material_name, trial=rec.trial, frames=n,
+                frames_in_contact=int(np.count_nonzero(force >= threshold_n)), mean_force_n=float(force.mean()),
+                min_force_n=float(force.min()), max_force_n=float(force.max()), start_ns=int(frame_t[0]),
+                end_ns=end_ns,
+            ))
+            # Release: no-contact frames through the gap, the label inside it.
+            label_ns = end_ns + label_delay_ns
+            label_written = False
+            next_start_ns = end_ns + release_ns
+            if opts.release_fill:
+                n_release = max(1, release_ns // period_ns)
+                next_start_ns = end_ns + n_release * period_ns  # the stream stays gap-free
+                offsets = np.arange(PAC_PER_FRAME, dtype=np.int64) * period_ns // PAC_PER_FRAME
+                last_tdc = int(rec.tdc[-1])
+                for s in range(0, n_release, fpb):
+                    e = min(n_release, s + fpb)
+                    rf_t = end_ns + np.arange(s, e, dtype=np.int64) * period_ns
+                    rp_t = (rf_t[:, None] + offsets[None, :]).ravel()
+                    k = e - s
+                    zeros = np.zeros(k, dtype=np.int64)
+                    msg = factory.batch(seq, rf_t, rp_t, np.zeros(k * PAC_PER_FRAME, dtype=np.int64), zeros, zeros,
+                                        np.full(k, last_tdc, dtype=np.int64), np.zeros((k, N_ELECTRODES), np.int64))
+                    log_ns = int(rf_t[-1]) + period_ns
+                    if not label_written and log_ns > label_ns:
+                        bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.material_name))
+                        label_written = True
+                        report.labels += 1
+                    bag.write(opts.biotac_topic, log_ns, msg)
+                    seq += k
+                    report.batches += 1
+                    report.release_frames += k
+            if not label_written:
+                bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.material_name))
+                report.labels += 1
+    return report
