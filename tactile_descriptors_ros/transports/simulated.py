@@ -1,0 +1,134 @@
+"""A transport whose device is a Python object: the simulator's wire-byte sources.
+
+The source is given at construction and decides what the "device" sends;
+the transport adds the lifecycle and the interface, so a driver cannot tell
+it from hardware.  A source may provide any of:
+
+* ``read(max_bytes) -> bytes`` (or be a plain callable ``f(max_bytes) -> bytes``):
+  a byte stream, for :meth:`SimulatedTransport.read`;
+* ``write(data)``: receives what the driver writes (else it is kept in ``written``);
+* ``transfer(cs, data) -> bytes``: an SPI device (e.g. :class:`~..codecs.biotac_spi.BiotacSpiResponder`
+  instances behind a chip-select map, see :class:`SpiBus`);
+* ``recv(timeout_s) -> can.Message | None`` and ``send(msg)``: a CAN bus;
+* ``open()`` / ``close()``: called with the transport's.
+
+Sources should emit real wire bytes made with this package's encoders.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from ..errors import TransportError
+from .base import ByteTransport, MessageTransport, SpiTransport
+
+__all__ = ["SimulatedTransport", "SpiBus"]
+
+
+class SpiBus:
+    """An SPI source made of per-chip-select devices with ``transfer(mosi) -> miso``.
+
+    A broadcast (``cs=None``) goes to every device; the MISO of a broadcast is
+    all zeros (BioTacs do not drive MISO together).
+    """
+
+    def __init__(self, devices: Mapping[int, Any]) -> None:
+        self.devices = dict(devices)
+
+    def transfer(self, cs: int | None, data: bytes) -> bytes:
+        if cs is None:
+            for dev in self.devices.values():
+                dev.transfer(data)
+            return bytes(len(data))
+        dev = self.devices.get(int(cs))
+        if dev is None:
+            return b"\xff" * len(data)  # nothing selected: MISO pulled up
+        return bytes(dev.transfer(data))
+
+
+class SimulatedTransport(ByteTransport, SpiTransport, MessageTransport):
+    """Transport over a simulator source (see the module docstring).
+
+    Parameters
+    ----------
+    source : object or callable
+        The simulated device.
+    poll_s : float
+        When a byte source has nothing and a read has a timeout, wait this
+        long once before returning ``b""`` (keeps driver loops from spinning).
+    """
+
+    name = "simulated"
+
+    def __init__(self, source: Any, poll_s: float = 0.001) -> None:
+        super().__init__()
+        if source is None:
+            from ..errors import ConfigError
+            raise ConfigError("the simulated transport needs a source", key="source")
+        self.source = source
+        self.poll_s = float(poll_s)
+        self.written = bytearray()
+        self.sent: list[Any] = []
+
+    def _call(self, name: str) -> Callable[..., Any]:
+        fn = getattr(self.source, name, None)
+        if fn is None:
+            raise TransportError(f"simulated source {type(self.source).__name__} has no {name}()")
+        return fn
+
+    def _open(self) -> None:
+        fn = getattr(self.source, "open", None)
+        if callable(fn):
+            fn()
+
+    def _close(self) -> None:
+        fn = getattr(self.source, "close", None)
+        if callable(fn):
+            fn()
+
+    def read(self, max_bytes: int = 4096, timeout_s: float | None = None) -> bytes:
+        self._require_open()
+        fn = getattr(self.source, "read", None) or (self.source if callable(self.source) else None)
+        if fn is None:
+            raise TransportError(f"simulated source {type(self.source).__name__} has no read()")
+        data = bytes(fn(max_bytes))
+        if not data and timeout_s:
+            time.sleep(min(float(timeout_s), self.poll_s))
+            data = bytes(fn(max_bytes))
+        if len(data) > max_bytes:
+            raise TransportError(f"simulated source returned {len(data)} bytes for max_bytes={max_bytes}")
+        return data
+
+    def write(self, data: bytes) -> int:
+        self._require_open()
+        fn = getattr(self.source, "write", None)
+        if fn is not None:
+            fn(bytes(data))
+        else:
+            self.written += data
+        return len(data)
+
+    def transfer(self, cs: int | None, data: bytes) -> bytes:
+        self._require_open()
+        out = bytes(self._call("transfer")(cs, bytes(data)))
+        if len(out) != len(data):
+            raise TransportError(f"simulated SPI returned {len(out)} bytes for {len(data)} sent")
+        return out
+
+    def recv(self, timeout_s: float | None = None):  # type: ignore[override]
+        self._require_open()
+        return self._call("recv")(timeout_s)
+
+    def send(self, msg) -> None:  # type: ignore[override]
+        self._require_open()
+        fn = getattr(self.source, "send", None)
+        if fn is not None:
+            fn(msg)
+        else:
+            self.sent.append(msg)
+
+    def describe(self) -> dict[str, Any]:
+        return {"transport": self.name, "source": type(self.source).__name__}
+
