@@ -1,0 +1,10 @@
+"""The node graph as data, and the in-repo launcher (no rclpy, no ``launch`` import).
+
+* :mod:`.graph` -- robot description + options -> :class:`~.graph.NodeSpec` list;
+  read by ``launch/*.launch.py`` and by ``tactile launch``;
+* :mod:`.processes` -- start NodeSpecs as subprocesses (``--ros-args
+  --params-file ... -r from:=to``), forward their output with a prefix, stop
+  them cleanly.
+"""
+
+__all__: list[str] = []

@@ -1,0 +1,290 @@
+"""The node graph of a robot, as data: robot description + options -> NodeSpecs.
+
+The robot YAML's ``nodes:`` section is the declarative graph.  Each entry
+names a node and says what to run::
+
+    nodes:
+      biotac_driver:                  # node name
+        executable: biotac_driver     # biotac_driver | skin_driver | window_node | classifier_node
+        body_parts: [thumb, index]    # optional: the body parts this node serves (default: all)
+        namespace: ""                 # optional
+        parameters: {transport: cheetah, serial: {port: /dev/ttyACM0}}   # nested = dotted names
+        sim_parameters: {transport: simulated}   # merged over parameters with --sim SCENE
+        remappings: {tactile/descriptor: /hand/descriptor}
+
+:func:`build_graph` turns it into :class:`NodeSpec` objects that both the
+ROS 2 launch files (``launch/*.launch.py``, one ``launch_ros.actions.Node``
+per spec) and the in-repo launcher (:mod:`.processes`, ``tactile launch``)
+start, so the two cannot drift apart.  It adds what every node needs
+(``robot`` as an absolute path, ``body_parts``), the simulation switch
+(``--sim SCENE``: drivers get ``sim_parameters`` and ``sim.scene``), and the
+scale-out option (one window node per body part).
+
+No rclpy and no launch import here: this module is plain data and is tested
+without ROS.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..core.robot import RobotDescription, load_robot
+from ..errors import ConfigError
+
+__all__ = [
+    "PACKAGE",
+    "EXECUTABLES",
+    "DRIVERS",
+    "NodeSpec",
+    "build_graph",
+    "flatten_parameters",
+    "parameters_document",
+    "write_parameters_file",
+]
+
+PACKAGE = "tactile_descriptors_ros"
+#: Executables of the package (console scripts in setup.py).
+EXECUTABLES = ("biotac_driver", "skin_driver", "window_node", "classifier_node")
+#: Executables that talk to hardware (and switch to a simulated transport with ``--sim``).
+DRIVERS = ("biotac_driver", "skin_driver")
+_ENTRY_KEYS = {"executable", "body_parts", "namespace", "parameters", "sim_parameters", "remappings"}
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node to start.
+
+    Attributes
+    ----------
+    name : str
+        Node name (``__node``).
+    executable : str
+        Console script of :data:`PACKAGE`.
+    parameters : dict
+        Flat parameter names (``qos.frames.depth``) to values.
+    remappings : tuple of (str, str)
+    namespace : str
+    package : str
+    """
+
+    name: str
+    executable: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+    remappings: tuple[tuple[str, str], ...] = ()
+    namespace: str = ""
+    package: str = PACKAGE
+
+    @property
+    def fully_qualified_name(self) -> str:
+        """``/namespace/name`` (``/name`` without a namespace)."""
+        ns = "/" + self.namespace.strip("/") if self.namespace.strip("/") else ""
+        return f"{ns}/{self.name}"
+
+
+def flatten_parameters(params: Mapping[str, Any], prefix: str = "", key: str = "parameters") -> dict[str, Any]:
+    """Nested mappings to dotted names: ``{"qos": {"frames": {"depth": 5}}}`` -> ``{"qos.frames.depth": 5}``.
+
+    Raises
+    ------
+    ConfigError
+        For a value ROS 2 parameters cannot hold (None, an empty or mixed list).
+    """
+    out: dict[str, Any] = {}
+    for name, value in params.items():
+        full = f"{prefix}.{name}" if prefix else str(name)
+        if isinstance(value, Mapping):
+            out.update(flatten_parameters(value, full, key))
+            continue
+        if value is None:
+            raise ConfigError("a ROS parameter cannot be null", key=f"{key}.{full}")
+        if isinstance(value, (list, tuple)):
+            if not value:
+                raise ConfigError("a ROS parameter cannot be an empty list (its type is unknown)",
+                                  key=f"{key}.{full}")
+            value = _homogeneous_list(list(value), f"{key}.{full}")
+        elif not isinstance(value, (bool, int, float, str)):
+            raise ConfigError(f"unsupported parameter value {value!r}", key=f"{key}.{full}")
+        out[full] = value
+    return out
+
+
+def _homogeneous_list(value: list, key: str) -> list:
+    """A list ROS 2 can hold: all bool, all str, all int, or numbers with a float (cast to float)."""
+    if all(isinstance(v, bool) for v in value) or all(isinstance(v, str) for v in value):
+        return value
+    numbers = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    if numbers and all(isinstance(v, int) for v in value):
+        return value
+    if numbers:
+        return [float(v) for v in value]
+    raise ConfigError(f"a list parameter needs items of one type (bool, int, float or str), got {value!r}", key=key)
+
+
+def _entry(robot: RobotDescription, name: str, raw: Any) -> dict[str, Any]:
+    key = f"nodes.{name}"
+    if not isinstance(raw, Mapping):
+        raise ConfigError("expected a mapping", key=key, source=robot.source)
+    unknown = set(raw) - _ENTRY_KEYS
+    if unknown:
+        raise ConfigError(f"unknown key {sorted(unknown)[0]!r} (known: {', '.join(sorted(_ENTRY_KEYS))})",
+                          key=key, source=robot.source)
+    exe = raw.get("executable")
+    if exe not in EXECUTABLES:
+        raise ConfigError(f"executable must be one of {EXECUTABLES}, got {exe!r}", key=f"{key}.executable",
+                          source=robot.source)
+    parts = raw.get("body_parts")
+    if parts is not None:
+        if not isinstance(parts, list) or not parts or not all(isinstance(p, str) for p in parts):
+            raise ConfigError("body_parts must be a non-empty list of body part names", key=f"{key}.body_parts",
+                              source=robot.source)
+        for p in parts:
+            robot.body_part(p)
+    for sub in ("parameters", "sim_parameters", "remappings"):
+        if not isinstance(raw.get(sub, {}) or {}, Mapping):
+            raise ConfigError("expected a mapping", key=f"{key}.{sub}", source=robot.source)
+    ns = raw.get("namespace", "") or ""
+    if not isinstance(ns, str):
+        raise ConfigError("expected a string", key=f"{key}.namespace", source=robot.source)
+    return {
+        "executable": exe,
+        "body_parts": list(parts) if parts else None,
+        "namespace": ns,
+        "parameters": flatten_parameters(raw.get("parameters") or {}, key=f"{key}.parameters"),
+        "sim_parameters": flatten_parameters(raw.get("sim_parameters") or {}, key=f"{key}.sim_parameters"),
+        "remappings": tuple((str(a), str(b)) for a, b in (raw.get("remappings") or {}).items()),
+    }
+
+
+def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: str | os.PathLike[str] | None = None,
+                split_window_nodes: bool = False, model_path: str | None = None,
+                use_sim_time: bool = False, overrides: Mapping[str, Mapping[str, Any]] | None = None,
+                namespace: str = "") -> list[NodeSpec]:
+    """The nodes to start for a robot.
+
+    Parameters
+    ----------
+    robot : RobotDescription or str or path
+        A loaded description, a shipped robot name or a YAML path.
+    sim_scene : str or path, optional
+        A scene name (``demo_shadow_hand``) or path: drivers run on the
+        simulated transport (their ``sim_parameters``, plus ``sim.scene`` as
+        an absolute path).
+    split_window_nodes : bool
+        Scale-out: every window node serving several body parts becomes one
+        node per body part (``<name>_<body part>``), all publishing on the
+        same descriptor topic with interleaved exploration ids
+        (``exploration_id_stride``/``offset``), and a ``pooled`` layout so
+        one classifier can take them all.
+    model_path : str, optional
+        ``model_path`` of every classifier node.
+    use_sim_time : bool
+        Set ``use_sim_time`` on every node (bag replay with ``--clock``).
+    overrides : mapping, optional
+        Node name -> parameters merged last (nested or dotted names).
+    namespace : str
+        Namespace of nodes that do not set their own.
+
+    Returns
+    -------
+    list of NodeSpec
+        In the order of the ``nodes:`` section (drivers first by convention).
+
+    Raises
+    ------
+    ConfigError
+        For an empty or malformed ``nodes:`` section, an unknown body part,
+        executable or override target, or contradictory options.
+    """
+    if not isinstance(robot, RobotDescription):
+        robot = load_robot(robot)
+    if not robot.nodes:
+        raise ConfigError("the robot description has no 'nodes:' section to launch", key="nodes",
+                          source=robot.source)
+    robot_param = str(Path(robot.source).resolve()) if robot.source and Path(robot.source).is_file() else robot.name
+    scene_param = None
+    if sim_scene is not None and str(sim_scene):
+        from ..sim.scene import scene_path
+
+        scene_param = str(scene_path(sim_scene).resolve())
+    entries = {name: _entry(robot, name, raw) for name, raw in robot.nodes.items()}
+    overrides = {k: flatten_parameters(v, key=f"overrides.{k}") for k, v in (overrides or {}).items()}
+
+    specs: list[NodeSpec] = []
+    for name, e in entries.items():
+        params: dict[str, Any] = {}
+        exe = e["executable"]
+        if exe != "classifier_node":
+            params["robot"] = robot_param
+            if e["body_parts"]:
+                params["body_parts"] = list(e["body_parts"])
+        params.update(e["parameters"])
+        if exe in DRIVERS and scene_param is not None:
+            params.update(e["sim_parameters"])
+            params.setdefault("transport", "simulated")
+            params["sim.scene"] = scene_param
+        if exe == "classifier_node" and model_path is not None:
+            params["model_path"] = str(model_path)
+        if use_sim_time:
+            params["use_sim_time"] = True
+        specs.append(NodeSpec(name, exe, params, e["remappings"], e["namespace"] or namespace))
+
+    if split_window_nodes:
+        specs = _split_window_nodes(robot, specs)
+
+    names = {s.name for s in specs}
+    for target, values in overrides.items():
+        if target not in names:
+            raise ConfigError(f"no node named {target!r} to override (nodes: {', '.join(sorted(names))})",
+                              key=f"overrides.{target}")
+        specs = [NodeSpec(s.name, s.executable, {**s.parameters, **values}, s.remappings, s.namespace, s.package)
+                 if s.name == target else s for s in specs]
+    fq = [s.fully_qualified_name for s in specs]
+    dup = sorted({n for n in fq if fq.count(n) > 1})
+    if dup:
+        raise ConfigError(f"two nodes would have the same name {dup[0]!r}", key="nodes", source=robot.source)
+    return specs
+
+
+def _split_window_nodes(robot: RobotDescription, specs: list[NodeSpec]) -> list[NodeSpec]:
+    out: list[NodeSpec] = []
+    windows = [s for s in specs if s.executable == "window_node"]
+    parts_of = {s.name: list(s.parameters.get("body_parts") or [p.name for p in robot.body_parts]) for s in windows}
+    total = sum(len(v) for v in parts_of.values())
+    index = 0
+    for s in specs:
+        if s.executable != "window_node":
+            out.append(s)
+            continue
+        layout = s.parameters.get("descriptor.layout", "pooled")
+        if layout != "pooled":
+            raise ConfigError(
+                f"window node {s.name!r} sets descriptor.layout {layout!r}, but split window nodes publish one "
+                "body part each on one topic: only the 'pooled' layout gives the classifier one feature layout",
+                key=f"nodes.{s.name}.parameters.descriptor.layout", source=robot.source)
+        for part in parts_of[s.name]:
+            params = copy.deepcopy(s.parameters)
+            params.update({"body_parts": [part], "descriptor.layout": "pooled",
+                           "exploration_id_stride": total, "exploration_id_offset": index})
+            out.append(NodeSpec(f"{s.name}_{part}", s.executable, params, s.remappings, s.namespace, s.package))
+            index += 1
+    return out
+
+
+def parameters_document(specs: Sequence[NodeSpec]) -> dict[str, Any]:
+    """A ROS 2 parameters file (``--params-file``) for the specs: ``{fq name: {ros__parameters: ...}}``."""
+    return {s.fully_qualified_name: {"ros__parameters": dict(s.parameters)} for s in specs}
+
+
+def write_parameters_file(specs: Sequence[NodeSpec], path: str | os.PathLike[str]) -> Path:
+    """Write :func:`parameters_document` as YAML; return the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(parameters_document(specs), sort_keys=False, default_flow_style=False))
+    return path

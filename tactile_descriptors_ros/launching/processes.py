@@ -1,0 +1,186 @@
+"""Start a node graph as subprocesses, forward their output, stop them cleanly.
+
+What ``ros2 launch`` does for the package's own nodes, on a machine without
+``launch``/``launch_ros`` (not on PyPI).  Each
+:class:`~.graph.NodeSpec` becomes one process::
+
+    <python> -m tactile_descriptors_ros.nodes.<executable> --ros-args
+        -r __node:=<name> [-r __ns:=/<namespace>] --params-file <tmp yaml> [-r from:=to ...]
+
+started with this interpreter (the venv's own python: the ROS wheels'
+bootstrapper has set the library paths of this process, and children
+started with another interpreter would not find the ROS libraries).  Each
+child runs in its own session, so a Ctrl-C in the terminal reaches only the
+launcher, which then stops the children in order: SIGINT to each (rclpy
+shuts down cleanly: devices closed, models saved), a wait, then SIGTERM and
+finally SIGKILL, always by PID.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+from ..errors import ConfigError
+from .graph import PACKAGE, NodeSpec, write_parameters_file
+
+__all__ = ["node_command", "RunningNode", "GraphProcesses"]
+
+
+def node_command(spec: NodeSpec, params_file: str | os.PathLike[str], python: str | None = None) -> list[str]:
+    """The command line that starts one node with its name, namespace, parameters and remappings."""
+    if spec.package != PACKAGE:
+        raise ConfigError(f"the in-repo launcher starts only {PACKAGE} nodes, not {spec.package}/{spec.executable}")
+    cmd = [python or sys.executable, "-m", f"{PACKAGE}.nodes.{spec.executable}", "--ros-args",
+           "-r", f"__node:={spec.name}"]
+    ns = spec.namespace.strip("/")
+    if ns:
+        cmd += ["-r", f"__ns:=/{ns}"]
+    cmd += ["--params-file", os.fspath(params_file)]
+    for src, dst in spec.remappings:
+        cmd += ["-r", f"{src}:={dst}"]
+    return cmd
+
+
+@dataclass
+class RunningNode:
+    """A started node process."""
+
+    spec: NodeSpec
+    process: subprocess.Popen
+    reader: threading.Thread | None = None
+    lines: list[str] = field(default_factory=list)
+
+    @property
+    def returncode(self) -> int | None:
+        return self.process.poll()
+
+
+class GraphProcesses:
+    """Run NodeSpecs as child processes.
+
+    Parameters
+    ----------
+    specs : sequence of NodeSpec
+    env : mapping, optional
+        Environment of the children (default: this process's).
+    output : file, optional
+        Where the children's lines go, each prefixed with ``[node name]``
+        (default ``sys.stdout``); ``None`` keeps them only in ``lines``.
+    keep_lines : int
+        Lines kept per node (for error reports and tests).
+    workdir : path, optional
+        Where the parameters file is written (default: a temporary folder
+        removed by :meth:`stop`).
+    """
+
+    def __init__(self, specs: Sequence[NodeSpec], *, env: Mapping[str, str] | None = None,
+                 output: IO[str] | None = sys.stdout, keep_lines: int = 200,
+                 workdir: str | os.PathLike[str] | None = None) -> None:
+        if not specs:
+            raise ConfigError("no nodes to start")
+        self.specs = list(specs)
+        self.env = dict(os.environ if env is None else env)
+        self.env.setdefault("PYTHONUNBUFFERED", "1")
+        self.env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "1")
+        self.env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
+        self.output = output
+        self.keep_lines = int(keep_lines)
+        self._tmp = None if workdir is not None else tempfile.TemporaryDirectory(prefix="tactile_launch_")
+        self.workdir = Path(workdir if workdir is not None else self._tmp.name)
+        self.params_file = self.workdir / "parameters.yaml"
+        self.nodes: list[RunningNode] = []
+        self._lock = threading.Lock()
+
+    # ----------------------------------------------------------------- start
+    def start(self) -> None:
+        """Write the parameters file and start every node."""
+        write_parameters_file(self.specs, self.params_file)
+        width = max(len(s.name) for s in self.specs)
+        for spec in self.specs:
+            proc = subprocess.Popen(node_command(spec, self.params_file), env=self.env, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, bufsize=1,
+                                    start_new_session=True)
+            node = RunningNode(spec, proc)
+            node.reader = threading.Thread(target=self._forward, args=(node, f"[{spec.name:<{width}}] "),
+                                           daemon=True, name=f"out-{spec.name}")
+            node.reader.start()
+            self.nodes.append(node)
+
+    def _forward(self, node: RunningNode, prefix: str) -> None:
+        assert node.process.stdout is not None
+        for line in node.process.stdout:
+            line = line.rstrip("\n")
+            with self._lock:
+                node.lines.append(line)
+                del node.lines[:-self.keep_lines]
+                if self.output is not None:
+                    self.output.write(prefix + line + "\n")
+                    self.output.flush()
+
+    # ------------------------------------------------------------ supervise
+    def exited(self) -> list[RunningNode]:
+        """Nodes whose process has ended."""
+        return [n for n in self.nodes if n.returncode is not None]
+
+    def wait(self, timeout_s: float | None = None, poll_s: float = 0.2) -> list[RunningNode]:
+        """Block until a node exits (returned) or ``timeout_s`` passes (``[]``)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            done = self.exited()
+            if done:
+                return done
+            if deadline is not None and time.monotonic() >= deadline:
+                return []
+            time.sleep(poll_s)
+
+    # ----------------------------------------------------------------- stop
+    def stop(self, sigint_timeout_s: float = 10.0, sigterm_timeout_s: float = 3.0) -> dict[str, int | None]:
+        """Stop every node: SIGINT, wait; SIGTERM, wait; SIGKILL -- each by PID.
+
+        Returns
+        -------
+        dict
+            Node name -> exit code.
+        """
+        for sig, timeout in ((signal.SIGINT, sigint_timeout_s), (signal.SIGTERM, sigterm_timeout_s),
+                             (signal.SIGKILL, 5.0)):
+            alive = [n for n in self.nodes if n.returncode is None]
+            if not alive:
+                break
+            for n in alive:
+                try:
+                    os.kill(n.process.pid, sig)
+                except ProcessLookupError:
+                    pass
+            deadline = time.monotonic() + timeout
+            for n in alive:
+                try:
+                    n.process.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    pass
+        for n in self.nodes:
+            if n.reader is not None:
+                n.reader.join(timeout=2.0)
+            if n.process.stdout is not None:
+                n.process.stdout.close()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+        return {n.spec.name: n.returncode for n in self.nodes}
+
+    def __enter__(self) -> GraphProcesses:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

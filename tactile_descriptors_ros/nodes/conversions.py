@@ -1,0 +1,418 @@
+"""Every conversion between ROS messages and core types, in one place.
+
+Messages carry raw integer counts (``INVALID_COUNT`` / ``INVALID_ACCEL`` for a
+sample that could not be read) and per-sample offsets from ``header.stamp``;
+the core works on int64 nanosecond stamps and integer counts (exact ranks by
+counting).  An invalid sample stays marked invalid all the way: it becomes
+``valid = False`` in the :class:`~tactile_descriptors_ros.core.windowing.CellChunk`
+and NaN force, never a neighbour's value.
+
+Array fields are converted through ``array.array`` / ``numpy.frombuffer`` (the
+generated setters accept ``array.array`` without a per-element check), so a
+batch of a few thousand samples converts in microseconds.
+"""
+
+from __future__ import annotations
+
+import array
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.aggregation import RobotDescriptor
+from ..core.windowing import CellChunk, Window
+from ..errors import SignalError
+
+__all__ = [
+    "INVALID_COUNT",
+    "INVALID_ACCEL",
+    "stamp_to_ns",
+    "ns_to_stamp",
+    "BioTacBatch",
+    "biotac_batch_to_msg",
+    "biotac_msg_to_batch",
+    "biotac_msg_to_chunk",
+    "SkinFrame",
+    "skin_frame_to_msg",
+    "skin_msg_to_frame",
+    "skin_msg_to_chunk",
+    "descriptor_to_msg",
+    "DescriptorSample",
+    "descriptor_from_msg",
+    "prediction_to_msg",
+]
+
+#: Marker of an unreadable unsigned sample (BioTacFrameBatch, SkinCellFrame).
+INVALID_COUNT = 65535
+#: Marker of an unreadable accelerometer sample (SkinCellFrame).
+INVALID_ACCEL = -32768
+
+
+# ----------------------------------------------------------------------- time
+
+
+def stamp_to_ns(stamp) -> int:
+    """``builtin_interfaces/Time`` to int64 nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(t_ns: int):
+    """int64 nanoseconds to ``builtin_interfaces/Time``.
+
+    Raises
+    ------
+    SignalError
+        For negative times (a ROS time cannot be before the epoch).
+    """
+    from builtin_interfaces.msg import Time
+
+    t_ns = int(t_ns)
+    if t_ns < 0:
+        raise SignalError(f"cannot represent a negative time ({t_ns} ns) as builtin_interfaces/Time")
+    sec, nsec = divmod(t_ns, 1_000_000_000)
+    return Time(sec=sec, nanosec=nsec)
+
+
+def _arr(typecode: str, values: np.ndarray, dtype) -> array.array:
+    out = array.array(typecode)
+    out.frombytes(np.ascontiguousarray(values, dtype=dtype).tobytes())
+    return out
+
+
+def _np(values, dtype) -> np.ndarray:
+    if isinstance(values, array.array):
+        return np.frombuffer(values, dtype=dtype).copy() if len(values) else np.zeros(0, dtype)
+    return np.asarray(values, dtype=dtype)
+
+
+# --------------------------------------------------------------------- BioTac
+
+
+@dataclass
+class BioTacBatch:
+    """Decoded BioTac frames of one sensor, as the driver hands them to the message.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Time of the first PAC sample.
+    pac : numpy.ndarray of uint16, shape (n_pac,)
+        Counts, ``INVALID_COUNT`` where unreadable.
+    pac_offset_ns : numpy.ndarray of int64, shape (n_pac,)
+    frame_offset_ns : numpy.ndarray of int64, shape (n_frames,)
+    pdc, tac, tdc : numpy.ndarray of uint16, shape (n_frames,)
+    electrodes : numpy.ndarray of uint16, shape (n_frames, n_electrodes)
+    first_frame_sequence : int
+    bad_words : int
+    """
+
+    stamp_ns: int
+    pac: np.ndarray
+    pac_offset_ns: np.ndarray
+    frame_offset_ns: np.ndarray
+    pdc: np.ndarray
+    tac: np.ndarray
+    tdc: np.ndarray
+    electrodes: np.ndarray
+    first_frame_sequence: int = 0
+    bad_words: int = 0
+
+    def __post_init__(self) -> None:
+        n_f = len(self.frame_offset_ns)
+        if len(self.pac) != len(self.pac_offset_ns):
+            raise SignalError(f"{len(self.pac)} PAC samples but {len(self.pac_offset_ns)} PAC offsets")
+        for name in ("pdc", "tac", "tdc"):
+            if len(getattr(self, name)) != n_f:
+                raise SignalError(f"{len(getattr(self, name))} {name} samples for {n_f} frames")
+        if np.ndim(self.electrodes) != 2 or np.shape(self.electrodes)[0] != n_f:
+            raise SignalError(f"electrodes must be (frames={n_f}, n_electrodes), got {np.shape(self.electrodes)}")
+
+    @property
+    def frame_count(self) -> int:
+        return len(self.frame_offset_ns)
+
+
+def biotac_batch_to_msg(batch: BioTacBatch, *, sensor_name: str, body_part: str, chip_select: int,
+                        serial_number: str = "", frame_id: str = "", pac_pa_per_count: float = 0.0,
+                        pdc_pa_per_count: float = 0.0, force_n_per_count: float = 0.0,
+                        pdc_tare_counts: float = 0.0, electrode_tare_counts: Sequence[float] = ()):
+    """Build a ``BioTacFrameBatch`` from a decoded batch."""
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch
+
+    msg = BioTacFrameBatch()
+    msg.header.stamp = ns_to_stamp(batch.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.sensor_name = sensor_name
+    msg.body_part = body_part
+    msg.serial_number = serial_number
+    msg.chip_select = int(chip_select)
+    msg.first_frame_sequence = int(batch.first_frame_sequence) & 0xFFFFFFFF
+    msg.frame_count = batch.frame_count
+    msg.electrode_count = int(np.shape(batch.electrodes)[1])
+    msg.pac = _arr("H", batch.pac, np.uint16)
+    msg.pac_offset_ns = _arr("q", batch.pac_offset_ns, np.int64)
+    msg.frame_offset_ns = _arr("q", batch.frame_offset_ns, np.int64)
+    msg.pdc = _arr("H", batch.pdc, np.uint16)
+    msg.tac = _arr("H", batch.tac, np.uint16)
+    msg.tdc = _arr("H", batch.tdc, np.uint16)
+    msg.electrodes = _arr("H", np.asarray(batch.electrodes).reshape(-1), np.uint16)
+    msg.pac_pa_per_count = float(pac_pa_per_count)
+    msg.pdc_pa_per_count = float(pdc_pa_per_count)
+    msg.force_n_per_count = float(force_n_per_count)
+    msg.pdc_tare_counts = float(pdc_tare_counts)
+    msg.electrode_tare_counts = _arr("d", np.asarray(electrode_tare_counts, dtype=np.float64), np.float64)
+    msg.bad_words = int(batch.bad_words)
+    return msg
+
+
+def biotac_msg_to_batch(msg) -> BioTacBatch:
+    """Inverse of :func:`biotac_batch_to_msg` (raises SignalError for inconsistent lengths)."""
+    n_f = int(msg.frame_count)
+    n_e = int(msg.electrode_count)
+    el = _np(msg.electrodes, np.uint16)
+    if n_e == 0 or el.size != n_f * n_e:
+        raise SignalError(f"{el.size} electrode samples for {n_f} frames x {n_e} electrodes")
+    frame_off = _np(msg.frame_offset_ns, np.int64)
+    if frame_off.size != n_f:
+        raise SignalError(f"frame_count {n_f} but {frame_off.size} frame offsets")
+    return BioTacBatch(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        pac=_np(msg.pac, np.uint16),
+        pac_offset_ns=_np(msg.pac_offset_ns, np.int64),
+        frame_offset_ns=frame_off,
+        pdc=_np(msg.pdc, np.uint16),
+        tac=_np(msg.tac, np.uint16),
+        tdc=_np(msg.tdc, np.uint16),
+        electrodes=el.reshape(n_f, n_e),
+        first_frame_sequence=int(msg.first_frame_sequence),
+        bad_words=int(msg.bad_words),
+    )
+
+
+def biotac_msg_to_chunk(msg) -> CellChunk:
+    """``BioTacFrameBatch`` -> :class:`CellChunk` (vibration PAC, deformation electrodes).
+
+    Force (contact gate, eq. 13/16): ``(PDC - pdc_tare_counts) * force_n_per_count``
+    in newtons, NaN where PDC is ``INVALID_COUNT``.  Invalid PAC or electrode
+    samples are marked invalid (their values are never used).
+    """
+    b = biotac_msg_to_batch(msg)
+    t0 = b.stamp_ns
+    pac = b.pac.astype(np.int32)
+    el = b.electrodes.astype(np.int32).T  # (n_e, frames)
+    pdc = b.pdc.astype(np.float64)
+    pdc_ok = b.pdc != INVALID_COUNT
+    force = np.where(pdc_ok, (pdc - float(msg.pdc_tare_counts)) * float(msg.force_n_per_count), np.nan)
+    return CellChunk(
+        vibration=pac[None, :],
+        vibration_t_ns=t0 + b.pac_offset_ns,
+        deformation=el,
+        deformation_t_ns=t0 + b.frame_offset_ns,
+        force_n=force,
+        force_t_ns=t0 + b.frame_offset_ns,
+        vibration_valid=b.pac != INVALID_COUNT,
+        deformation_valid=np.all(b.electrodes != INVALID_COUNT, axis=1),
+    )
+
+
+# ------------------------------------------------------------------ skin cell
+
+
+@dataclass
+class SkinFrame:
+    """Decoded samples of one skin cell, as the driver hands them to the message.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Time of the first accelerometer sample.
+    accel : numpy.ndarray of int16, shape (3, n_accel)
+        x, y, z counts; ``INVALID_ACCEL`` where unreadable.
+    accel_offset_ns : numpy.ndarray of int64, shape (n_accel,)
+    force : numpy.ndarray of uint16, shape (3, n_force)
+        Three force sensors; ``INVALID_COUNT`` where unreadable.
+    force_offset_ns : numpy.ndarray of int64, shape (n_force,)
+    proximity : numpy.ndarray of uint16, shape (n_force,) or (0,)
+    temperature_c : float
+        NaN when none was read.
+    """
+
+    stamp_ns: int
+    accel: np.ndarray
+    accel_offset_ns: np.ndarray
+    force: np.ndarray
+    force_offset_ns: np.ndarray
+    proximity: np.ndarray
+    temperature_c: float = float("nan")
+    sequence: int = 0
+    bad_frames: int = 0
+
+    def __post_init__(self) -> None:
+        if np.ndim(self.accel) != 2 or np.shape(self.accel)[0] != 3 or \
+                np.shape(self.accel)[1] != len(self.accel_offset_ns):
+            raise SignalError(f"accel must be (3, {len(self.accel_offset_ns)}), got {np.shape(self.accel)}")
+        if np.ndim(self.force) != 2 or np.shape(self.force)[0] != 3 or \
+                np.shape(self.force)[1] != len(self.force_offset_ns):
+            raise SignalError(f"force must be (3, {len(self.force_offset_ns)}), got {np.shape(self.force)}")
+        if len(self.proximity) not in (0, len(self.force_offset_ns)):
+            raise SignalError(f"{len(self.proximity)} proximity samples for {len(self.force_offset_ns)} force samples")
+
+
+def skin_frame_to_msg(frame: SkinFrame, *, cell_id: int, body_part: str, frame_id: str = "",
+                      accel_mps2_per_count: float = 0.0, force_n_per_count: float = 0.0,
+                      force_tare_counts: Sequence[float] = (0.0, 0.0, 0.0), proximity_per_count: float = 0.0):
+    """Build a ``SkinCellFrame`` from decoded samples."""
+    from tactile_descriptors_msgs.msg import SkinCellFrame
+
+    msg = SkinCellFrame()
+    msg.header.stamp = ns_to_stamp(frame.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.cell_id = int(cell_id)
+    msg.body_part = body_part
+    msg.sequence = int(frame.sequence) & 0xFFFFFFFF
+    acc = np.asarray(frame.accel, dtype=np.int16)
+    msg.accel_x = _arr("h", acc[0], np.int16)
+    msg.accel_y = _arr("h", acc[1], np.int16)
+    msg.accel_z = _arr("h", acc[2], np.int16)
+    msg.accel_offset_ns = _arr("q", frame.accel_offset_ns, np.int64)
+    msg.accel_mps2_per_count = float(accel_mps2_per_count)
+    msg.force = _arr("H", np.asarray(frame.force, dtype=np.uint16).T.reshape(-1), np.uint16)
+    msg.force_offset_ns = _arr("q", frame.force_offset_ns, np.int64)
+    msg.force_n_per_count = float(force_n_per_count)
+    msg.force_tare_counts = np.asarray(force_tare_counts, dtype=np.float64)
+    msg.proximity = _arr("H", frame.proximity, np.uint16)
+    msg.proximity_per_count = float(proximity_per_count)
+    msg.temperature_c = float(frame.temperature_c)
+    msg.bad_frames = int(frame.bad_frames)
+    return msg
+
+
+def skin_msg_to_frame(msg) -> SkinFrame:
+    """Inverse of :func:`skin_frame_to_msg` (raises SignalError for inconsistent lengths)."""
+    ax, ay, az = (_np(getattr(msg, f"accel_{a}"), np.int16) for a in "xyz")
+    if not ax.size == ay.size == az.size:
+        raise SignalError(f"accelerometer axes differ in length: {ax.size}, {ay.size}, {az.size}")
+    force = _np(msg.force, np.uint16)
+    if force.size % 3:
+        raise SignalError(f"{force.size} force samples is not a multiple of 3 sensors")
+    return SkinFrame(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        accel=np.stack([ax, ay, az]),
+        accel_offset_ns=_np(msg.accel_offset_ns, np.int64),
+        force=force.reshape(-1, 3).T.copy(),
+        force_offset_ns=_np(msg.force_offset_ns, np.int64),
+        proximity=_np(msg.proximity, np.uint16),
+        temperature_c=float(msg.temperature_c),
+        sequence=int(msg.sequence),
+        bad_frames=int(msg.bad_frames),
+    )
+
+
+def skin_msg_to_chunk(msg) -> CellChunk:
+    """``SkinCellFrame`` -> :class:`CellChunk` (vibration accelerometer, deformation force).
+
+    Force (contact gate, eq. 27): the mean of the three tared force sensors
+    times ``force_n_per_count``, NaN where any of them is ``INVALID_COUNT``.
+    """
+    f = skin_msg_to_frame(msg)
+    t0 = f.stamp_ns
+    acc = f.accel.astype(np.int32)
+    forces = f.force.astype(np.int32)
+    f_ok = np.all(f.force != INVALID_COUNT, axis=0)
+    tare = np.asarray(msg.force_tare_counts, dtype=np.float64).reshape(3, 1)
+    mean_n = ((forces - tare).mean(axis=0)) * float(msg.force_n_per_count)
+    return CellChunk(
+        vibration=acc,
+        vibration_t_ns=t0 + f.accel_offset_ns,
+        deformation=forces,
+        deformation_t_ns=t0 + f.force_offset_ns,
+        force_n=np.where(f_ok, mean_n, np.nan),
+        force_t_ns=t0 + f.force_offset_ns,
+        vibration_valid=np.all(f.accel != INVALID_ACCEL, axis=0),
+        deformation_valid=f_ok,
+    )
+
+
+# ----------------------------------------------------------------- descriptor
+
+
+def descriptor_to_msg(desc: RobotDescriptor, window: Window, *, frame_id: str = "",
+                      exploration_id: int | None = None):
+    """Build a ``Descriptor`` message for one window (stamp = window end)."""
+    from tactile_descriptors_msgs.msg import Descriptor
+
+    msg = Descriptor()
+    msg.header.stamp = ns_to_stamp(window.end_ns)
+    msg.header.frame_id = frame_id
+    msg.robot = desc.robot
+    msg.exploration_id = int(window.exploration_id if exploration_id is None else exploration_id)
+    msg.window_start = ns_to_stamp(window.start_ns)
+    msg.window_end = ns_to_stamp(window.end_ns)
+    msg.window_mode = window.mode
+    msg.layout_mode = desc.layout
+    msg.channel_mode = desc.channels
+    parts = desc.body_parts
+    msg.body_parts = [bp.name for bp in parts]
+    msg.contact = [bool(bp.contact) for bp in parts]
+    msg.cells_in_contact = _arr("H", np.array([bp.cells_in_contact for bp in parts]), np.uint16)
+    msg.cells_total = _arr("H", np.array([bp.cells_total for bp in parts]), np.uint16)
+    msg.mean_force_n = _arr("d", np.array([bp.mean_force_n for bp in parts], dtype=np.float64), np.float64)
+    msg.quality = _arr("I", np.array([bp.quality for bp in parts]), np.uint32)
+    msg.labels = list(desc.labels)
+    msg.values = _arr("d", np.asarray(desc.values, dtype=np.float64), np.float64)
+    return msg
+
+
+@dataclass
+class DescriptorSample:
+    """What the classifier needs from a ``Descriptor`` message."""
+
+    exploration_id: int
+    window_end_ns: int
+    values: np.ndarray
+    labels: tuple[str, ...]
+    contact: bool
+    window_mode: str
+    robot: str
+    body_parts: tuple[str, ...]
+
+
+def descriptor_from_msg(msg) -> DescriptorSample:
+    """``Descriptor`` -> :class:`DescriptorSample` (raises SignalError for a malformed message)."""
+    values = _np(msg.values, np.float64)
+    labels = tuple(msg.labels)
+    if values.size != len(labels):
+        raise SignalError(f"descriptor has {values.size} values but {len(labels)} labels")
+    n_parts = len(msg.body_parts)
+    if len(msg.contact) != n_parts:
+        raise SignalError(f"descriptor has {n_parts} body parts but {len(msg.contact)} contact flags")
+    return DescriptorSample(
+        exploration_id=int(msg.exploration_id),
+        window_end_ns=stamp_to_ns(msg.window_end),
+        values=values,
+        labels=labels,
+        contact=any(bool(c) for c in msg.contact),
+        window_mode=str(msg.window_mode),
+        robot=str(msg.robot),
+        body_parts=tuple(msg.body_parts),
+    )
+
+
+def prediction_to_msg(sample: DescriptorSample, *, class_name: str | None, class_names: Sequence[str],
+                      scores: np.ndarray, model_version: int, updates: int, frame_id: str = ""):
+    """Build a ``Prediction`` message (``has_model`` false before the first class is known)."""
+    from tactile_descriptors_msgs.msg import Prediction
+
+    msg = Prediction()
+    msg.header.stamp = ns_to_stamp(sample.window_end_ns)
+    msg.header.frame_id = frame_id
+    msg.exploration_id = int(sample.exploration_id)
+    msg.window_end = ns_to_stamp(sample.window_end_ns)
+    msg.has_model = class_name is not None
+    msg.class_name = class_name or ""
+    msg.class_names = list(class_names)
+    msg.scores = _arr("d", np.asarray(scores, dtype=np.float64), np.float64)
+    msg.model_version = int(model_version) & 0xFFFFFFFF
+    msg.updates = int(updates) & 0xFFFFFFFF
+    return msg

@@ -1,0 +1,90 @@
+"""QoS of every topic as node parameters.
+
+Sensor-data QoS mismatches are the most common complaint in tactile driver
+issue trackers: a ``RELIABLE`` subscription never matches a ``BEST_EFFORT``
+publisher, and the symptom is silence.  Every publisher and subscription of
+the package's nodes therefore reads its QoS from three parameters named
+after the endpoint::
+
+    qos.<endpoint>.reliability   reliable | best_effort | system_default
+    qos.<endpoint>.durability    volatile | transient_local | system_default
+    qos.<endpoint>.depth         history depth (KEEP_LAST), >= 1
+
+The defaults are chosen so that the package's own graph always matches and a
+foreign publisher or subscriber most likely does:
+
+* drivers *publish* frames ``reliable`` (a reliable offer matches both
+  reliable and best-effort requests, including ``ros2 topic echo``'s);
+* the window node *subscribes* to frames ``best_effort`` (a best-effort request
+  matches both reliable and best-effort publishers, e.g. a driver configured
+  with ``SensorDataQoS`` or a bag replayed with its recorded offers);
+* descriptors, predictions and labels are rare and each one matters (a lost
+  label is a lost update): reliable on both sides, depth 10 to 50.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..errors import ConfigError
+
+__all__ = ["QosDefaults", "RELIABILITIES", "DURABILITIES", "declare_qos", "qos_profile"]
+
+RELIABILITIES = ("reliable", "best_effort", "system_default")
+DURABILITIES = ("volatile", "transient_local", "system_default")
+
+
+@dataclass(frozen=True)
+class QosDefaults:
+    """Default QoS of one endpoint (overridable by parameters)."""
+
+    reliability: str = "reliable"
+    durability: str = "volatile"
+    depth: int = 10
+
+
+def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "?"):
+    """Build an :class:`rclpy.qos.QoSProfile` from policy names.
+
+    Raises
+    ------
+    ConfigError
+        Naming the offending ``qos.<endpoint>.*`` parameter.
+    """
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    rel = str(reliability).lower()
+    dur = str(durability).lower()
+    if rel not in RELIABILITIES:
+        raise ConfigError(f"must be one of {RELIABILITIES}, got {reliability!r}", key=f"qos.{endpoint}.reliability")
+    if dur not in DURABILITIES:
+        raise ConfigError(f"must be one of {DURABILITIES}, got {durability!r}", key=f"qos.{endpoint}.durability")
+    if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
+        raise ConfigError(f"must be an integer >= 1, got {depth!r}", key=f"qos.{endpoint}.depth")
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=int(depth),
+        reliability={"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT,
+                     "system_default": ReliabilityPolicy.SYSTEM_DEFAULT}[rel],
+        durability={"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL,
+                    "system_default": DurabilityPolicy.SYSTEM_DEFAULT}[dur],
+    )
+
+
+def declare_qos(node, endpoint: str, defaults: QosDefaults):
+    """Declare ``qos.<endpoint>.{reliability,durability,depth}`` on ``node`` and return the profile."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    prefix = f"qos.{endpoint}"
+    rel = node.declare_parameter(
+        f"{prefix}.reliability", defaults.reliability,
+        ParameterDescriptor(description=f"QoS reliability of '{endpoint}': {', '.join(RELIABILITIES)}",
+                            read_only=True)).value
+    dur = node.declare_parameter(
+        f"{prefix}.durability", defaults.durability,
+        ParameterDescriptor(description=f"QoS durability of '{endpoint}': {', '.join(DURABILITIES)}",
+                            read_only=True)).value
+    depth = node.declare_parameter(
+        f"{prefix}.depth", defaults.depth,
+        ParameterDescriptor(description=f"QoS history depth of '{endpoint}' (KEEP_LAST)", read_only=True)).value
+    return qos_profile(rel, dur, depth, endpoint)

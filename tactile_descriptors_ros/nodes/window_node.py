@@ -1,0 +1,288 @@
+"""``window_node``: tactile frames -> contact gate -> windows -> ``Descriptor``.
+
+Subscribes to the frames of the body parts it serves (``BioTacFrameBatch`` or
+``SkinCellFrame``, chosen by each body part's cell type), converts them to
+:class:`~tactile_descriptors_ros.core.windowing.CellChunk` (force: BioTac
+``(PDC - tare) * force_n_per_count``; skin cell: mean of the three tared force
+sensors times their scale), cuts fixed or exploration windows with
+:class:`~tactile_descriptors_ros.core.windowing.Windower` and publishes the
+robot descriptor of each window (Kaboli et al. 2018, eq. 11-18, 28-29).
+
+Everything runs on the *sensor time stamps*: live data, ``use_sim_time`` and
+replayed bags give the same windows.  Faults (unknown sensors, malformed
+messages, lost frames, the windower's out-of-order / duplicate / clock-jump
+counters) are counted and reported on ``/diagnostics``.
+
+Topics, parameters and QoS: ``docs/nodes.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections import Counter
+from collections.abc import Sequence
+
+from rclpy.node import Node
+
+from ..core.aggregation import describe_window
+from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
+from ..core.windowing import Window, Windower
+from ..errors import ConfigError, SignalError
+from .common import Diagnostics, RateMeter, Status, declare, run_node
+from .conversions import biotac_msg_to_chunk, descriptor_to_msg, skin_msg_to_chunk
+from .qos import QosDefaults, declare_qos
+
+__all__ = ["WindowNode", "select_body_parts", "message_kind", "FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "main"]
+
+#: Default frames topic of a body part (relative: node namespaces apply).
+FRAMES_TOPIC = "tactile/{body_part}/frames"
+#: Default descriptor topic.
+DESCRIPTOR_TOPIC = "tactile/descriptor"
+
+
+def message_kind(cell_type: CellType) -> str:
+    """Which message carries a cell type: ``"biotac"`` or ``"skin"``.
+
+    A cell type with one vibration channel (PAC) is a BioTac
+    (``BioTacFrameBatch``); three vibration channels and three deformation
+    channels are a skin cell (``SkinCellFrame``).
+
+    Raises
+    ------
+    ConfigError
+        For a cell type no message of this package carries.
+    """
+    n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
+    if n_s == 1:
+        return "biotac"
+    if n_s == 3 and n_v == 3:
+        return "skin"
+    raise ConfigError(f"no message type carries cell type {cell_type.name!r} ({n_s} vibration and {n_v} "
+                      "deformation channels; BioTacFrameBatch has 1 + N, SkinCellFrame 3 + 3)",
+                      key=f"cell_types.{cell_type.name}")
+
+
+def select_body_parts(robot: RobotDescription, names: Sequence[str]) -> RobotDescription:
+    """The robot restricted to ``names`` (in the robot's order); all of it for an empty list.
+
+    Raises
+    ------
+    ConfigError
+        For an unknown body part (naming the known ones) or a name given twice.
+    """
+    names = [n for n in names if n]
+    if not names:
+        return robot
+    if len(set(names)) != len(names):
+        raise ConfigError(f"body part listed twice in {names}", key="body_parts")
+    for n in names:
+        robot.body_part(n)  # raises with the known names
+    parts = tuple(p for p in robot.body_parts if p.name in set(names))
+    return dataclasses.replace(robot, body_parts=parts)
+
+
+class WindowNode(Node):
+    """The window node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
+
+    def __init__(self, node_name: str = "window_node", **kwargs) -> None:
+        super().__init__(node_name, **kwargs)
+        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, SkinCellFrame
+
+        robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
+        if not robot_arg:
+            raise ConfigError("parameter 'robot' is required (e.g. shadow_hand, nao or a YAML path)", key="robot")
+        full = load_robot(robot_arg)
+        served = declare(self, "body_parts", [p.name for p in full.body_parts],
+                         "body parts this node serves (scale-out: one window node per body part)")
+        self.robot = select_body_parts(full, served)
+        w, c, d = self.robot.window, self.robot.contact, self.robot.descriptor
+        mode = declare(self, "window.mode", w.mode, "window mode", choices=WINDOW_MODES)
+        self.layout = declare(self, "descriptor.layout", d.layout, "descriptor layout", choices=LAYOUT_MODES)
+        self.channels = declare(self, "descriptor.channels", d.channels, "channel mode", choices=CHANNEL_MODES)
+        self.windower = Windower(
+            self.robot, mode=mode,
+            length_s=declare(self, "window.length_s", w.length_s, "fixed window length [s]"),
+            hop_s=declare(self, "window.hop_s", w.hop_s, "fixed window hop [s]"),
+            min_duration_s=declare(self, "window.min_duration_s", w.min_duration_s,
+                                   "shortest exploration kept [s]"),
+            max_duration_s=declare(self, "window.max_duration_s", w.max_duration_s,
+                                   "longest exploration window [s]"),
+            release_s=declare(self, "window.release_s", w.release_s,
+                              "force below the release threshold this long ends an exploration [s]"),
+            force_threshold_n=declare(self, "contact.force_threshold_n", c.force_threshold_n,
+                                      "contact gate F_t (eq. 13) [N]", minimum=0.0),
+            release_threshold_n=declare(self, "contact.release_threshold_n", c.release_threshold_n,
+                                        "exploration release threshold [N]", minimum=0.0),
+            lateness_s=declare(self, "window.lateness_s", 0.05, "wait for late cells after a fixed window [s]",
+                               minimum=0.0),
+        )
+        self.force_threshold_n = self.windower.onset_n
+        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the descriptors")
+        self.id_stride = declare(self, "exploration_id_stride", 1,
+                                 "published exploration id = local id * stride + offset", minimum=1)
+        self.id_offset = declare(self, "exploration_id_offset", 0, "see exploration_id_stride", minimum=0)
+        if self.id_offset >= self.id_stride and self.id_stride > 1:
+            raise ConfigError(f"must be below exploration_id_stride ({self.id_stride})",
+                              key="exploration_id_offset")
+        topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
+        self.descriptors_published = 0
+        self.last_quality: dict[str, int] = {}
+        self.faults: Counter[str] = Counter()
+        self._untared: set[str] = set()
+        self._next_seq: dict[str, int] = {}
+        self._rates: dict[str, RateMeter] = {}
+        self._last_seen: dict[str, float] = {}
+
+        qos_frames = declare_qos(self, "frames", QosDefaults("best_effort", "volatile", 50))
+        qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 10))
+        self.pub = self.create_publisher(Descriptor, DESCRIPTOR_TOPIC, qos_desc)
+        self._cells_by_name: dict[tuple[str, str], int] = {}
+        self.subs = []
+        for part in self.robot.body_parts:
+            kind = message_kind(self.robot.cell_types[part.cell_type])
+            topic = topic_fmt.format(body_part=part.name)
+            self._rates[part.name] = RateMeter()
+            for cell in part.cells:
+                self._cells_by_name[(part.name, cell.name)] = cell.id
+            if kind == "biotac":
+                cb = self._on_biotac
+                mtype = BioTacFrameBatch
+            else:
+                cb = self._on_skin
+                mtype = SkinCellFrame
+            self.subs.append(self.create_subscription(mtype, topic, cb, qos_frames))
+        self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
+        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0,
+                                                     "diagnostics period [s]", minimum=0.01))
+        self.diagnostics.add("windows", self._status)
+        self.get_logger().info(
+            f"robot {self.robot.name}: {len(self.robot.body_parts)} body parts "
+            f"({', '.join(p.name for p in self.robot.body_parts)}), {self.windower.mode} windows, "
+            f"{self.layout}/{self.channels} descriptors on {self.pub.topic_name}")
+
+    # ------------------------------------------------------------ input
+    def _seen(self, part: str, frames: int) -> None:
+        self._rates[part].add(frames)
+        self._last_seen[part] = time.monotonic()
+
+    def _on_biotac(self, msg) -> None:
+        part = msg.body_part
+        cid = self._cells_by_name.get((part, msg.sensor_name))
+        if cid is None:
+            self.faults["unknown_sensor"] += 1
+            self.get_logger().warn(f"frames from unknown sensor {msg.sensor_name!r} on body part {part!r}; "
+                                   "dropped (not in the robot description)",
+                                   throttle_duration_sec=5.0)
+            return
+        try:
+            chunk = biotac_msg_to_chunk(msg)
+        except SignalError as exc:
+            self.faults["malformed"] += 1
+            self.get_logger().warn(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
+                                   throttle_duration_sec=5.0)
+            return
+        if msg.pdc_tare_counts != 0.0:
+            self._untared.discard(msg.sensor_name)
+        elif msg.sensor_name not in self._untared:
+            self._untared.add(msg.sensor_name)
+            self.get_logger().warn(f"{msg.sensor_name} was never tared: its force is PDC counts times the scale "
+                                   "and may read as permanent contact (call the driver's ~/tare)")
+        self._sequence(msg.sensor_name, int(msg.first_frame_sequence), int(msg.frame_count))
+        self.faults["bad_words"] += int(msg.bad_words)
+        self._seen(part, int(msg.frame_count))
+        self._add(cid, chunk)
+
+    def _on_skin(self, msg) -> None:
+        cid = int(msg.cell_id)
+        part = self._cell_part.get(cid)
+        if part is None:
+            self.faults["unknown_cell"] += 1
+            self.get_logger().warn(f"frames from cell {cid} which is not in the served body parts; dropped",
+                                   throttle_duration_sec=5.0)
+            return
+        if msg.body_part != part:
+            self.faults["body_part_mismatch"] += 1
+            self.get_logger().warn(f"cell {cid} claims body part {msg.body_part!r} but the robot description "
+                                   f"puts it on {part!r}; dropped", throttle_duration_sec=5.0)
+            return
+        try:
+            chunk = skin_msg_to_chunk(msg)
+        except SignalError as exc:
+            self.faults["malformed"] += 1
+            self.get_logger().warn(f"malformed SkinCellFrame from cell {cid}: {exc}", throttle_duration_sec=5.0)
+            return
+        self._sequence(f"cell{cid}", int(msg.sequence), 1)
+        self.faults["bad_frames"] += int(msg.bad_frames)
+        self._seen(part, 1)
+        self._add(cid, chunk)
+
+    def _sequence(self, key: str, first: int, count: int) -> None:
+        expected = self._next_seq.get(key)
+        if expected is not None and first != expected:
+            gap = (first - expected) & 0xFFFFFFFF
+            if gap < 0x80000000:
+                self.faults["lost_frames"] += gap
+            else:
+                self.faults["sequence_restart"] += 1
+        self._next_seq[key] = (first + count) & 0xFFFFFFFF
+
+    def _add(self, cid: int, chunk) -> None:
+        self.windower.add(cid, chunk)
+        for w in self.windower.poll():
+            self._publish(w)
+
+    # ----------------------------------------------------------- output
+    def _publish(self, window: Window) -> None:
+        try:
+            desc = describe_window(self.robot, window.cells, layout=self.layout, channels=self.channels,
+                                   force_threshold_n=self.force_threshold_n)
+        except SignalError as exc:
+            self.faults["describe_failed"] += 1
+            self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
+            return
+        eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
+        msg = descriptor_to_msg(desc, window, frame_id=self.frame_id, exploration_id=eid)
+        self.pub.publish(msg)
+        self.descriptors_published += 1
+        self.last_quality = {bp.name: bp.quality for bp in desc.body_parts}
+        if window.mode == "exploration":
+            touching = [bp.name for bp in desc.body_parts if bp.contact]
+            self.get_logger().info(
+                f"exploration {eid}: {(window.end_ns - window.start_ns) / 1e9:.2f} s, "
+                f"contact {', '.join(touching) or 'none'}")
+
+    def _status(self) -> Status:
+        faults = dict(self.faults)
+        faults.update({f"windower_{k}": v for k, v in self.windower.faults.items()})
+        values: dict = {"descriptors_published": self.descriptors_published,
+                        "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
+        now = time.monotonic()
+        silent = []
+        for part, meter in self._rates.items():
+            values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin messages/s
+            seen = self._last_seen.get(part)
+            if seen is None or now - seen > 2.0:
+                silent.append(part)
+        values.update({f"fault_{k}": v for k, v in sorted(faults.items())})
+        values.update({f"quality_{k}": v for k, v in self.last_quality.items()})
+        bad = {k: v for k, v in faults.items() if v and k != "windower_exploration_too_short"}
+        if self._untared:
+            values["untared_sensors"] = ", ".join(sorted(self._untared))
+        if silent:
+            return Status("warn", f"no frames from {', '.join(silent)}", values)
+        if self._untared:
+            return Status("warn", f"never tared: {values['untared_sensors']}", values)
+        if bad:
+            return Status("warn", "faults: " + ", ".join(f"{k}={v}" for k, v in sorted(bad.items())), values)
+        return Status("ok", f"{self.descriptors_published} descriptors", values)
+
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Entry point of the ``window_node`` executable."""
+    return run_node(WindowNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
