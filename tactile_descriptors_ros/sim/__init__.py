@@ -1,0 +1,33 @@
+"""Scene simulator: simulate only the effects a scene calls for, and feed the real drivers.
+
+* :mod:`.scene` -- scenes as YAML (robot, effects, explorations), strictly validated;
+* :mod:`.textures` -- per-material texture models fitted to real BioTac recordings
+  (AR vibration, electrode statistics) and parametric materials;
+* :mod:`.engine` -- :func:`simulate`: integer ADC counts per cell and stream with
+  int64 ns time stamps, plus ground truth;
+* :mod:`.sources` -- the simulated sensors' wire bytes, made by the real codecs' encoders.
+"""
+
+from .engine import CellRecord, ExplorationTiming, SimResult, Stream, iter_simulate, simulate
+from .scene import EFFECTS, MOTIONS, Exploration, Scene, load_scene, parse_scene
+from .textures import MaterialModel, fit_materials, get_material, material_library, parametric_material
+
+__all__ = [
+    "CellRecord",
+    "ExplorationTiming",
+    "SimResult",
+    "Stream",
+    "simulate",
+    "iter_simulate",
+    "EFFECTS",
+    "MOTIONS",
+    "Exploration",
+    "Scene",
+    "load_scene",
+    "parse_scene",
+    "MaterialModel",
+    "fit_materials",
+    "get_material",
+    "material_library",
+    "parametric_material",
+]
