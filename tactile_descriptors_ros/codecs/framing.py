@@ -336,11 +336,21 @@ class StreamDecoder(Generic[F]):
         """Hook for subclasses that break ``bad_payloads`` down by reason."""
 
     def finish(self) -> list[F]:
-        """End of stream: count a held-back partial frame as truncated and clear it."""
-        if self._buf:
+        """End of stream: deliver what can still be decoded, count partial frames as truncated.
+
+        A held-back frame that can never complete (the stream ended, or a
+        false sync promised more bytes than came) is counted as truncated and
+        the bytes after its first byte are scanned again, so complete frames
+        behind it are not lost.
+        """
+        out: list[F] = []
+        while self._buf:
             if self._buf.startswith(self.sync):
                 self.stats.truncated += 1
+                self._lose_sync()
+                self._skip(1)
+                out.extend(self.feed(b""))
             else:
-                self.stats.garbage_bytes += len(self._buf)
-            self._buf.clear()
-        return []
+                self._skip(len(self._buf))
+        self._sync_tracker_stats()
+        return out
