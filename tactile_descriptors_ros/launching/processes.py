@@ -33,7 +33,19 @@ from typing import IO
 from ..errors import ConfigError
 from .graph import PACKAGE, NodeSpec, write_parameters_file
 
-__all__ = ["node_command", "RunningNode", "GraphProcesses"]
+__all__ = ["node_command", "RunningNode", "GraphProcesses", "localhost_environment", "run_until_interrupted"]
+
+
+def localhost_environment(env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The environment with DDS discovery kept on this machine unless the caller chose otherwise.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` defaults to ``LOCALHOST`` (Kilted ignores
+    ``ROS_LOCALHOST_ONLY``); set it to ``SUBNET`` yourself for a multi-machine
+    robot.  ``ROS_DOMAIN_ID`` is left as it is (0 by default in ROS 2).
+    """
+    out = dict(os.environ if env is None else env)
+    out.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    return out
 
 
 def node_command(spec: NodeSpec, params_file: str | os.PathLike[str], python: str | None = None) -> list[str]:
@@ -184,3 +196,39 @@ class GraphProcesses:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None,
+                          stop_when_one_exits: bool = False) -> dict[str, int | None]:
+    """Start ``procs`` and supervise them until Ctrl-C, SIGTERM or ``duration_s``; then stop them.
+
+    A node that exits is reported on stderr; the others keep running (as with
+    ``ros2 launch``) unless ``stop_when_one_exits``.  Returns the exit codes.
+    """
+    def on_term(signum, frame):  # SIGTERM to the launcher: stop the graph like Ctrl-C
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, on_term) if threading.current_thread() is threading.main_thread() else None
+    deadline = None if duration_s is None else time.monotonic() + float(duration_s)
+    reported: set[str] = set()
+    try:
+        procs.start()
+        while True:
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                break
+            done = procs.wait(timeout_s=0.5 if remaining is None else min(0.5, remaining))
+            for n in done:
+                if n.spec.name not in reported:
+                    reported.add(n.spec.name)
+                    print(f"tactile launch: node {n.spec.name} exited with code {n.returncode}", file=sys.stderr,
+                          flush=True)
+            if len(reported) == len(procs.nodes) or (reported and stop_when_one_exits):
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        codes = procs.stop()
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+    return codes

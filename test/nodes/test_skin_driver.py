@@ -1,0 +1,103 @@
+"""skin_driver over the python-can virtual bus and pyserial's loop://."""
+
+from __future__ import annotations
+
+import time
+
+import can
+import pytest
+
+from tactile_descriptors_ros.codecs.skin import Modality
+from tactile_descriptors_ros.codecs.skin_can import SkinCanEncoder
+from tactile_descriptors_ros.codecs.skin_serial import SkinSerialEncoder
+
+pytestmark = pytest.mark.ros
+
+
+def _spin_until(executor, cond, timeout_s=10.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not cond():
+        executor.spin_once(timeout_sec=0.05)
+    return cond()
+
+
+def _make(ros_context, params, transport_factory=None):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import SkinCellFrame
+    from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
+
+    import rclpy
+
+    drv = SkinDriver(context=ros_context, transport_factory=transport_factory,
+                     parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+    sink = rclpy.create_node("sink", context=ros_context)
+    got = []
+    sink.create_subscription(SkinCellFrame, "tactile/left_hand/frames", got.append, 100)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(drv)
+    ex.add_node(sink)
+    return drv, ex, got
+
+
+def _samples(send, n_ms=400, cells=(1, 2), unknown=(999,), force=(100, 110, 120)):
+    """Send n_ms of accel (1 kHz) and force (250 Hz) samples per cell, plus frames of unknown cells."""
+    for k in range(n_ms):
+        for c in cells + unknown:
+            send(c, Modality.ACCEL, (k % 50 - 25, 3, -4))
+            if k % 4 == 0:
+                send(c, Modality.FORCE, force)
+
+
+def test_can_virtual_bus_publishes_cells_and_reports_unknown_ids(ros_context):
+    channel = f"skin_test_{time.monotonic_ns()}"
+    drv, ex, got = _make(ros_context, {"robot": "nao", "transport": "can", "can.interface": "virtual",
+                                       "can.channel": channel, "tare_on_start_s": 0.0, "resync_s": 0.0})
+    try:
+        bus = can.Bus(interface="virtual", channel=channel)
+        enc = SkinCanEncoder()
+        _samples(lambda c, m, v: bus.send(enc.encode(c, m, v)))
+        assert _spin_until(ex, lambda: {m.cell_id for m in got} >= {1, 2})
+        m = next(m for m in got if m.cell_id == 1)
+        assert m.body_part == "left_hand"
+        assert len(m.accel_x) == len(m.accel_offset_ns) > 0
+        assert list(m.force[:3]) == [100, 110, 120]
+        assert 999 not in {m.cell_id for m in got}
+        _spin_until(ex, lambda: drv.decoder.stats.unknown_cells > 0, 2.0)
+        bus_status = next(s for s in drv.diagnostics.statuses() if s.name.endswith(": bus"))
+        assert bus_status.level == b"\x01"
+        assert "999" in bus_status.message
+        bus.shutdown()
+    finally:
+        drv.close()
+
+
+def test_serial_loop_url_and_tare(ros_context):
+    drv, ex, got = _make(ros_context, {"robot": "nao", "transport": "serial", "serial.port": "loop://",
+                                       "tare_on_start_s": 0.0})
+    try:
+        enc = SkinSerialEncoder()
+        _samples(lambda c, m, v: drv.transport.write(enc.encode(c, m, v)), n_ms=300, unknown=())
+        assert _spin_until(ex, lambda: any(m.cell_id == 2 for m in got))
+        m = next(m for m in got if m.cell_id == 2)
+        assert len(m.force) % 3 == 0 and len(m.force) // 3 == len(m.force_offset_ns)
+        # tare while out of contact: ~0.24 N mean force is above the 0.2 N threshold -> refused
+        from std_srvs.srv import Trigger
+
+        resp = drv._srv_tare(Trigger.Request(), Trigger.Response())
+        assert not resp.success and "contact" in resp.message
+    finally:
+        drv.close()
+
+
+def test_unopenable_device_is_a_clear_error(ros_context):
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.errors import TransportError
+    from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
+
+    with pytest.raises(TransportError, match="configure failed"):
+        SkinDriver(context=ros_context, parameter_overrides=[
+            Parameter("robot", value="nao"), Parameter("transport", value="serial"),
+            Parameter("serial.port", value="/dev/does_not_exist_tactile")])
