@@ -77,4 +77,9 @@ def create_transport(name: str, **params: Any) -> Transport:
         inspect.signature(cls).bind(**params)
     except TypeError as exc:
         raise ConfigError(f"bad parameters for transport {name!r}: {exc}", key="transport") from None
-    return cls(**params)
+    try:
+        return cls(**params)
+    except ConfigError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"bad parameters for transport {name!r}: {exc}", key="transport") from None

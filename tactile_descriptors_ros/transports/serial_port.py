@@ -9,6 +9,9 @@ from .base import ByteTransport
 
 __all__ = ["SerialTransport"]
 
+_SERIAL_OPTIONS = frozenset({"bytesize", "parity", "stopbits", "xonxoff", "rtscts", "dsrdtr",
+                             "write_timeout", "inter_byte_timeout", "exclusive"})
+
 
 class SerialTransport(ByteTransport):
     """A serial port opened with :func:`serial.serial_for_url`.
@@ -35,6 +38,11 @@ class SerialTransport(ByteTransport):
         self.port = str(port)
         self.baudrate = int(baudrate)
         self.timeout_s = float(timeout_s)
+        unknown = sorted(set(options) - _SERIAL_OPTIONS)
+        if unknown:
+            from ..errors import ConfigError
+            raise ConfigError(f"unknown serial option(s) {unknown}; known: {sorted(_SERIAL_OPTIONS)}",
+                              key="transport")
         self.options = options
         self._serial: Any = None
 
