@@ -41,7 +41,7 @@ from . import biotac_spi as spi
 from . import bridge_serial as bridge
 from . import skin_serial
 from .framing import crc32
-from .skin import PAYLOAD_SIZE, Modality, SkinSample, pack_values
+from .skin import PAYLOAD_SIZE, Modality, SkinSample
 
 __all__ = ["FuzzReport", "FUZZERS", "fuzz_codec", "fuzz_biotac_spi", "fuzz_bridge_serial",
            "fuzz_skin_can", "fuzz_skin_serial"]
@@ -188,7 +188,6 @@ def _spi_batch(report: FuzzReport, rng: np.random.Generator, pattern: spi.FrameP
         report.violate(f"biotac_spi: decode_many raised {type(exc).__name__}: {exc}")
         return
     status = frames.status
-    words_values, _ = spi.decode_words(raw)
     # values of every word in pattern order, rebuilt from the typed fields
     names = pattern.names()
     word_names = [nm for nm in names if nm != "-"]
@@ -258,7 +257,6 @@ def _spi_batch(report: FuzzReport, rng: np.random.Generator, pattern: spi.FrameP
                 or not np.array_equal(f.electrodes, frames.electrodes[i]) or f.pdc != frames.pdc[i]:
             report.violate(f"biotac_spi: sensor {cs} of a sample set differs from its own reply")
     report.checked["sample_set_frames"] += len(take)
-    del words_values
 
 
 def fuzz_biotac_spi(n_inputs: int, seed: int = 0, progress: Progress = None,

@@ -150,3 +150,8 @@ def test_skin_serial_counts_rejects_and_resyncs():
     assert dec.reject_reasons == {"unknown_cell": 1} and dict(dec.unknown_cell_ids) == {500: 1}
     assert st_.garbage_bytes >= 4
     assert a.startswith(SYNC)
+
+
+def test_can_example_from_the_docs():
+    msg = encode_can_message(SkinSample(0x1234, Modality.FORCE, 5, (0xABC, 1, 0xFFF)))
+    assert msg.arbitration_id == 0x15A21234 and bytes(msg.data) == bytes.fromhex("05abc001fff0")
