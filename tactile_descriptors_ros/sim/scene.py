@@ -422,7 +422,9 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
         robot = load_robot(robot_name)
     except ConfigError as exc:
         raise SceneError(str(exc), key="scene.robot", source=source) from None
-    scene_seed = int(sr.get("seed", 0, int)) if seed is None else int(seed)
+    scene_seed = int(sr.get("seed", 0, int))
+    if seed is not None:
+        scene_seed = int(seed)
     start_ns = int(round(sr.number("start_s", 0.0, minimum=0.0) * 1e9))
     lead_in_s = sr.number("lead_in_s", 1.0, minimum=0.0)
     sr.check_unknown()

@@ -327,10 +327,15 @@ class MaterialModel:
     source: Mapping[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-serialisable dict (rounded to 6 significant digits, it is a fit)."""
+        """A JSON-serialisable dict, at full float precision.
+
+        AR models with poles near the unit circle (slow electrode motion) are
+        very sensitive to their coefficients: rounding to 6 digits can change
+        the process variance a thousandfold, so nothing is rounded.
+        """
         data = asdict(self)
         data["source"] = dict(self.source)
-        return {"format": MODEL_FORMAT, **_round(data)}
+        return {"format": MODEL_FORMAT, **_plain(data)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], origin: str = "<dict>") -> "MaterialModel":
@@ -368,13 +373,13 @@ class MaterialModel:
             raise DataFormatError(f"{origin}: bad texture model: {exc!r}") from None
 
 
-def _round(value: Any) -> Any:
-    if isinstance(value, float):
-        return float(f"{value:.6g}")
+def _plain(value: Any) -> Any:
+    if isinstance(value, (float, np.floating)):
+        return float(value)
     if isinstance(value, dict):
-        return {k: _round(v) for k, v in value.items()}
+        return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_round(v) for v in value]
+        return [_plain(v) for v in value]
     return value
 
 
