@@ -976,13 +976,43 @@ class BiotacFrameDecoder:
         A reply shorter than the pattern marks its missing words
         :attr:`WordStatus.MISSING`; a longer one raises :class:`FrameError`.
         """
+        s = self._check_sensor(sensor)
         arr = _as_byte_array(data)
+        nbytes = self.pattern.byte_count
         if arr.ndim != 1:
             raise FrameError("decode() takes the bytes of one frame; use decode_many() for a matrix")
-        if arr.size > self.pattern.byte_count:
-            raise FrameError(f"{arr.size} reply bytes for a {self.pattern.byte_count}-byte frame: the "
+        if arr.size > nbytes:
+            raise FrameError(f"{arr.size} reply bytes for a {nbytes}-byte frame: the "
                              "configured frame pattern does not match the device")
-        return self.decode_many(sensor, arr, first_sequence=sequence).frame(0)
+        n_words = arr.size // 2
+        words = np.zeros(self.pattern.word_count, dtype=np.intp)
+        words[:n_words] = (arr[0: 2 * n_words: 2].astype(np.intp) << 8) | arr[1: 2 * n_words: 2]
+        values = _VALUE_TABLE[words]
+        status = _STATUS_TABLE[words]
+        if n_words < self.pattern.word_count:
+            values[n_words:] = INVALID_COUNT
+            status[n_words:] = WordStatus.MISSING
+        ok = status == WordStatus.OK
+        counts = WordCounts() if ok.all() else WordCounts.from_status(status)
+        if sequence is None:
+            sequence = self._next_seq[s]
+        self._next_seq[s] = int(sequence) + 1
+        self.totals[s] = self.totals[s] + counts
+        self.frames_decoded[s] += 1
+
+        def slow(ch: int) -> tuple[int, bool]:
+            k = self._slow_idx[ch]
+            if k < 0 or not ok[k]:
+                return INVALID_COUNT, False
+            return int(values[k]), True
+
+        pdc, pdc_ok = slow(PDC)
+        tac, tac_ok = slow(TAC)
+        tdc, tdc_ok = slow(TDC)
+        return BiotacFrame(
+            sensor=s, sequence=int(sequence), pac=values[self._pac_idx], pac_valid=ok[self._pac_idx],
+            pdc=pdc, pdc_valid=pdc_ok, tac=tac, tac_valid=tac_ok, tdc=tdc, tdc_valid=tdc_ok,
+            electrodes=values[self._el_idx], electrodes_valid=ok[self._el_idx], status=status, counts=counts)
 
     def decode_sample_set(self, replies: Mapping[int, bytes | np.ndarray],
                           sequence: int | None = None) -> dict[int, BiotacFrame]:

@@ -67,12 +67,13 @@ FORCE_N_PER_COUNT: float = 10.0 / 4095
 #: Temperature is sent in centi-degrees.
 TEMPERATURE_C_PER_COUNT: float = 0.01
 
+_MODALITIES: dict[int, Modality] = {int(m): m for m in Modality}
 _RANGES: dict[Modality, tuple[int, int]] = {
     Modality.ACCEL: (-512, 511), Modality.FORCE: (0, 4095),
     Modality.PROXIMITY: (0, 0xFFFE), Modality.TEMPERATURE: (-32767, 32767)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class SkinSample:
     """One sample of one modality of one cell.
 
@@ -145,10 +146,9 @@ def unpack_values(modality: int, data: bytes) -> tuple[int, ...]:
     FrameError
         Payload length wrong for the modality.
     """
-    try:
-        m = Modality(modality)
-    except ValueError:
-        raise CodecError(f"unknown skin modality {modality}") from None
+    m = _MODALITIES.get(modality)
+    if m is None:
+        raise CodecError(f"unknown skin modality {modality}")
     if len(data) != PAYLOAD_SIZE[m]:
         raise FrameError(f"{m.name} payload must be {PAYLOAD_SIZE[m]} bytes, got {len(data)}")
     w = int.from_bytes(data, "big")

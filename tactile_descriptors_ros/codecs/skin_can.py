@@ -50,6 +50,7 @@ __all__ = [
     "SkinCanDecoder",
 ]
 
+_MODALITIES: dict[int, Modality] = {int(m): m for m in Modality}
 #: 9-bit tag in bits 28..20 of our arbitration ids.
 PROTOCOL_TAG = 0x15A
 
@@ -185,9 +186,8 @@ class SkinCanDecoder:
         if tag != PROTOCOL_TAG:
             st.foreign_frames += 1
             return None
-        try:
-            modality = Modality(mod)
-        except ValueError:
+        modality = _MODALITIES.get(mod)
+        if modality is None:
             st.unknown_modality += 1
             return None
         data = bytes(msg.data)
