@@ -67,7 +67,9 @@ class SerialTransport(ByteTransport):
         import serial
         ser = self._serial
         try:
-            ser.timeout = self.timeout_s if timeout_s is None else float(timeout_s)
+            timeout = self.timeout_s if timeout_s is None else float(timeout_s)
+            if ser.timeout != timeout:  # setting it reconfigures a real port: only on change
+                ser.timeout = timeout
             first = ser.read(1)
             if not first or max_bytes <= 1:
                 return first
