@@ -138,7 +138,8 @@ def _scale_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return x, np.ones(x.shape[:-1])
     peak = np.max(np.abs(x), axis=-1)
     _, exponent = np.frexp(np.where(peak > 0, peak, 1.0))
-    scale = np.ldexp(1.0, exponent)
+    # 2**1024 is not a float64: cap the scale at 2**1023 (rows then span [-2, 2]).
+    scale = np.ldexp(1.0, np.minimum(exponent, 1023))
     x /= scale[..., None]
     return x, scale
 
@@ -238,7 +239,10 @@ def hjorth(x: np.ndarray, fs_hz: float, axis: int = -1) -> Hjorth:
     var_ddx = _variance_of_centred(ddx)
     # Mobility of S and of S' without the fs factor, which cancels in Complexity.
     mob_x = np.sqrt(_safe_ratio(var_dx, np.where(flat, 0.0, var_x)))
-    flat_dx = var_dx <= (FLAT_RELATIVE_TOLERANCE**2) * np.maximum(var_x, np.finfo(float).tiny)
+    # The derivative is judged flat in the same scaled units as S: rounding
+    # noise of diff() on a ramp riding on a large offset is not signal.
+    flat_dx = var_dx <= FLAT_RELATIVE_TOLERANCE**2
+    mob_x = np.where(flat_dx, 0.0, mob_x)
     mob_dx = np.sqrt(_safe_ratio(var_ddx, np.where(flat_dx, 0.0, var_dx)))
     mobility = np.asarray(mob_x * fs, dtype=np.float64)
     complexity = _safe_ratio(mob_dx, np.where(flat | flat_dx, 0.0, mob_x))
@@ -254,7 +258,7 @@ def _activity_from_scaled(var_scaled: np.ndarray, scale: np.ndarray, quality: np
     mant, exp = np.frexp(var_scaled)
     _, sexp = np.frexp(scale)
     total_exp = exp + 2 * (sexp - 1)
-    over = total_exp > 1023
+    over = (total_exp > 1023) & (var_scaled > 0)  # a zero variance never overflows
     activity = np.asarray(np.ldexp(mant, np.minimum(total_exp, 1023)), dtype=np.float64)
     if over.any():
         activity[over] = _FLOAT_MAX
