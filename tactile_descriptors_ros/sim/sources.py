@@ -1,0 +1,336 @@
+"""Simulated devices: the scene's samples as real wire bytes, made by the package's own encoders.
+
+Each source is what :class:`~tactile_descriptors_ros.transports.simulated.SimulatedTransport`
+expects (``read(max_bytes)``, ``recv(timeout_s)`` or ``transfer(cs, mosi)``),
+so the real drivers decode simulated sensors exactly as they decode hardware:
+
+* :class:`BiotacBridgeSource` -- the USB-serial bridge byte stream
+  (:mod:`~tactile_descriptors_ros.codecs.bridge_serial`): one frame per frame
+  period and BioTac, payload = the SPI reply words of the frame pattern
+  (:func:`~tactile_descriptors_ros.codecs.biotac_spi.encode_words`);
+* :func:`biotac_spi_bus` -- one :class:`~tactile_descriptors_ros.codecs.biotac_spi.BiotacSpiResponder`
+  per chip select, answering sampling commands with the simulated values;
+* :class:`SkinCanSource` -- :class:`can.Message` objects of the skin CAN layout
+  (:mod:`~tactile_descriptors_ros.codecs.skin_can`);
+* :class:`SkinSerialSource` -- the skin serial byte stream
+  (:mod:`~tactile_descriptors_ros.codecs.skin_serial`).
+
+Faults declared in the scene become wire faults: a dropped frame is not
+sent but its sequence number is used up (the decoder sees a gap); a
+``bad_parity`` word gets its high byte's parity bit flipped; a corrupt frame
+gets a payload byte flipped after its CRC was computed (serial) or loses its
+last data byte (CAN, whose own CRC would reject bit errors); an unplugged
+cell sends nothing.
+
+Sources simulate lazily, chunk by chunk (:func:`~.engine.iter_simulate`),
+and by default hand out data as fast as it is read; with ``speed`` set they
+pace it on the wall clock (``speed=1`` is real time).
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from collections import deque
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from ..codecs.biotac_spi import PDC, TAC, TDC, BiotacSpiResponder, FramePattern, channel_name, encode_words
+from ..codecs.bridge_serial import BridgeFrame, BridgeFrameType, encode_bridge_frame
+from ..errors import SceneError
+from .engine import FAULT_CORRUPT, FAULT_PARITY, SimResult, iter_simulate
+from .scene import Scene
+
+__all__ = [
+    "biotac_frame_words",
+    "bridge_frames",
+    "skin_messages",
+    "BiotacBridgeSource",
+    "SkinCanSource",
+    "SkinSerialSource",
+    "biotac_spi_bus",
+    "SKIN_STREAM_MODALITY",
+]
+
+#: Skin streams and their codec modality numbers (imported lazily with the codec).
+SKIN_STREAM_MODALITY = {"accel": 1, "force": 2, "proximity": 3, "temperature": 4}
+
+
+def _pattern_for(result: SimResult, pattern: FramePattern | str | None) -> FramePattern:
+    pat = FramePattern.parse(pattern) if pattern is not None else FramePattern.default()
+    ct = next(iter(result.cells.values()))
+    pac, el = ct.streams["pac"], ct.streams["electrodes"]
+    ppf = int(round(pac.rate_hz / el.rate_hz))
+    if pat.pac_count != ppf or pat.electrode_count != el.counts.shape[0]:
+        raise SceneError(f"frame pattern {pat} has {pat.pac_count} PAC and {pat.electrode_count} electrode words, "
+                         f"the robot {ppf} and {el.counts.shape[0]}", key="pattern")
+    return pat
+
+
+def biotac_frame_words(cell: Any, pattern: FramePattern) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One BioTac's frames as SPI words in pattern order.
+
+    Returns
+    -------
+    words : numpy.ndarray of int64, shape (n_frames, word_count)
+    fault : numpy.ndarray of int8, same shape
+    seq : numpy.ndarray of int64, shape (n_frames,)
+        Frame numbers (gaps are dropped frames).
+    t_ns : numpy.ndarray of int64, shape (n_frames,)
+    """
+    pdc = cell.streams["pdc"]
+    n = pdc.seq.size
+    ppf = pattern.pac_count
+    words = np.zeros((n, pattern.word_count), dtype=np.int64)
+    fault = np.zeros((n, pattern.word_count), dtype=np.int8)
+    pac = cell.streams["pac"]
+    words[:, pattern.pac_word_indices] = pac.counts[0].reshape(n, ppf)
+    fault[:, pattern.pac_word_indices] = pac.fault[0].reshape(n, ppf)
+    el = cell.streams["electrodes"]
+    words[:, pattern.electrode_word_indices] = el.counts.T
+    fault[:, pattern.electrode_word_indices] = el.fault.T
+    for ch, name in ((PDC, "pdc"), (TAC, "tac"), (TDC, "tdc")):
+        if ch in pattern.words:
+            k = pattern.word_index(ch)
+            words[:, k] = cell.streams[name].counts[0]
+            fault[:, k] = cell.streams[name].fault[0]
+    return words, fault, pdc.seq, pdc.t_ns
+
+
+def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None) -> list[tuple[int, bytes]]:
+    """``(t_ns, frame bytes)`` of every BioTac frame of a simulation chunk, in time order."""
+    pat = _pattern_for(result, pattern)
+    out: list[tuple[int, int, bytes]] = []
+    for k, cell in enumerate(result.cells.values()):
+        if cell.kind != "biotac":
+            continue
+        cs = int(cell.extra.get("chip_select", k))
+        words, fault, seq, t_ns = biotac_frame_words(cell, pat)
+        raw = np.frombuffer(encode_words(words.ravel()), dtype=np.uint8).reshape(len(seq), -1).copy()
+        parity = np.nonzero(fault == FAULT_PARITY)
+        raw[parity[0], 2 * parity[1]] ^= 0x01  # wrong odd-parity bit of the high byte
+        corrupt = (fault == FAULT_CORRUPT).any(axis=1)
+        start = result.scene.start_ns
+        for i in range(len(seq)):
+            frame = encode_bridge_frame(BridgeFrame(BridgeFrameType.SAMPLE, cs, int(seq[i]) & 0xFFFF,
+                                                    int((int(t_ns[i]) - start) // 1000) & 0xFFFFFFFF,
+                                                    raw[i].tobytes()))
+            if corrupt[i]:
+                b = bytearray(frame)
+                b[12 + (int(seq[i]) * 7) % raw.shape[1]] ^= 0x5A  # garbled on the line: the CRC no longer matches
+                frame = bytes(b)
+            out.append((int(t_ns[i]), cs, frame))
+    out.sort(key=lambda x: (x[0], x[1]))
+    return [(t, f) for t, _, f in out]
+
+
+def skin_messages(result: SimResult) -> list[tuple[int, int, int, int, tuple[int, ...], bool]]:
+    """Every skin sample of a chunk as ``(t_ns, cell_id, modality, sequence, values, corrupt)``, in time order."""
+    rows = []
+    for cell in result.cells.values():
+        if cell.kind != "skin":
+            continue
+        for name, mod in SKIN_STREAM_MODALITY.items():
+            st = cell.streams.get(name)
+            if st is None or not st.seq.size:
+                continue
+            corrupt = (st.fault == FAULT_CORRUPT).any(axis=0)
+            vals = st.counts.T.tolist()
+            for i, (t, s) in enumerate(zip(st.t_ns.tolist(), st.seq.tolist())):
+                rows.append((t, cell.cell_id, mod, s & 0xFF, tuple(vals[i]), bool(corrupt[i])))
+    rows.sort(key=lambda r: (r[0], r[2], r[1]))
+    return rows
+
+
+class _PacedSource:
+    """Items with time stamps from a lazily simulated scene, optionally paced on the wall clock."""
+
+    def __init__(self, scene: Scene, speed: float | None = None, chunk_s: float = 10.0,
+                 clock: Any = time.monotonic) -> None:
+        if speed is not None and speed <= 0:
+            raise SceneError(f"speed must be positive, got {speed}", key="speed")
+        self.scene = scene
+        self.speed = speed
+        self.clock = clock
+        self._chunks = iter_simulate(scene, max_chunk_s=chunk_s)
+        self._items: deque[tuple[int, Any]] = deque()
+        self._t0_wall: float | None = None
+        self.exhausted = False
+        self.results: list[dict[str, Any]] = []  # ground truth of the chunks simulated so far
+
+    def open(self) -> None:
+        self._t0_wall = self.clock()
+
+    def close(self) -> None:
+        pass
+
+    def _convert(self, result: SimResult) -> list[tuple[int, Any]]:
+        raise NotImplementedError
+
+    def _fill(self) -> bool:
+        if self.exhausted:
+            return False
+        try:
+            result = next(self._chunks)
+        except StopIteration:
+            self.exhausted = True
+            return False
+        self.results.append({"explorations": [e.to_dict() for e in result.explorations],
+                             "faults": result.faults, "end_ns": result.end_ns})
+        self._items.extend(self._convert(result))
+        return True
+
+    def _due_ns(self) -> int | None:
+        if self.speed is None:
+            return None
+        if self._t0_wall is None:
+            self._t0_wall = self.clock()
+        return self.scene.start_ns + int((self.clock() - self._t0_wall) * self.speed * 1e9)
+
+    def _pop_due(self) -> tuple[int, Any] | None:
+        while not self._items:
+            if not self._fill():
+                return None
+        due = self._due_ns()
+        if due is not None and self._items[0][0] > due:
+            return None
+        return self._items.popleft()
+
+    def __iter__(self) -> Iterator[tuple[int, Any]]:
+        """All items in time order, ignoring pacing."""
+        while True:
+            while not self._items:
+                if not self._fill():
+                    return
+            yield self._items.popleft()
+
+
+class _ByteSource(_PacedSource):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._pending = bytearray()
+
+    def read(self, max_bytes: int = 4096) -> bytes:
+        """Up to ``max_bytes`` of the stream (what is due, when paced)."""
+        while len(self._pending) < max_bytes:
+            item = self._pop_due()
+            if item is None:
+                break
+            self._pending += item[1]
+        out = bytes(self._pending[:max_bytes])
+        del self._pending[:max_bytes]
+        return out
+
+
+class BiotacBridgeSource(_ByteSource):
+    """The USB-serial bridge of a simulated Shadow Hand: a byte stream for ``SimulatedTransport``.
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene of a robot with BioTac cells.
+    pattern : FramePattern or str, optional
+        Frame pattern (default: the 44-word default frame).
+    speed : float, optional
+        Pace on the wall clock (1 = real time); default: as fast as read.
+    """
+
+    def __init__(self, scene: Scene, pattern: FramePattern | str | None = None, speed: float | None = None,
+                 chunk_s: float = 10.0, clock: Any = time.monotonic) -> None:
+        super().__init__(scene, speed, chunk_s, clock)
+        self.pattern = pattern
+
+    def _convert(self, result: SimResult) -> list[tuple[int, bytes]]:
+        return bridge_frames(result, self.pattern)
+
+
+class SkinSerialSource(_ByteSource):
+    """Skin cells on the serial framing (:mod:`~tactile_descriptors_ros.codecs.skin_serial`)."""
+
+    def _convert(self, result: SimResult) -> list[tuple[int, bytes]]:
+        from ..codecs.skin import Modality, SkinSample
+        from ..codecs.skin_serial import encode_skin_frame
+
+        out = []
+        for t, cid, mod, seq, vals, corrupt in skin_messages(result):
+            frame = encode_skin_frame(SkinSample(cid, Modality(mod), seq, vals))
+            if corrupt:
+                b = bytearray(frame)
+                b[-5] ^= 0x5A  # last payload byte: the CRC no longer matches
+                frame = bytes(b)
+            out.append((t, frame))
+        return out
+
+
+class SkinCanSource(_PacedSource):
+    """Skin cells on the CAN layout: ``recv(timeout_s) -> can.Message | None`` for ``SimulatedTransport``."""
+
+    def _convert(self, result: SimResult) -> list[tuple[int, Any]]:
+        from ..codecs.skin import Modality, SkinSample
+        from ..codecs.skin_can import encode_can_message
+
+        out = []
+        for t, cid, mod, seq, vals, corrupt in skin_messages(result):
+            msg = encode_can_message(SkinSample(cid, Modality(mod), seq, vals, t))
+            if corrupt:
+                msg.data = msg.data[:-1]
+                msg.dlc = len(msg.data)
+            out.append((t, msg))
+        return out
+
+    def recv(self, timeout_s: float | None = None) -> Any:
+        """The next due message, or None (after waiting up to ``timeout_s`` when paced)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while True:
+            item = self._pop_due()
+            if item is not None:
+                return item[1]
+            if self.exhausted and not self._items:
+                return None
+            if deadline is None or time.monotonic() >= deadline:
+                return None
+            time.sleep(min(0.001, max(0.0, deadline - time.monotonic())))
+
+
+def biotac_spi_bus(result: SimResult, serial_prefix: str = "BTSIM") -> Any:
+    """An :class:`~tactile_descriptors_ros.transports.simulated.SpiBus` of simulated BioTacs.
+
+    Each chip select answers sampling commands with its next simulated value
+    of the sampled channel (each channel has its own cursor, PAC advancing by
+    one sample per command), so a driver polling the default frame pattern
+    reads the simulated frames in order.  After the last sample a channel
+    keeps returning its last value.  Bus faults (parity, drops) are not
+    modelled at this level: use :class:`BiotacBridgeSource` for those.
+    """
+    from ..codecs.biotac_spi import PAC, electrode_channel
+    from ..transports.simulated import SpiBus
+
+    devices = {}
+    for k, cell in enumerate(result.cells.values()):
+        if cell.kind != "biotac":
+            continue
+        series: dict[int, np.ndarray] = {PAC: cell.streams["pac"].counts[0], PDC: cell.streams["pdc"].counts[0],
+                                         TAC: cell.streams["tac"].counts[0], TDC: cell.streams["tdc"].counts[0]}
+        for i, row in enumerate(cell.streams["electrodes"].counts):
+            series[electrode_channel(i + 1)] = row
+        cursors = dict.fromkeys(series, 0)
+
+        def sample(channel: int, _s=series, _c=cursors) -> int:
+            data = _s.get(channel)
+            if data is None or not data.size:
+                raise SceneError(f"channel {channel_name(channel)} is not simulated", key="pattern")
+            i = min(_c[channel], data.size - 1)
+            _c[channel] += 1
+            return int(data[i])
+
+        cs = int(cell.extra.get("chip_select", k))
+        devices[cs] = BiotacSpiResponder(sample, serial_number=f"{serial_prefix}{cell.cell_id:011d}",
+                                         electrode_count=cell.streams["electrodes"].counts.shape[0])
+    return SpiBus(devices)
+
+
+def merge_by_time(*streams: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
+    """Merge time-ordered ``(t_ns, item)`` lists."""
+    return list(heapq.merge(*streams, key=lambda x: x[0]))
