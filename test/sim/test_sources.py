@@ -22,10 +22,28 @@ HAND = {
     "explorations": [{"material": "cork", "body_parts": ["index", "thumb"], "duration_s": 1.0, "pause_s": 0.3}],
 }
 NAO = {
-    "scene": {"name": "wire", "robot": "nao", "seed": 4, "lead_in_s": 0.2},
+    "scene": {"name": "wire", "robot": "nao", "seed": 4, "lead_in_s": 0.2},  # robot replaced by a small copy
     "effects": {"normal_force": {}, "texture_vibration": {}, "proximity": {}, "adc": {}},
     "explorations": [{"material": "steel", "body_parts": ["right_hand"], "duration_s": 0.4, "pause_s": 0.1}],
 }
+
+
+@pytest.fixture(scope="module", autouse=True)
+def small_nao(tmp_path_factory):
+    """NAO's skin cell type on two body parts of three cells (the wire tests decode every frame in Python)."""
+    import yaml
+
+    from tactile_descriptors_ros.core.robot import robot_config_path
+
+    data = yaml.safe_load(robot_config_path("nao").read_text())
+    data["body_parts"] = [{"name": "right_hand", "cell_type": "skin_cell", "cells": [{"id": 15}, {"id": 16}, {"id": 17}]},
+                          {"name": "chest", "cell_type": "skin_cell", "cells": [{"id": 20}, {"id": 21}, {"id": 22}]}]
+    data.pop("nodes", None)
+    path = tmp_path_factory.mktemp("robot") / "small_nao.yaml"
+    path.write_text(yaml.safe_dump(data))
+    NAO["scene"]["robot"] = str(path)
+    NAO["explorations"][0]["body_parts"] = ["right_hand", "chest"]
+    yield path
 
 
 def _scene(base, **effects):
