@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SignalError
-from .alignment import hold_indices
-from .descriptors import Quality, hjorth, pearson, spearman
+from .descriptors import Quality
+from .fast import cell_quantities
 from .robot import BodyPart, CellType, RobotDescription
 
 __all__ = [
@@ -172,44 +172,11 @@ def cell_features(
             f"vibration and deformation must be (n_cells, channels, samples) with the same n_cells; "
             f"got {s.shape} and {v.shape}"
         )
-    n_cells = s.shape[0]
-    ts = np.asarray(vibration_t_ns, dtype=np.int64)
-    tv = np.asarray(deformation_t_ns, dtype=np.int64)
-    ts = np.broadcast_to(ts, (n_cells, s.shape[2])) if ts.ndim == 1 else ts
-    tv = np.broadcast_to(tv, (n_cells, v.shape[2])) if tv.ndim == 1 else tv
-    if ts.shape != (n_cells, s.shape[2]) or tv.shape != (n_cells, v.shape[2]):
-        raise SignalError(
-            f"time stamps do not match samples: {ts.shape} vs {s.shape}, {tv.shape} vs {v.shape}"
-        )
-
-    hs = hjorth(s, vibration_rate_hz)
-    hv = hjorth(v, deformation_rate_hz)
-    quality = np.bitwise_or.reduce(hs.quality, axis=1) | np.bitwise_or.reduce(hv.quality, axis=1)
-
-    lin = np.zeros((n_cells, s.shape[1], v.shape[1]))
-    nonlin = np.zeros_like(lin)
-    corr_quality = np.zeros(n_cells, dtype=np.uint32)
-    shared = n_cells > 0 and bool(np.all(ts == ts[0])) and bool(np.all(tv == tv[0]))
-    groups = [np.arange(n_cells)] if shared else [np.array([c]) for c in range(n_cells)]
-    for cells in groups:
-        if cells.size == 0:
-            continue
-        c0 = int(cells[0])
-        idx = hold_indices(tv[c0], ts[c0])
-        paired = idx >= 0
-        if v.shape[2] == 0:
-            paired[:] = False
-        s_p = s[cells][:, :, paired]  # (k, n_s, n_pair)
-        v_p = v[cells][:, :, idx[paired]]  # (k, n_v, n_pair), held
-        r, qr = pearson(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
-        rho, qn = spearman(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
-        lin[cells] = r
-        nonlin[cells] = rho
-        corr_quality[cells] = np.bitwise_or.reduce((qr | qn).reshape(len(cells), -1), axis=1)
-    return CellFeatures(
-        hs.activity, hs.mobility, hs.complexity, hv.activity, hv.mobility, hv.complexity,
-        lin, nonlin, quality | corr_quality,
-    )
+    # Exact fast path (core/fast.py): run sums over the held V instead of the
+    # expanded series, counting ranks for integer counts, exact integer moments.
+    # Equal to the straightforward computation (fast.cell_quantities_reference).
+    return CellFeatures(*cell_quantities(s, vibration_t_ns, v, deformation_t_ns,
+                                         vibration_rate_hz, deformation_rate_hz))
 
 
 def contact_gate(force_n: np.ndarray, threshold_n: float) -> np.ndarray:
