@@ -28,15 +28,17 @@ from __future__ import annotations
 
 import math
 import os
+import random
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from ..core.robot import RobotDescription, config_dir, load_robot
+from ..core.robot import RobotDescription, config_dir, load_robot, robot_config_path
 from ..errors import ConfigError, SceneError
 
 __all__ = [
@@ -257,7 +259,7 @@ def _check_number(value: float, r: _R, name: str, positive: bool, minimum: float
         raise r.error(name, f"must be at least {minimum}, got {value!r}")
 
 
-def _draw(spec: Any, key: str, source: str, rng: np.random.Generator, *, numeric: bool,
+def _draw(spec: Any, key: str, source: str, rng: random.Random, *, numeric: bool,
           positive: bool = True) -> Any:
     """Resolve a value spec (fixed, grid, choice, uniform) to one value."""
     if isinstance(spec, Mapping):
@@ -268,7 +270,7 @@ def _draw(spec: Any, key: str, source: str, rng: np.random.Generator, *, numeric
         if kind == "choice":
             if not isinstance(args, list) or not args:
                 raise SceneError("choice needs a non-empty list", key=f"{key}.choice", source=source)
-            value = args[int(rng.integers(len(args)))]
+            value = args[rng.randrange(len(args))]
         elif kind in ("grid", "uniform") and numeric:
             if (not isinstance(args, list) or len(args) != (3 if kind == "grid" else 2)
                     or not all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in args)):
@@ -282,9 +284,9 @@ def _draw(spec: Any, key: str, source: str, rng: np.random.Generator, *, numeric
                 if step <= 0:
                     raise SceneError("grid step must be positive", key=f"{key}.grid", source=source)
                 n = int(math.floor((hi - lo) / step + 1e-9)) + 1
-                value = round(lo + step * int(rng.integers(n)), 9)
+                value = round(lo + step * rng.randrange(n), 9)
             else:
-                value = float(rng.uniform(lo, hi))
+                value = rng.uniform(lo, hi)
         else:
             raise SceneError(f"unknown random value kind {kind!r} (use grid, choice or uniform)", key=key, source=source)
     else:
@@ -336,7 +338,7 @@ def _parse_motion(value: Any, key: str, source: str) -> tuple[str, ...]:
     return parts
 
 
-def _parse_parts(spec: Any, key: str, source: str, robot: RobotDescription, rng: np.random.Generator) -> tuple[str, ...]:
+def _parse_parts(spec: Any, key: str, source: str, robot: RobotDescription, rng: random.Random) -> tuple[str, ...]:
     known = [p.name for p in robot.body_parts]
     if spec == "all":
         return tuple(known)
@@ -352,8 +354,8 @@ def _parse_parts(spec: Any, key: str, source: str, robot: RobotDescription, rng:
                                  key=f"{key}.random_subset[{i}]", source=source)
         if not 1 <= minimum <= maximum <= len(pool):
             raise SceneError(f"need 1 <= min <= max <= {len(pool)}", key=f"{key}.min", source=source)
-        k = int(rng.integers(minimum, maximum + 1))
-        chosen = set(rng.choice(len(pool), size=k, replace=False).tolist())
+        k = rng.randint(minimum, maximum)
+        chosen = set(rng.sample(range(len(pool)), k))
         return tuple(p for i, p in enumerate(pool) if i in chosen)
     if isinstance(spec, str):
         spec = [spec]
@@ -419,7 +421,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
     description = sr.get("description", "", str)
     robot_name = sr.get("robot", kind=str)
     try:
-        robot = load_robot(robot_name)
+        robot = _robot(robot_name)
     except ConfigError as exc:
         raise SceneError(str(exc), key="scene.robot", source=source) from None
     scene_seed = int(sr.get("seed", 0, int))
@@ -451,7 +453,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
         raise root.error("explorations", "a scene needs at least one exploration")
     root.check_unknown()
 
-    rng = np.random.default_rng([scene_seed, 0x5CE7E])
+    rng = random.Random(f"tactile-scene/{scene_seed}")  # fast scalar draws, stable across versions
     explorations: list[Exploration] = []
     for i, entry in enumerate(raw):
         key = f"explorations[{i}]"
@@ -476,12 +478,23 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
             for _ in range(repeat):
                 batch = list(materials)
                 if order == "shuffled":
-                    batch = [batch[j] for j in rng.permutation(len(batch))]
+                    rng.shuffle(batch)
                 sequence += batch
         params = {**defaults, **{k: v for k, v in entry.items() if k in _DEFAULT_KEYS}}
         for mat in sequence:
             explorations.append(_resolve(len(explorations), mat, entry.get("label"), params, key, source, robot, rng))
     return Scene(name, description, robot, scene_seed, start_ns, lead_in_s, effects, sensors, tuple(explorations), source)
+
+
+def _robot(name: str) -> RobotDescription:
+    """Robot descriptions are read once per file version (PyYAML is slow on the 116-cell NAO)."""
+    path = robot_config_path(name)
+    return _robot_cached(str(path.resolve()), path.stat().st_mtime_ns)
+
+
+@lru_cache(maxsize=16)
+def _robot_cached(path: str, mtime_ns: int) -> RobotDescription:
+    return load_robot(path)
 
 
 def _materials_of(entry: Mapping[str, Any], key: str, source: str) -> list[str]:
@@ -495,12 +508,25 @@ def _materials_of(entry: Mapping[str, Any], key: str, source: str) -> list[str]:
     ms = entry["materials"]
     if isinstance(ms, Mapping):
         r = _R(ms, f"{key}.materials", source)
-        n = r.get("parametric", kind=int)
+        out: list[str] = []
+        fitted = r.get("fitted", [], (str, list))
+        if fitted == "all":
+            from .textures import material_library
+
+            out += sorted(material_library())
+        elif isinstance(fitted, list):
+            out += [str(m) for m in fitted]
+        else:
+            raise r.error("fitted", f"expected 'all' or a list of material names, got {fitted!r}")
+        n = r.get("parametric", 0, int)
         prefix = r.get("prefix", "material", str)
         r.check_unknown()
-        if n < 1:
-            raise r.error("parametric", f"must be at least 1, got {n}")
-        return [f"param:{prefix}_{j:03d}" for j in range(1, n + 1)]
+        if n < 0:
+            raise r.error("parametric", f"must be at least 0, got {n}")
+        out += [f"param:{prefix}_{j:03d}" for j in range(1, n + 1)]
+        if not out:
+            raise r.error("parametric", "no materials: give fitted and/or parametric")
+        return out
     if not isinstance(ms, list) or not ms or not all(isinstance(m, str) and m for m in ms):
         raise SceneError("expected a list of material names or {parametric: N, prefix: ...}", key=f"{key}.materials",
                          source=source)
@@ -539,7 +565,7 @@ def _validate_sensor(params: Any, key: str, source: str, kind: str) -> None:
 
 
 def _resolve(index: int, material: str, label: Any, params: Mapping[str, Any], key: str, source: str,
-             robot: RobotDescription, rng: np.random.Generator) -> Exploration:
+             robot: RobotDescription, rng: random.Random) -> Exploration:
     def num(name: str, default: Any, positive: bool = True) -> float:
         return _draw(params.get(name, default), f"{key}.{name}", source, rng, numeric=True, positive=positive)
 

@@ -118,11 +118,26 @@ def test_sequences_and_in_hand():
 
 
 def test_every_shipped_scene_loads():
-    names = sorted(p.stem for p in scenes_dir().glob("*.yaml"))
-    assert {"demo_shadow_hand", "demo_nao"} <= set(names)
-    for name in names:
-        scene = load_scene(name)
-        assert scene.explorations, name
+    """Every shipped scene validates (protocol scenes with their repeats capped: resolving 12 000 touches is slow)."""
+    import yaml
+
+    paths = sorted(scenes_dir().glob("*.yaml"))
+    assert {"demo_shadow_hand", "demo_nao"} <= {p.stem for p in paths}
+    for path in paths:
+        data = yaml.safe_load(path.read_text())
+        full = sum(e.get("repeat", 1) for e in data["explorations"])
+        for e in data["explorations"]:
+            e["repeat"] = min(e.get("repeat", 1), 2)
+        scene = parse_scene(data, source=str(path))
+        assert scene.explorations, path
+        assert full >= len(scene.explorations) / 120
+
+
+def test_protocol_scenes_follow_the_paper():
+    train = load_scene("shadow_hand_lateral_train")
+    assert len(train.explorations) == 120 * 20
+    assert {e.duration_s for e in train.explorations} == {2.0}
+    assert len({e.material for e in train.explorations}) == 120
 
 
 def test_demo_scenes_last_about_a_minute():
