@@ -349,7 +349,7 @@ class BiotacDriver(LifecycleNode):
                 self.source = BridgeFrameSource(self.transport, self.pattern, sorted(self.sensors), decoder)
             self.source.read_serial_numbers()
             for cs, err in self.source.serial_errors.items():
-                self.get_logger().warn(f"{self.sensors[cs].sensor_name} (chip select {cs}): no serial number: {err}")
+                self.get_logger().warning(f"{self.sensors[cs].sensor_name} (chip select {cs}): no serial number: {err}")
         except TactileError as exc:
             self.last_error = str(exc)
             self.get_logger().error(f"cannot open {self.transport_name} transport: {exc}")
@@ -477,7 +477,7 @@ class BiotacDriver(LifecycleNode):
                     if ok:
                         self.get_logger().info(f"{st.cfg.sensor_name}: start tare {why}")
                     else:
-                        self.get_logger().warn(f"{st.cfg.sensor_name}: start tare failed: {why}",
+                        self.get_logger().warning(f"{st.cfg.sensor_name}: start tare failed: {why}",
                                                throttle_duration_sec=5.0)
                 return  # nothing is published before the start tare
             st.frames.append((seq, stamp, frames))

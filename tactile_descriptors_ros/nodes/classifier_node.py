@@ -106,7 +106,7 @@ class ClassifierNode(Node):
             sample = descriptor_from_msg(msg)
         except SignalError as exc:
             self.counts["malformed_descriptor"] += 1
-            self.get_logger().warn(f"malformed descriptor: {exc}", throttle_duration_sec=5.0)
+            self.get_logger().warning(f"malformed descriptor: {exc}", throttle_duration_sec=5.0)
             return
         self.counts["descriptors"] += 1
         if not sample.contact:
@@ -125,7 +125,7 @@ class ClassifierNode(Node):
         self.layout_error = None
         if not np.all(np.isfinite(sample.values)):
             self.counts["nonfinite_descriptor"] += 1
-            self.get_logger().warn("descriptor with non-finite values ignored", throttle_duration_sec=5.0)
+            self.get_logger().warning("descriptor with non-finite values ignored", throttle_duration_sec=5.0)
             return
         self.model.observe(sample.values)
         name, scores = self.model.predict(sample.values)
@@ -152,7 +152,7 @@ class ClassifierNode(Node):
         name = str(msg.class_name).strip()
         if not name:
             self.counts["empty_label"] += 1
-            self.get_logger().warn(f"label for exploration {eid} has an empty class name; ignored")
+            self.get_logger().warning(f"label for exploration {eid} has an empty class name; ignored")
             return
         if eid == 0:
             sample = self.latest
@@ -164,7 +164,7 @@ class ClassifierNode(Node):
                 self.counts["early_labels"] += 1
                 return
             self.counts["unknown_exploration"] += 1
-            self.get_logger().warn(
+            self.get_logger().warning(
                 f"label {name!r} for exploration {eid or '(most recent)'}: no such descriptor with contact among "
                 f"the last {self.horizon} kept; ignored")
             return

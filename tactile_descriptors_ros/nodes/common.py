@@ -198,6 +198,10 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
         name = node.get_name() if node is not None else "node"
         print(f"[FATAL] [{name}]: {exc}", file=sys.stderr, flush=True)
         code = 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # a callback was cut short by Ctrl-C (e.g. publishing after the context shut down): a clean stop
     finally:
         if node is not None:
             close = getattr(node, "close", None)

@@ -329,7 +329,7 @@ class SkinDriver(LifecycleNode):
             if cell.accel[-1][0] - cell.first_t_ns >= self.tare_on_start_s * 1e9:
                 ok, why = self._tare_cell(cell, self.tare_on_start_s)
                 if not ok:
-                    self.get_logger().warn(f"cell {cell.cell_id}: start tare failed: {why}", throttle_duration_sec=5.0)
+                    self.get_logger().warning(f"cell {cell.cell_id}: start tare failed: {why}", throttle_duration_sec=5.0)
                     cell.tared = True  # publish anyway, untared (the diagnostics say so)
             cell.accel.clear()
             cell.force.clear()

@@ -171,7 +171,7 @@ class WindowNode(Node):
         cid = self._cells_by_name.get((part, msg.sensor_name))
         if cid is None:
             self.faults["unknown_sensor"] += 1
-            self.get_logger().warn(f"frames from unknown sensor {msg.sensor_name!r} on body part {part!r}; "
+            self.get_logger().warning(f"frames from unknown sensor {msg.sensor_name!r} on body part {part!r}; "
                                    "dropped (not in the robot description)",
                                    throttle_duration_sec=5.0)
             return
@@ -179,14 +179,14 @@ class WindowNode(Node):
             chunk = biotac_msg_to_chunk(msg)
         except SignalError as exc:
             self.faults["malformed"] += 1
-            self.get_logger().warn(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
+            self.get_logger().warning(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
                                    throttle_duration_sec=5.0)
             return
         if msg.pdc_tare_counts != 0.0:
             self._untared.discard(msg.sensor_name)
         elif msg.sensor_name not in self._untared:
             self._untared.add(msg.sensor_name)
-            self.get_logger().warn(f"{msg.sensor_name} was never tared: its force is PDC counts times the scale "
+            self.get_logger().warning(f"{msg.sensor_name} was never tared: its force is PDC counts times the scale "
                                    "and may read as permanent contact (call the driver's ~/tare)")
         self._sequence(msg.sensor_name, int(msg.first_frame_sequence), int(msg.frame_count))
         self.faults["bad_words"] += int(msg.bad_words)
@@ -198,19 +198,19 @@ class WindowNode(Node):
         part = self._cell_part.get(cid)
         if part is None:
             self.faults["unknown_cell"] += 1
-            self.get_logger().warn(f"frames from cell {cid} which is not in the served body parts; dropped",
+            self.get_logger().warning(f"frames from cell {cid} which is not in the served body parts; dropped",
                                    throttle_duration_sec=5.0)
             return
         if msg.body_part != part:
             self.faults["body_part_mismatch"] += 1
-            self.get_logger().warn(f"cell {cid} claims body part {msg.body_part!r} but the robot description "
+            self.get_logger().warning(f"cell {cid} claims body part {msg.body_part!r} but the robot description "
                                    f"puts it on {part!r}; dropped", throttle_duration_sec=5.0)
             return
         try:
             chunk = skin_msg_to_chunk(msg)
         except SignalError as exc:
             self.faults["malformed"] += 1
-            self.get_logger().warn(f"malformed SkinCellFrame from cell {cid}: {exc}", throttle_duration_sec=5.0)
+            self.get_logger().warning(f"malformed SkinCellFrame from cell {cid}: {exc}", throttle_duration_sec=5.0)
             return
         self._sequence(f"cell{cid}", int(msg.sequence), 1)
         self.faults["bad_frames"] += int(msg.bad_frames)

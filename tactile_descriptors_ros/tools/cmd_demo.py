@@ -1,0 +1,159 @@
+"""``tactile demo shadow_hand|nao``: a simulated robot through the live graph, learning online.
+
+Starts the robot's node graph (the same as ``tactile launch ROBOT --sim
+SCENE``: real drivers on the simulated transport speaking the wire format,
+the window node, the classifier node with a fresh model in a temporary
+folder) and plays the scene (``config/scenes/demo_<robot>.yaml`` by default).
+This process listens to the prediction topic and, after each exploration's
+prediction, publishes the true label of that exploration on the label topic
+(the experimenter's part), so the classifier learns online: predict first,
+then update (paper section VI-A).
+
+The true label of a prediction is the scene exploration its window overlaps
+most, by the sensor time stamps (the drivers stamp with the simulator's
+clock in the demo).  Prints the online learning curve and ends with one
+summary line of JSON; ``accuracy`` is the accuracy of predictions made
+before their label arrived, ``accuracy_after_first`` leaves out the first
+exploration of each class (which no online learner can get right).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+__all__ = ["register", "run_demo", "match_exploration"]
+
+
+def match_exploration(start_ns: int, end_ns: int, timings) -> int | None:
+    """Index of the exploration whose contact interval overlaps ``[start_ns, end_ns)`` most (None if none)."""
+    best, best_overlap = None, 0
+    for i, t in enumerate(timings):
+        overlap = min(end_ns, t.release_ns) - max(start_ns, t.onset_ns)
+        if overlap > best_overlap:
+            best, best_overlap = i, overlap
+    return best
+
+
+def run_demo(robot: str, scene: str | None = None, speed: float = 1.0, split_window_nodes: bool = False,
+             timeout_s: float | None = None, verbose: bool = False, out=sys.stdout) -> dict:
+    """Run the demo; return the summary (see the module docstring)."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+
+    from ..core.robot import load_robot
+    from ..launching.graph import build_graph
+    from ..launching.processes import GraphProcesses, localhost_environment
+    from ..sim import load_scene, simulate
+
+    t_start = time.monotonic()
+    rob = load_robot(robot)
+    scene_name = scene or f"demo_{rob.name}"
+    sc = load_scene(scene_name)
+    truth = simulate(sc).explorations  # ground truth: onset/release times and labels
+    drivers = [name for name, e in rob.nodes.items() if e.get("executable") in ("biotac_driver", "skin_driver")]
+    overrides = {d: {"stamp_source": "device", "sim.speed": float(speed)} for d in drivers}
+    tmp = tempfile.TemporaryDirectory(prefix="tactile_demo_")
+    specs = build_graph(rob, sim_scene=scene_name, split_window_nodes=split_window_nodes,
+                        model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
+    procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("tactile_demo", context=context)
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    label_pub = node.create_publisher(Label, "tactile/label", qos)
+    rows: list[dict] = []
+    seen_classes: set[str] = set()
+    done_ids: set[int] = set()
+
+    def on_prediction(msg) -> None:
+        if msg.exploration_id in done_ids:
+            return
+        end = msg.window_end.sec * 1_000_000_000 + msg.window_end.nanosec
+        eid = int(msg.exploration_id)
+        idx = match_exploration(windows.get(eid, end - 1), end, truth)
+        done_ids.add(eid)
+        if idx is None:
+            rows.append({"exploration_id": eid, "truth": None, "predicted": msg.class_name, "correct": False})
+            print(f"exploration {eid:3d}: no scene exploration matches its window; not labelled", file=out,
+                  flush=True)
+            return
+        label = truth[idx].exploration.label
+        first = label not in seen_classes
+        correct = bool(msg.has_model and msg.class_name == label)
+        rows.append({"exploration_id": eid, "scene_index": idx, "truth": label, "predicted": msg.class_name,
+                     "correct": correct, "first_of_class": first})
+        seen_classes.add(label)
+        label_pub.publish(Label(exploration_id=eid, class_name=label))
+        n_ok = sum(r["correct"] for r in rows)
+        print(f"exploration {eid:3d}: true {label:<14s} predicted {msg.class_name or '(no model)':<14s} "
+              f"{'ok ' if correct else 'bad'}  online accuracy {n_ok}/{len(rows)} = {n_ok / len(rows):.2f}",
+              file=out, flush=True)
+
+    windows: dict[int, int] = {}  # exploration id -> window start [ns], from the descriptors
+    node.create_subscription(Descriptor, "tactile/descriptor",
+                             lambda m: windows.__setitem__(int(m.exploration_id), m.window_start.sec * 1_000_000_000
+                                                           + m.window_start.nanosec), qos)
+    node.create_subscription(Prediction, "tactile/prediction", on_prediction, qos)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    scene_s = (sc.duration_s if hasattr(sc, "duration_s") else 60.0) / speed
+    deadline = time.monotonic() + (timeout_s if timeout_s is not None else scene_s + 25.0)
+    failed: list[str] = []
+    try:
+        procs.start()
+        while time.monotonic() < deadline and len(rows) < len(truth):
+            executor.spin_once(timeout_sec=0.1)
+            for n in procs.exited():
+                if n.spec.name not in failed:
+                    failed.append(n.spec.name)
+                    print(f"node {n.spec.name} exited with code {n.returncode}:\n  " + "\n  ".join(n.lines[-15:]),
+                          file=sys.stderr, flush=True)
+            if failed and len(failed) == len(procs.nodes):
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        procs.stop()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        tmp.cleanup()
+    n = len(rows)
+    later = [r for r in rows if r.get("truth") and not r.get("first_of_class")]
+    return {
+        "robot": rob.name, "scene": sc.name, "explorations": len(truth), "predictions": n,
+        "accuracy": round(sum(r["correct"] for r in rows) / n, 4) if n else None,
+        "accuracy_after_first": round(sum(r["correct"] for r in later) / len(later), 4) if later else None,
+        "classes": len(seen_classes), "unmatched": sum(1 for r in rows if r.get("truth") is None),
+        "speed": speed, "failed_nodes": failed, "wall_time_s": round(time.monotonic() - t_start, 1),
+    }
+
+
+def _run(args: argparse.Namespace) -> int:
+    summary = run_demo(args.robot, args.scene, args.speed, args.split_window_nodes, args.timeout_s, args.verbose)
+    print(json.dumps(summary), flush=True)
+    return 0 if summary["predictions"] and not summary["failed_nodes"] else 1
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("demo", help="simulated robot through the live graph, learning online",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("robot", help="shadow_hand or nao (or a robot YAML path with a nodes: section)")
+    p.add_argument("--scene", default=None, help="scene name or path (default demo_<robot>)")
+    p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
+    p.add_argument("--split-window-nodes", action="store_true", help="one window node per body part")
+    p.add_argument("--timeout-s", type=float, default=None, help="give up after this long")
+    p.add_argument("--verbose", action="store_true", help="forward the nodes' output to stderr")
+    p.add_argument("--json", action="store_true", help="(the summary line is always JSON)")
+    p.set_defaults(func=_run)

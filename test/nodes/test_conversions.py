@@ -1,0 +1,98 @@
+"""Message <-> core conversions: round trips, invalid samples, units."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+
+def _batch(n_frames=3, n_el=19, t0=5_000_000_123):
+    from tactile_descriptors_ros.nodes.conversions import BioTacBatch
+
+    rng = np.random.default_rng(1)
+    pac = rng.integers(0, 4096, n_frames * 22).astype(np.uint16)
+    pac[5] = 65535
+    el = rng.integers(0, 4096, (n_frames, n_el)).astype(np.uint16)
+    el[1, 4] = 65535
+    pdc = np.array([2100, 65535, 2300][:n_frames], np.uint16)
+    return BioTacBatch(t0, pac, np.arange(n_frames * 22, dtype=np.int64) * 454_545,
+                       np.arange(n_frames, dtype=np.int64) * 10_000_000, pdc, pdc, pdc, el, 7, 2)
+
+
+def test_biotac_round_trip_and_chunk():
+    from tactile_descriptors_ros.nodes.conversions import biotac_batch_to_msg, biotac_msg_to_batch, biotac_msg_to_chunk
+
+    b = _batch()
+    msg = biotac_batch_to_msg(b, sensor_name="biotac_index", body_part="index", chip_select=1,
+                              force_n_per_count=0.05, pdc_tare_counts=2000.0, electrode_tare_counts=[1.0] * 19)
+    back = biotac_msg_to_batch(msg)
+    for name in ("pac", "pac_offset_ns", "frame_offset_ns", "pdc", "tac", "tdc", "electrodes"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(b, name))
+    assert (back.stamp_ns, back.first_frame_sequence, back.bad_words) == (b.stamp_ns, 7, 2)
+    ch = biotac_msg_to_chunk(msg)
+    assert ch.vibration.shape == (1, 66) and ch.deformation.shape == (19, 3)
+    assert not ch.vibration_valid[5] and ch.vibration_valid.sum() == 65
+    np.testing.assert_array_equal(ch.deformation_valid, [True, False, True])
+    assert ch.force_n[0] == pytest.approx(5.0) and math.isnan(ch.force_n[1]) and ch.force_n[2] == pytest.approx(15.0)
+    assert ch.vibration_t_ns[0] == b.stamp_ns and ch.deformation_t_ns[2] == b.stamp_ns + 20_000_000
+
+
+def test_inconsistent_lengths_are_errors():
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.nodes.conversions import BioTacBatch, biotac_batch_to_msg, biotac_msg_to_chunk
+
+    with pytest.raises(SignalError):
+        BioTacBatch(0, np.zeros(3, np.uint16), np.zeros(2, np.int64), np.zeros(1, np.int64),
+                    np.zeros(1, np.uint16), np.zeros(1, np.uint16), np.zeros(1, np.uint16), np.zeros((1, 19), np.uint16))
+    msg = biotac_batch_to_msg(_batch(), sensor_name="s", body_part="index", chip_select=0)
+    msg.frame_count = 4
+    with pytest.raises(SignalError):
+        biotac_msg_to_chunk(msg)
+
+
+def test_skin_round_trip_and_chunk():
+    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_frame_to_msg, skin_msg_to_chunk, skin_msg_to_frame
+
+    acc = np.array([[1, 2, -3, 4], [0, -512, 7, 8], [9, 10, 11, -32768]], np.int16)
+    force = np.array([[100, 200], [110, 65535], [120, 220]], np.uint16)
+    f = SkinFrame(1_000, acc, np.arange(4, dtype=np.int64) * 1_000_000, force,
+                  np.array([0, 4_000_000], np.int64), np.array([5, 6], np.uint16), 31.5, 9, 1)
+    msg = skin_frame_to_msg(f, cell_id=17, body_part="right_hand", force_n_per_count=0.01,
+                            force_tare_counts=[100, 110, 120])
+    back = skin_msg_to_frame(msg)
+    np.testing.assert_array_equal(back.accel, acc)
+    np.testing.assert_array_equal(back.force, force)
+    assert back.temperature_c == 31.5 and back.sequence == 9
+    ch = skin_msg_to_chunk(msg)
+    np.testing.assert_array_equal(ch.vibration_valid, [True, True, True, False])
+    np.testing.assert_array_equal(ch.deformation_valid, [True, False])
+    assert ch.force_n[0] == pytest.approx(0.0) and math.isnan(ch.force_n[1])
+
+
+def test_descriptor_and_prediction_messages():
+    from tactile_descriptors_ros.core.aggregation import describe_window
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.core.windowing import Window
+    from tactile_descriptors_ros.nodes.conversions import descriptor_from_msg, descriptor_to_msg, prediction_to_msg
+
+    robot = load_robot("shadow_hand")
+    d = describe_window(robot, {})
+    msg = descriptor_to_msg(d, Window(1_000, 2_000_000_001, 4, "exploration"))
+    s = descriptor_from_msg(msg)
+    assert s.exploration_id == 4 and s.window_end_ns == 2_000_000_001 and len(s.values) == 40
+    assert s.labels == d.labels and not s.contact and s.body_parts[0] == "thumb"
+    p = prediction_to_msg(s, class_name=None, class_names=[], scores=np.zeros(0), model_version=0, updates=0)
+    assert not p.has_model and p.class_name == "" and p.exploration_id == 4
+
+
+def test_stamp_conversion():
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, stamp_to_ns
+
+    assert stamp_to_ns(ns_to_stamp(12_345_678_901)) == 12_345_678_901
+    with pytest.raises(SignalError):
+        ns_to_stamp(-1)

@@ -1,0 +1,141 @@
+"""window_node and classifier_node in-process: descriptors, predictions, labels, model file, services."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from helpers import BiotacStream, spin_until
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def graph(ros_context, tmp_path):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, Label, Prediction
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    model = tmp_path / "model.json"
+    w = WindowNode(context=ros_context, parameter_overrides=[
+        Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
+        Parameter("qos.frames.reliability", value="reliable")])
+    c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model))])
+    io = rclpy.create_node("io", context=ros_context)
+    out = {"pred": [], "desc": []}
+    io.create_subscription(Prediction, "tactile/prediction", out["pred"].append, 50)
+    io.create_subscription(Descriptor, "tactile/descriptor", out["desc"].append, 50)
+    frames = io.create_publisher(BioTacFrameBatch, "tactile/index/frames", 50)
+    labels = io.create_publisher(Label, "tactile/label", 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (w, c, io):
+        ex.add_node(n)
+    spin_until(ex, lambda: frames.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1, 10)
+    yield {"ex": ex, "window": w, "classifier": c, "frames": frames, "labels": labels, "out": out, "model": model,
+           "Label": Label}
+
+
+def _explore(g, stream, freq_hz):
+    n, nd = len(g["out"]["pred"]), len(g["out"]["desc"])
+    for m in stream.exploration(freq_hz):
+        g["frames"].publish(m)
+        g["ex"].spin_once(timeout_sec=0.005)
+    assert spin_until(g["ex"], lambda: len(g["out"]["pred"]) > n and len(g["out"]["desc"]) > nd, 10), \
+        "no descriptor and prediction for the exploration"
+    return g["out"]["pred"][-1]
+
+
+def test_predict_then_learn_online(graph):
+    g = graph
+    stream = BiotacStream()
+    first = _explore(g, stream, 40.0)
+    assert first.exploration_id == 1 and not first.has_model and first.class_name == ""
+    d = g["out"]["desc"][-1]
+    assert d.body_parts == ["index"] and d.contact == [True] and len(d.values) == 8
+    assert d.window_mode == "exploration" and d.labels[0] == "index/A_pac"
+    g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
+    assert spin_until(g["ex"], lambda: g["classifier"].model is not None and g["classifier"].model.pa.updates == 1)
+    second = _explore(g, stream, 300.0)
+    assert second.exploration_id == 2 and second.has_model and second.class_name == "cork"
+    assert list(second.class_names) == ["cork"] and len(second.scores) == 1
+    g["labels"].publish(g["Label"](exploration_id=0, class_name="felt"))  # 0 = the most recent
+    assert spin_until(g["ex"], lambda: g["classifier"].model.classes == ["cork", "felt"])
+    state = json.loads(g["model"].read_text())  # saved atomically after the update
+    assert state["pa"]["classes"] == ["cork", "felt"] and state["pa"]["updates"] == 2
+    third = _explore(g, stream, 40.0)
+    assert list(third.class_names) == ["cork", "felt"] and third.model_version == 2
+
+
+def test_unknown_exploration_label_is_counted_and_reported(graph):
+    g = graph
+    _explore(g, BiotacStream(), 40.0)
+    g["labels"].publish(g["Label"](exploration_id=0, class_name="cork"))
+    g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
+    # an old id that never had a descriptor with contact
+    g["classifier"].latest_id_seen = 5
+    g["labels"].publish(g["Label"](exploration_id=3, class_name="felt"))
+    assert spin_until(g["ex"], lambda: g["classifier"].counts["unknown_exploration"] == 1)
+    st = next(s for s in g["classifier"].diagnostics.statuses() if s.name.endswith("classifier"))
+    assert st.level == b"\x01" and "unknown explorations" in st.message
+    assert g["classifier"].model.classes == ["cork"]  # never applied to another descriptor
+
+
+def test_save_reset_and_reload(graph, ros_context):
+    from rclpy.parameter import Parameter
+    from std_srvs.srv import Trigger
+
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
+    g = graph
+    c = g["classifier"]
+    assert not c._srv_save(Trigger.Request(), Trigger.Response()).success  # no model yet
+    _explore(g, BiotacStream(), 40.0)
+    g["labels"].publish(g["Label"](exploration_id=0, class_name="cork"))
+    assert spin_until(g["ex"], lambda: c.model.pa.updates == 1)
+    assert c._srv_save(Trigger.Request(), Trigger.Response()).success
+    again = ClassifierNode("classifier_reloaded", context=ros_context,
+                           parameter_overrides=[Parameter("model_path", value=str(g["model"]))])
+    assert again.model.classes == ["cork"]
+    again.destroy_node()
+    resp = c._srv_reset(Trigger.Request(), Trigger.Response())
+    assert resp.success and c.model.classes == []
+    assert json.loads(g["model"].read_text())["pa"]["classes"] == []
+
+
+def test_layout_mismatch_refused(graph, tmp_path, ros_context):
+    """A model of another layout is never overwritten: predictions stop, diagnostics say why."""
+    g = graph
+    _explore(g, BiotacStream(), 40.0)
+    c = g["classifier"]
+    from tactile_descriptors_ros.core.learning import OnlineClassifier
+
+    c.model = OnlineClassifier(["a", "b"])
+    n = len(g["out"]["pred"])
+    stream = BiotacStream(seed=3)
+    for m in stream.exploration(40.0):
+        g["frames"].publish(m)
+        g["ex"].spin_once(timeout_sec=0.005)
+    assert spin_until(g["ex"], lambda: c.counts["layout_mismatch"] >= 1)
+    assert len(g["out"]["pred"]) == n
+    st = next(s for s in c.diagnostics.statuses() if s.name.endswith("classifier"))
+    assert st.level == b"\x02"
+
+
+def test_window_node_counts_unknown_sensor_and_lost_frames(graph):
+    g = graph
+    s = BiotacStream(sensor_name="biotac_ghost")
+    g["frames"].publish(s.batch(0.0, 40.0))
+    good = BiotacStream()
+    g["frames"].publish(good.batch(0.0, 40.0))
+    good.seq += 30  # 30 frames lost on the wire
+    good.t_ns += 300_000_000
+    g["frames"].publish(good.batch(0.0, 40.0))
+    w = g["window"]
+    assert spin_until(g["ex"], lambda: w.faults["unknown_sensor"] == 1 and w.faults["lost_frames"] == 30)
+    st = w.diagnostics.statuses()[0]
+    assert st.level == b"\x01" and "unknown_sensor=1" in st.message
