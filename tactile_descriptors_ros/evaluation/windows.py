@@ -1,0 +1,170 @@
+"""Trial selection, the crop rule and seeded window positions.
+
+The crop rule (no duration leak): in the BioTac sliding data material 1 lasts
+about 6 s and the others about 8 s, so trial length alone would give a class
+away.  Every trial is first cropped to the *common length* -- the shortest
+trial of the data in use (599 frames = 5.99 s here) -- and every window is
+then drawn inside that cropped span: a ``whole`` window is the cropped trial
+itself, a shorter window starts at a uniformly random frame of the cropped
+span.  All windows of one evaluation therefore have exactly the same number
+of frames, and a window's position carries no class information.
+
+Positions are drawn from a generator seeded by ``(seed, material, trial,
+length)``, so they do not depend on which other trials are loaded.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..datasets.biotac_slide import BiotacRecording, load_recordings
+from ..errors import ConfigError
+
+__all__ = [
+    "parse_trials",
+    "format_trials",
+    "common_length_frames",
+    "window_frames",
+    "Window",
+    "draw_windows",
+    "load_split",
+]
+
+_RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+))?\s*$")
+
+
+def parse_trials(text: str | Sequence[int] | None) -> list[int] | None:
+    """Parse ``"1-20"``, ``"1-5,8,10-12"`` (or a sequence of ints) into a sorted list.
+
+    ``None`` or ``"all"`` means every trial.
+
+    Raises
+    ------
+    ConfigError
+        For a malformed range or a range that runs backwards.
+    """
+    if text is None:
+        return None
+    if not isinstance(text, str):
+        out = sorted({int(t) for t in text})
+        if not out or out[0] < 1:
+            raise ConfigError(f"trial numbers must be >= 1, got {list(text)!r}")
+        return out
+    if text.strip().lower() == "all":
+        return None
+    out: set[int] = set()
+    for part in text.split(","):
+        m = _RANGE.match(part)
+        if not m:
+            raise ConfigError(f"bad trial range {part!r} (expected e.g. 1-20 or 1-5,8)", key="trials")
+        lo = int(m.group(1))
+        hi = int(m.group(2)) if m.group(2) else lo
+        if hi < lo or lo < 1:
+            raise ConfigError(f"bad trial range {part!r}: must be increasing and >= 1", key="trials")
+        out.update(range(lo, hi + 1))
+    return sorted(out)
+
+
+def format_trials(trials: Sequence[int] | None) -> str:
+    """Inverse of :func:`parse_trials` (compact ``a-b,c`` form)."""
+    if trials is None:
+        return "all"
+    t = sorted(trials)
+    parts, start, prev = [], t[0], t[0]
+    for x in t[1:] + [None]:
+        if x is not None and x == prev + 1:
+            prev = x
+            continue
+        parts.append(f"{start}-{prev}" if prev > start else f"{start}")
+        if x is not None:
+            start = prev = x
+    return ",".join(parts)
+
+
+def common_length_frames(recordings: Sequence[BiotacRecording]) -> int:
+    """The crop length: the frame count of the shortest recording."""
+    if not recordings:
+        raise ConfigError("no recordings to crop")
+    return int(min(r.n_frames for r in recordings))
+
+
+def window_frames(window: str | float, frame_rate_hz: float, common_frames: int) -> int:
+    """Frames per window: ``"whole"`` is the common length, else ``round(seconds * rate)``.
+
+    Raises
+    ------
+    ConfigError
+        When the window is not positive or longer than the common length.
+    """
+    if isinstance(window, str):
+        if window.strip().lower() == "whole":
+            return int(common_frames)
+        try:
+            window = float(window)
+        except ValueError:
+            raise ConfigError(f"window must be seconds or 'whole', got {window!r}", key="window") from None
+    n = int(round(float(window) * frame_rate_hz))
+    if n < 3:
+        raise ConfigError(f"window of {window} s is shorter than 3 frames", key="window")
+    if n > common_frames:
+        raise ConfigError(
+            f"window of {window} s ({n} frames) is longer than the common trial length "
+            f"({common_frames} frames = {common_frames / frame_rate_hz:.2f} s)", key="window")
+    return n
+
+
+@dataclass(frozen=True)
+class Window:
+    """One window: frames ``start:start + n_frames`` of one recording."""
+
+    material: int
+    trial: int
+    start: int
+    n_frames: int
+
+
+def draw_windows(recordings: Sequence[BiotacRecording], n_frames: int, common_frames: int,
+                 per_trial: int = 1, seed: int = 0) -> list[Window]:
+    """Seeded random window positions inside each trial's common-length crop.
+
+    Parameters
+    ----------
+    recordings : sequence of BiotacRecording
+    n_frames : int
+        Window length in frames (every window has exactly this length).
+    common_frames : int
+        Crop length; windows lie in frames ``0:common_frames`` of every trial.
+    per_trial : int, default 1
+        Windows per trial.  When the window is the whole crop there is only
+        one position and ``per_trial`` is ignored.
+    seed : int
+
+    Returns
+    -------
+    list of Window, ordered as the recordings.
+    """
+    if n_frames > common_frames:
+        raise ConfigError(f"window ({n_frames} frames) longer than the crop ({common_frames})")
+    out = []
+    span = common_frames - n_frames
+    for r in recordings:
+        if r.n_frames < common_frames:
+            raise ConfigError(f"{r.path}: {r.n_frames} frames, shorter than the crop ({common_frames})")
+        if span == 0:
+            out.append(Window(r.material, r.trial, 0, n_frames))
+            continue
+        rng = np.random.default_rng([int(seed), int(r.material), int(r.trial), int(n_frames)])
+        for start in rng.integers(0, span + 1, size=per_trial):
+            out.append(Window(r.material, r.trial, int(start), n_frames))
+    return out
+
+
+def load_split(data_dir: str | Path, trials: Sequence[int] | None,
+               materials: Sequence[int] | None = None) -> list[BiotacRecording]:
+    """Load the recordings of a split (see :func:`~..datasets.biotac_slide.load_recordings`)."""
+    return load_recordings(data_dir, trials=trials, materials=materials)
