@@ -75,6 +75,12 @@ class Window:
 class SampleStream:
     """A growable, trimmable buffer of time-stamped multichannel samples.
 
+    Samples live in preallocated arrays between ``_lo`` and ``_hi``;
+    trimming moves ``_lo`` (no copy) and appending compacts or grows the
+    arrays only when the end is reached, so the cost per message is a few
+    slice assignments.  The last stamp is kept as a Python int (it is read
+    for every message).
+
     Parameters
     ----------
     n_channels : int
@@ -89,33 +95,42 @@ class SampleStream:
         self._ok = np.empty(cap, dtype=bool)
         self._lo = 0
         self._hi = 0
+        self._last: int | None = None
 
     def __len__(self) -> int:
         return self._hi - self._lo
 
     @property
     def last_t_ns(self) -> int | None:
-        return int(self._t[self._hi - 1]) if self._hi > self._lo else None
+        return self._last
 
     def append(self, t_ns: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None) -> None:
         n = t_ns.shape[0]
         if values.shape != (self.n_channels, n):
             raise SignalError(f"expected samples of shape ({self.n_channels}, {n}), got {values.shape}")
-        if self._hi + n > self._t.shape[0]:
+        if n == 0:
+            return
+        hi = self._hi
+        if hi + n > self._t.shape[0]:
             self._compact(n)
-        self._t[self._hi:self._hi + n] = t_ns
-        self._v[:, self._hi:self._hi + n] = values
-        self._ok[self._hi:self._hi + n] = True if valid is None else valid
-        self._hi += n
+            hi = self._hi
+        end = hi + n
+        self._t[hi:end] = t_ns
+        self._v[:, hi:end] = values
+        self._ok[hi:end] = True if valid is None else valid
+        self._hi = end
+        self._last = int(self._t[end - 1])
 
     def _compact(self, extra: int) -> None:
         size = self._hi - self._lo
         cap = self._t.shape[0]
         if size + extra > cap // 2:
             cap = max(2 * cap, 2 * (size + extra))
-        t = np.empty(cap, dtype=np.int64)
-        v = np.empty((self.n_channels, cap), dtype=self._v.dtype)
-        ok = np.empty(cap, dtype=bool)
+            t = np.empty(cap, dtype=np.int64)
+            v = np.empty((self.n_channels, cap), dtype=self._v.dtype)
+            ok = np.empty(cap, dtype=bool)
+        else:  # room enough once the trimmed head is dropped: move down in place
+            t, v, ok = self._t, self._v, self._ok
         t[:size] = self._t[self._lo:self._hi]
         v[:, :size] = self._v[:, self._lo:self._hi]
         ok[:size] = self._ok[self._lo:self._hi]
@@ -123,14 +138,19 @@ class SampleStream:
 
     def trim_before(self, t_ns: int, keep_one: bool = False) -> None:
         """Drop samples older than ``t_ns`` (keeping the last one before it if asked)."""
+        if self._hi == self._lo or t_ns <= self._t[self._lo]:
+            return  # nothing older than t_ns
         t = self._t[self._lo:self._hi]
         i = int(np.searchsorted(t, t_ns, side="left"))
         if keep_one and i > 0:
             i -= 1
         self._lo += i
+        if self._lo == self._hi:
+            self._last = None
 
     def clear(self) -> None:
         self._lo = self._hi = 0
+        self._last = None
 
     def between(self, start_ns: int, end_ns: int, hold_before: bool = False
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
