@@ -1,0 +1,572 @@
+"""Timing the descriptor path against a naive per-signal baseline (``tactile bench``).
+
+What is timed (SPEC section 7, issue 8):
+
+* **package** -- :func:`~tactile_descriptors_ros.core.aggregation.describe_window`
+  on one window (contact gate, per-cell quantities through the exact fast
+  kernel of :mod:`tactile_descriptors_ros.core.fast`, per-body-part
+  averages, whole-robot layout);
+* **kernel** -- the per-cell quantities alone
+  (:func:`~tactile_descriptors_ros.core.fast.cell_quantities`), the part the
+  fast paths replace;
+* **expanded** -- the package's previous vectorised implementation (V
+  expanded by zero-order hold, broadcast pairs, ranks of the expanded
+  series; :func:`~tactile_descriptors_ros.core.fast.cell_quantities_reference`);
+* **baseline** -- what usual code does: per cell and per signal, a plain
+  numpy Hjorth, and ``scipy.stats.pearsonr`` / ``spearmanr`` of every S
+  channel with every V channel held onto S's time base; the same contact
+  gate and averages.
+
+Before anything is timed, the package's descriptor is checked against the
+baseline's on the same window (:class:`BenchMismatch` otherwise).  Times are
+medians over repeats of wall-clock time (``perf_counter``) and of the
+thread's CPU time (``thread_time``); on a shared machine CPU time is the
+better estimate of "one core", wall time is what a user waits.  BLAS and
+OpenMP pools are limited to one thread (threadpoolctl) for the whole run.
+"""
+
+from __future__ import annotations
+
+import copy
+import gc
+import math
+import os
+import platform
+import statistics
+import time
+import warnings
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy import stats
+
+from ..core import fast
+from ..core.aggregation import (
+    CellFeatures,
+    CellSignals,
+    RobotDescriptor,
+    body_part_layout,
+    contact_gate,
+    describe_window,
+    reduce_body_part,
+)
+from ..core.alignment import zero_order_hold
+from ..core.robot import RobotDescription, load_robot, parse_robot, robot_config_path
+from ..core.windowing import CellChunk, Windower
+from ..errors import TactileError
+
+__all__ = [
+    "BenchMismatch",
+    "Timing",
+    "CaseResult",
+    "BenchReport",
+    "skin_robot",
+    "skin_window",
+    "biotac_window",
+    "naive_describe",
+    "check_agreement",
+    "time_call",
+    "bench_case",
+    "bench_windowing",
+    "run_bench",
+    "format_report",
+    "one_core",
+    "DEFAULT_LENGTHS_S",
+]
+
+#: Window lengths of the scaling table (seconds).
+DEFAULT_LENGTHS_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+
+
+class BenchMismatch(TactileError):
+    """The package's descriptor disagrees with the naive baseline: timings would be meaningless."""
+
+
+# ----------------------------------------------------------------- windows
+def skin_robot(n_cells: int, cells_per_part: int = 116) -> RobotDescription:
+    """A robot of ``n_cells`` NAO skin cells (the ``skin_cell`` type of ``nao.yaml``).
+
+    Cells are split into body parts of at most ``cells_per_part`` cells; for
+    ``n_cells == 116`` the shipped NAO description is returned unchanged.
+    """
+    if n_cells == 116:
+        return load_robot("nao")
+    with open(robot_config_path("nao"), encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    data["robot"]["name"] = f"skin_{n_cells}"
+    data.pop("nodes", None)
+    parts = []
+    for k, start in enumerate(range(0, n_cells, cells_per_part)):
+        ids = range(start + 1, min(n_cells, start + cells_per_part) + 1)
+        parts.append({"name": f"part_{k}", "cell_type": "skin_cell", "cells": [{"id": i} for i in ids]})
+    data["body_parts"] = parts
+    return parse_robot(data, source=f"<bench skin robot, {n_cells} cells>")
+
+
+def skin_window(robot: RobotDescription, length_s: float = 2.0, *, seed: int = 0,
+                dtype: type = np.int32) -> dict[int, CellSignals]:
+    """One window of every cell of a skin robot, all in contact (synthetic).
+
+    Accelerometer (1 kHz, 10-bit signed counts): gravity on z plus a texture
+    vibration (AR(2) noise, std about 12 counts); force sensors (250 Hz,
+    12-bit counts): a pressing profile around 0.5-2 N plus noise.  The last
+    force sample before the window is included (zero-order hold).  Counts
+    are ``dtype`` (int32, as the window node delivers them).
+    """
+    rng = np.random.default_rng(seed)
+    cell_type = next(iter(robot.cell_types.values()))
+    fs_a = cell_type.vibration.rate_hz
+    fs_f = cell_type.deformation.rate_hz
+    n_a = int(round(length_s * fs_a))
+    n_f = int(round(length_s * fs_f))
+    t_a = np.arange(n_a, dtype=np.int64) * int(round(1e9 / fs_a))
+    t_f = (np.arange(n_f + 1, dtype=np.int64) - 1) * int(round(1e9 / fs_f))
+    n_per_count = float(cell_type.force.n_per_count) if cell_type.force else 0.002442
+    ids = sorted(robot.cell_index())
+    n_cells = len(ids)
+    white = rng.normal(0.0, 7.0, (n_cells, 3, n_a + 2))
+    vib = white.copy()
+    for k in range(2, n_a + 2):  # AR(2) texture vibration, vectorised over cells and axes
+        vib[:, :, k] += 1.2 * vib[:, :, k - 1] - 0.5 * vib[:, :, k - 2]
+    accel = np.clip(np.rint(vib[:, :, 2:] + np.array([0.0, 0.0, 256.0])[:, None]), -512, 511).astype(dtype)
+    press = rng.uniform(200, 800, (n_cells, 3, 1)) * (1 + 0.2 * np.sin(np.linspace(0, np.pi, n_f + 1)))
+    force = np.clip(np.rint(press + rng.normal(0, 4.0, (n_cells, 3, n_f + 1))), 0, 4095).astype(dtype)
+    out = {}
+    for c, cid in enumerate(ids):
+        force_n = force[c].mean(axis=0)[1:] * n_per_count
+        out[cid] = CellSignals(accel[c], t_a, force[c], t_f, force_n)
+    return out
+
+
+def biotac_window(robot: RobotDescription | None = None, length_s: float = 2.0, *, seed: int = 0,
+                  dtype: type = np.int32) -> dict[int, CellSignals]:
+    """One window of every BioTac of the Shadow Hand, all in contact (synthetic).
+
+    Frames at 100 Hz carry 22 PAC samples (2.2 kHz, spread over the frame)
+    and 19 electrodes; 12-bit counts.  PAC is a texture vibration around
+    2000 counts, electrodes a slow deformation around 2500 counts.
+    """
+    robot = robot or load_robot("shadow_hand")
+    rng = np.random.default_rng(seed)
+    cell_type = next(iter(robot.cell_types.values()))
+    frame_hz = cell_type.deformation.rate_hz
+    per_frame = int(round(cell_type.vibration.rate_hz / frame_hz))
+    n_frames = int(round(length_s * frame_hz))
+    frame_t = np.arange(n_frames, dtype=np.int64) * int(round(1e9 / frame_hz))
+    pac_t = (frame_t[:, None] + (np.arange(per_frame) * int(round(1e9 / frame_hz))) // per_frame).ravel()
+    n_e = len(cell_type.deformation.channels)
+    out = {}
+    for cid in sorted(robot.cell_index()):
+        white = rng.normal(0, 25.0, pac_t.size + 2)
+        pac = np.convolve(white, [1.0, 0.8, 0.3], mode="valid")[: pac_t.size]
+        electrodes = 2500 + rng.normal(0, 3, (n_e, n_frames)).cumsum(axis=1) + rng.normal(0, 2, (n_e, n_frames))
+        out[cid] = CellSignals(
+            np.clip(np.rint(2000 + pac), 0, 4095).astype(dtype)[None, :], pac_t,
+            np.clip(np.rint(electrodes), 0, 4095).astype(dtype), frame_t,
+            np.full(n_frames, 1.0),
+        )
+    return out
+
+
+# ----------------------------------------------------------------- baseline
+def _hjorth_plain(x: np.ndarray, fs_hz: float) -> tuple[float, float, float]:
+    """Hjorth parameters of one signal in plain numpy (eq. 1-3, derivative per second)."""
+    x = np.asarray(x, dtype=np.float64)
+    d = np.diff(x) * fs_hz
+    dd = np.diff(d) * fs_hz
+    var_x, var_d, var_dd = np.var(x), np.var(d), np.var(dd)
+    mob = math.sqrt(var_d / var_x) if var_x > 0 else 0.0
+    mob_d = math.sqrt(var_dd / var_d) if var_d > 0 else 0.0
+    return float(var_x), mob, (mob_d / mob if mob > 0 else 0.0)
+
+
+def _naive_cell(sig: CellSignals, fs_s: float, fs_v: float) -> tuple[np.ndarray, ...]:
+    s = np.asarray(sig.vibration)
+    v = np.asarray(sig.deformation)
+    hs = np.array([_hjorth_plain(ch, fs_s) for ch in s]).T
+    hv = np.array([_hjorth_plain(ch, fs_v) for ch in v]).T
+    held, valid = zero_order_hold(sig.deformation_t_ns, v, sig.vibration_t_ns)
+    lin = np.zeros((s.shape[0], v.shape[0]))
+    nonlin = np.zeros_like(lin)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # constant input: scipy warns and returns NaN
+        for i in range(s.shape[0]):
+            for j in range(v.shape[0]):
+                a, b = s[i, valid], held[j, valid]
+                lin[i, j] = np.nan_to_num(stats.pearsonr(a, b)[0])
+                nonlin[i, j] = np.nan_to_num(stats.spearmanr(a, b)[0])
+    return hs[0], hs[1], hs[2], hv[0], hv[1], hv[2], lin, nonlin
+
+
+def naive_describe(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
+                   channels: str | None = None, force_threshold_n: float | None = None) -> np.ndarray:
+    """The robot descriptor (concatenated body parts) computed signal by signal.
+
+    The naive baseline: a Python loop over cells and signals, a plain numpy
+    Hjorth per signal and ``scipy.stats.pearsonr``/``spearmanr`` per (S, V)
+    pair on the zero-order-hold-expanded series; then the same contact gate
+    and averages as the package (:func:`~.aggregation.reduce_body_part`).
+    """
+    channels = channels or robot.descriptor.channels
+    threshold = robot.contact.force_threshold_n if force_threshold_n is None else force_threshold_n
+    values = []
+    for part in robot.body_parts:
+        cell_type = robot.cell_types[part.cell_type]
+        present = [c.id for c in part.cells if c.id in cells and cells[c.id].valid]
+        gate = contact_gate([cells[i].force_n for i in present], threshold) if present else np.zeros(0, bool)
+        touching = [i for i, g in zip(present, gate) if g]
+        if not touching:
+            values.append(np.zeros(len(body_part_layout(cell_type, channels))))
+            continue
+        per_cell = [_naive_cell(cells[i], cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)
+                    for i in touching]
+        feats = CellFeatures(*(np.stack(q) for q in zip(*per_cell)), np.zeros(len(touching), np.uint32))
+        values.append(reduce_body_part(feats, np.ones(len(touching), bool), cell_type, channels))
+    return np.concatenate(values)
+
+
+def check_agreement(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
+                    rtol: float = 1e-7, atol: float = 1e-9) -> float:
+    """Assert that the package's descriptor equals the naive baseline's.
+
+    Returns the largest absolute difference; raises :class:`BenchMismatch`
+    (naming the worst label) when they differ beyond the tolerance.
+    """
+    got: RobotDescriptor = describe_window(robot, cells, layout="concat")
+    want = naive_describe(robot, cells, channels=got.channels)
+    if got.values.shape != want.shape:
+        raise BenchMismatch(f"descriptor sizes differ: package {got.values.shape}, baseline {want.shape}")
+    diff = np.abs(got.values - want)
+    bad = diff > atol + rtol * np.abs(want)
+    if bad.any():
+        k = int(np.argmax(np.where(bad, diff, -1)))
+        raise BenchMismatch(
+            f"{robot.name}: package and baseline disagree at {got.labels[k]}: {got.values[k]!r} vs {want[k]!r} "
+            f"({int(bad.sum())} of {bad.size} values differ); not timing")
+    return float(diff.max()) if diff.size else 0.0
+
+
+# ------------------------------------------------------------------- timing
+@dataclass
+class Timing:
+    """Median (and spread) of repeated calls, in milliseconds."""
+
+    wall_ms: float
+    cpu_ms: float
+    wall_min_ms: float
+    cpu_min_ms: float
+    repeats: int
+
+    @property
+    def per_second(self) -> float:
+        return 1000.0 / self.wall_ms if self.wall_ms > 0 else math.inf
+
+
+def time_call(fn: Callable[[], Any], repeat: int = 5, warmup: int = 1) -> Timing:
+    """Time ``fn()``: medians of wall-clock and thread CPU time over ``repeat`` calls."""
+    for _ in range(max(0, warmup)):
+        fn()
+    wall, cpu = [], []
+    gc_was = gc.isenabled()
+    gc.disable()
+    try:
+        for _ in range(max(1, repeat)):
+            c0, w0 = time.thread_time(), time.perf_counter()
+            fn()
+            wall.append((time.perf_counter() - w0) * 1e3)
+            cpu.append((time.thread_time() - c0) * 1e3)
+    finally:
+        if gc_was:
+            gc.enable()
+    return Timing(statistics.median(wall), statistics.median(cpu), min(wall), min(cpu), len(wall))
+
+
+@dataclass
+class CaseResult:
+    """One benchmark case (a robot window)."""
+
+    name: str
+    n_cells: int
+    length_s: float
+    samples: int
+    package: Timing
+    kernel: Timing
+    baseline: Timing
+    baseline_extrapolated_from: int | None = None
+    expanded: Timing | None = None
+    max_abs_diff: float = 0.0
+    target_ms: float | None = None
+
+    @property
+    def speedup_wall(self) -> float:
+        return self.baseline.wall_ms / self.package.wall_ms
+
+    @property
+    def speedup_cpu(self) -> float:
+        return self.baseline.cpu_ms / self.package.cpu_ms
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["speedup_wall"] = self.speedup_wall
+        d["speedup_cpu"] = self.speedup_cpu
+        d["package_windows_per_s"] = self.package.per_second
+        d["target_met"] = None if self.target_ms is None else self.package.cpu_ms <= self.target_ms
+        return d
+
+
+def _stack_batch(cells: Mapping[int, CellSignals]) -> tuple[np.ndarray, ...]:
+    ids = sorted(cells)
+    first = cells[ids[0]]
+    return (np.stack([cells[i].vibration for i in ids]), first.vibration_t_ns,
+            np.stack([cells[i].deformation for i in ids]), first.deformation_t_ns)
+
+
+def _subset(robot: RobotDescription, cells: Mapping[int, CellSignals], n: int
+            ) -> tuple[RobotDescription, dict[int, CellSignals]]:
+    """The first ``n`` cells as a robot of their own (for an extrapolated baseline)."""
+    sub = skin_robot(n) if n != 116 else skin_robot(116)
+    ids = sorted(cells)[:n]
+    sub_ids = sorted(sub.cell_index())
+    return sub, {new: cells[old] for new, old in zip(sub_ids, ids)}
+
+
+def bench_case(name: str, robot: RobotDescription, cells: Mapping[int, CellSignals], *, repeat: int = 5,
+               baseline_repeat: int = 3, baseline_cells: int | None = None, with_expanded: bool = False,
+               target_ms: float | None = None, check: bool = True) -> CaseResult:
+    """Check agreement, then time the package, the kernel and the baseline on one window.
+
+    ``baseline_cells``: time the baseline on that many cells and scale the
+    time linearly to all cells (the baseline is a per-cell loop).
+    """
+    n_cells = len(cells)
+    if baseline_cells is not None and baseline_cells < n_cells:
+        b_robot, b_cells = _subset(robot, cells, baseline_cells)
+        scale = n_cells / baseline_cells
+    else:
+        b_robot, b_cells, scale = robot, cells, 1.0
+    diff = check_agreement(b_robot, b_cells) if check else float("nan")
+    package = time_call(lambda: describe_window(robot, cells), repeat)
+    s, ts, v, tv = _stack_batch(cells)
+    ct = next(iter(robot.cell_types.values()))
+    fs_s, fs_v = ct.vibration.rate_hz, ct.deformation.rate_hz
+    kernel = time_call(lambda: fast.cell_quantities(s, ts, v, tv, fs_s, fs_v), repeat)
+    # a warm-up call only when the baseline runs on a small subset (it is slow)
+    base = time_call(lambda: naive_describe(b_robot, b_cells), baseline_repeat, warmup=int(scale != 1.0))
+    if scale != 1.0:
+        base = Timing(base.wall_ms * scale, base.cpu_ms * scale, base.wall_min_ms * scale,
+                      base.cpu_min_ms * scale, base.repeats)
+    expanded = None
+    if with_expanded:
+        expanded = time_call(lambda: fast.cell_quantities_reference(s, ts, v, tv, fs_s, fs_v),
+                             baseline_repeat, warmup=0)
+    length_s = (int(ts[-1]) - int(ts[0])) / 1e9 + 1.0 / fs_s if ts.size else 0.0
+    return CaseResult(name, n_cells, round(length_s, 3), int(s.size + v.size), package, kernel, base,
+                      baseline_cells if scale != 1.0 else None, expanded, diff, target_ms)
+
+
+# ---------------------------------------------------------------- windowing
+@dataclass
+class WindowingResult:
+    """Cost of :class:`~.windowing.Windower` ``add`` + ``poll`` per message."""
+
+    n_cells: int
+    message_ms: float
+    messages: int
+    stream_s: float
+    windows: int
+    us_per_message: float
+    us_per_message_cpu: float
+    messages_per_s_needed: float
+    core_fraction: float
+
+
+def bench_windowing(robot: RobotDescription | None = None, *, stream_s: float = 6.0, message_ms: float = 50.0,
+                    length_s: float = 2.0, hop_s: float = 0.5, seed: int = 0) -> WindowingResult:
+    """Feed ``stream_s`` seconds of NAO skin data at full rate through a fixed-mode Windower.
+
+    Every cell sends one message per ``message_ms`` (accelerometer 1 kHz,
+    force 250 Hz, as ``SkinCellFrame`` chunks converted by the window node;
+    the skin driver's default ``batch_s`` is 50 ms);
+    the time of ``add`` + ``poll`` (including cutting the windows, not
+    describing them) is divided by the number of messages.
+    """
+    robot = robot or load_robot("nao")
+    rng = np.random.default_rng(seed)
+    ids = sorted(robot.cell_index())
+    n_msgs = int(round(stream_s * 1000 / message_ms))
+    n_a = int(round(message_ms))  # 1 kHz
+    accel = rng.integers(-40, 40, (3, n_a)).astype(np.int32)
+    chunks = []  # built before timing: the node's message conversion is not part of the windower
+    for m in range(n_msgs):
+        t0 = int(m * message_ms * 1e6)
+        t_a = t0 + np.arange(n_a, dtype=np.int64) * 1_000_000
+        t_f = t0 + np.arange(0, n_a, 4, dtype=np.int64) * 1_000_000
+        force = rng.integers(300, 600, (3, t_f.size)).astype(np.int32)
+        chunks.append(CellChunk(accel, t_a, force, t_f, force.mean(axis=0) * 0.002442, t_f))
+    windower = Windower(robot, mode="fixed", length_s=length_s, hop_s=hop_s)
+    windows = 0
+    c0, w0 = time.thread_time(), time.perf_counter()
+    for chunk in chunks:
+        for cid in ids:
+            windower.add(cid, chunk)
+        windows += len(windower.poll())
+    wall = time.perf_counter() - w0
+    cpu = time.thread_time() - c0
+    total = n_msgs * len(ids)
+    per_s = len(ids) * 1000.0 / message_ms
+    return WindowingResult(len(ids), message_ms, total, stream_s, windows, wall / total * 1e6, cpu / total * 1e6,
+                           per_s, per_s * cpu / total)
+
+
+# --------------------------------------------------------------------- run
+@dataclass
+class BenchReport:
+    """Everything ``tactile bench`` measured."""
+
+    cases: list[CaseResult]
+    scaling: list[CaseResult]
+    windowing: WindowingResult | None
+    environment: dict
+    notes: list[str] = field(default_factory=list)
+    latency: dict | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "cases": [c.to_dict() for c in self.cases],
+            "scaling": [c.to_dict() for c in self.scaling],
+            "windowing": asdict(self.windowing) if self.windowing else None,
+            "latency": self.latency,
+            "environment": self.environment,
+            "notes": self.notes,
+        }
+
+
+def one_core():
+    """Context manager limiting BLAS/OpenMP thread pools to one thread (threadpoolctl)."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1)
+
+
+def _environment() -> dict:
+    return {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "machine": platform.machine(),
+        "cpus": os.cpu_count(),
+        "load_average": [round(x, 2) for x in os.getloadavg()],
+        "threads": 1,
+    }
+
+
+def run_bench(*, repeat: int = 5, sizes: Iterable[int] = (1000, 10000), lengths_s: Iterable[float] = DEFAULT_LENGTHS_S,
+              baseline_cells: int = 116, windowing: bool = True, windowing_s: float = 6.0,
+              progress: Callable[[str], None] | None = None) -> BenchReport:
+    """Run the whole benchmark (see the module docstring); one core.
+
+    Parameters
+    ----------
+    repeat : int
+        Timed repeats of the package path per case (medians reported).
+    sizes : iterable of int
+        Skins of that many cells (2 s windows) besides the Shadow Hand and NAO.
+    lengths_s : iterable of float
+        NAO window lengths for the scaling table.
+    baseline_cells : int
+        The baseline of a larger skin is measured on this many cells and
+        extrapolated linearly (it is a per-cell loop); below 116 the NAO
+        baseline is extrapolated too.
+    windowing, windowing_s : bool, float
+        Measure the windowing cost on this many seconds of NAO stream.
+    progress : callable, optional
+        Called with a short message before each step.
+    """
+    say = progress or (lambda msg: None)
+    notes: list[str] = []
+    with one_core():
+        cases = []
+        say("Shadow Hand window")
+        hand = load_robot("shadow_hand")
+        cases.append(bench_case("shadow_hand (5 BioTacs, 2 s)", hand, biotac_window(hand), repeat=repeat,
+                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True, target_ms=1.0))
+        say("NAO window")
+        nao = load_robot("nao")
+        nao_base = min(116, baseline_cells)
+        cases.append(bench_case("nao (116 skin cells, 2 s)", nao, skin_window(nao), repeat=repeat,
+                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True, target_ms=5.0,
+                                baseline_cells=nao_base))
+        if nao_base < 116:
+            notes.append(f"NAO baseline extrapolated linearly from {nao_base} measured cells")
+        for n in sizes:
+            say(f"{n} cells")
+            robot = skin_robot(n)
+            cells = skin_window(robot, seed=n)
+            b_cells = min(n, baseline_cells)
+            cases.append(bench_case(f"skin ({n} cells, 2 s)", robot, cells, repeat=max(1, min(repeat, 3)),
+                                    baseline_repeat=1, baseline_cells=b_cells,
+                                    target_ms=500.0 if n >= 10000 else None))
+            if b_cells < n:
+                notes.append(f"baseline for {n} cells extrapolated linearly from {b_cells} measured cells")
+            del cells
+        scaling = []
+        for length in lengths_s:
+            say(f"NAO window of {length} s")
+            b_cells = min(16, baseline_cells)
+            scaling.append(bench_case(f"nao {length:g} s", nao, skin_window(nao, length), repeat=repeat,
+                                      baseline_repeat=1, baseline_cells=b_cells))
+        if scaling:
+            notes.append(f"scaling baselines extrapolated from {b_cells} cells")
+        wres = None
+        if windowing:
+            say("windowing")
+            wres = bench_windowing(nao, stream_s=windowing_s)
+    fast.release_buffers()
+    return BenchReport(cases, scaling, wres, _environment(), notes)
+
+
+def _fmt_ms(x: float) -> str:
+    return f"{x:9.2f}" if x < 1000 else f"{x:9.0f}"
+
+
+def format_report(report: BenchReport) -> str:
+    """The report as a plain-text table."""
+    env = report.environment
+    lines = [
+        f"tactile bench: one core (BLAS/OpenMP threads = 1), numpy {env['numpy']}, {env['cpus']} CPUs, "
+        f"load average {env['load_average']}",
+        "ms per window, median of repeats; cpu = this thread's CPU time (robust to other load), "
+        "wall = elapsed",
+        "",
+        f"{'case':32s} {'package':>9s} {'pkg cpu':>9s} {'kernel':>9s} {'win/s':>8s} {'baseline':>9s} "
+        f"{'base cpu':>9s} {'x wall':>7s} {'x cpu':>7s} {'target':>8s}",
+    ]
+    for c in report.cases + report.scaling:
+        tgt = "" if c.target_ms is None else f"<={c.target_ms:g} " + ("ok" if c.package.cpu_ms <= c.target_ms else "NO")
+        base_mark = "*" if c.baseline_extrapolated_from else " "
+        lines.append(
+            f"{c.name:32s} {_fmt_ms(c.package.wall_ms)} {_fmt_ms(c.package.cpu_ms)} {_fmt_ms(c.kernel.cpu_ms)} "
+            f"{c.package.per_second:8.1f} {_fmt_ms(c.baseline.wall_ms)}{base_mark}{_fmt_ms(c.baseline.cpu_ms)} "
+            f"{c.speedup_wall:7.0f} {c.speedup_cpu:7.0f} {tgt:>8s}")
+    for c in report.cases:
+        if c.expanded is not None:
+            lines.append(f"  {c.name}: previous vectorised expanded-ZOH kernel {c.expanded.cpu_ms:.1f} ms cpu "
+                         f"vs fast kernel {c.kernel.cpu_ms:.2f} ms cpu ({c.expanded.cpu_ms / c.kernel.cpu_ms:.0f}x)")
+    lines.append("  * baseline extrapolated linearly from a measured subset of cells")
+    lines.append("  agreement with the baseline checked before timing: max |difference| "
+                 + ", ".join(f"{c.max_abs_diff:.1e}" for c in report.cases))
+    w = report.windowing
+    if w:
+        lines += ["", f"windowing (Windower.add + poll, fixed 2 s / 0.5 s hop, {w.n_cells} cells, "
+                      f"one message per cell per {w.message_ms:g} ms): {w.us_per_message:.1f} us/message wall, "
+                      f"{w.us_per_message_cpu:.1f} us cpu; {w.messages_per_s_needed:.0f} messages/s at full rate "
+                      f"= {100 * w.core_fraction:.1f} % of one core"]
+    if report.latency:
+        lat = report.latency
+        lines += ["", "latency sensor stamp -> Prediction received (ROS topics): " + ", ".join(
+            f"{k} {v:.1f} ms" if isinstance(v, float) else f"{k} {v}" for k, v in lat.items())]
+    for note in report.notes:
+        lines.append(f"note: {note}")
+    return "\n".join(lines)

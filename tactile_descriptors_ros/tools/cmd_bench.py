@@ -1,0 +1,92 @@
+"""``tactile bench``: time the descriptor path against a naive per-signal baseline.
+
+In one run, after checking that the package's descriptor equals the naive
+baseline's on the same window (it aborts otherwise), times on one core
+(BLAS/OpenMP pools limited to one thread): a Shadow Hand window (5 BioTacs,
+2 s), a NAO window (116 skin cells, 2 s), 1,000 and 10,000 skin cells (the
+baseline extrapolated from a measured subset), the scaling with window length
+(0.5 to 10 s), and the windowing cost per NAO message.  ``--latency`` also
+measures sensor stamp -> Prediction through the ROS node graph.  Reading the
+numbers: docs/performance.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+__all__ = ["register", "run"]
+
+
+def _sizes(text: str) -> list[int]:
+    try:
+        sizes = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated cell counts, got {text!r}") from None
+    if any(n < 1 for n in sizes):
+        raise argparse.ArgumentTypeError("cell counts must be positive")
+    return sizes
+
+
+def _lengths(text: str) -> list[float]:
+    try:
+        lengths = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated seconds, got {text!r}") from None
+    if any(not 0 < x <= 60 for x in lengths):
+        raise argparse.ArgumentTypeError("window lengths must be in (0, 60] s")
+    return lengths
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("bench", help="time the descriptor path against a naive baseline",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--repeat", type=int, default=7, help="timed repeats per case (median reported; default 7)")
+    p.add_argument("--sizes", type=_sizes, default=[1000, 10000],
+                   help="large skins to time, comma-separated cell counts (default 1000,10000)")
+    p.add_argument("--lengths", type=_lengths, default=[0.5, 1.0, 2.0, 5.0, 10.0],
+                   help="NAO window lengths for the scaling table, seconds (default 0.5,1,2,5,10)")
+    p.add_argument("--baseline-cells", type=int, default=116,
+                   help="cells on which the baseline of a large skin is measured (default 116)")
+    p.add_argument("--no-windowing", action="store_true", help="skip the windowing measurement")
+    p.add_argument("--latency", action="store_true",
+                   help="also measure sensor stamp -> Prediction latency through window_node + classifier_node")
+    p.add_argument("--latency-s", type=float, default=8.0, help="seconds of NAO data for --latency (default 8)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..perf.bench import BenchMismatch, format_report, run_bench
+
+    if args.repeat < 1 or args.baseline_cells < 1:
+        print("tactile bench: error: --repeat and --baseline-cells must be at least 1", file=sys.stderr)
+        return 2
+    steps = 2 + len(args.sizes) + len(args.lengths) + (0 if args.no_windowing else 1)
+    bar = tqdm(total=steps, desc="bench", unit="case", file=sys.stderr, leave=False)
+
+    def progress(msg: str) -> None:
+        bar.set_postfix_str(msg)
+        bar.update(1)
+
+    try:
+        report = run_bench(repeat=args.repeat, sizes=args.sizes, lengths_s=args.lengths,
+                           baseline_cells=args.baseline_cells, windowing=not args.no_windowing,
+                           progress=progress)
+    except BenchMismatch as exc:
+        bar.close()
+        print(f"tactile bench: error: {exc}", file=sys.stderr)
+        return 1
+    bar.close()
+    if args.latency:
+        from ..perf.latency import measure_latency
+
+        report.latency = measure_latency(duration_s=args.latency_s)
+    if args.json:
+        print(json.dumps(report.to_dict(), default=float))
+    else:
+        print(format_report(report))
+    return 0

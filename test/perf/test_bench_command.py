@@ -1,0 +1,61 @@
+"""Smoke test of ``tactile bench`` with tiny sizes (no timing assertions: timings are noisy)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tactile_descriptors_ros.perf import bench
+from tactile_descriptors_ros.tools.cli import main
+
+
+def test_bench_command_json_smoke(capsys):
+    code = main(["bench", "--sizes", "130", "--lengths", "0.5", "--repeat", "1", "--baseline-cells", "3",
+                 "--no-windowing", "--json"])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    names = [c["name"] for c in report["cases"]]
+    assert names[0].startswith("shadow_hand") and names[1].startswith("nao") and "130 cells" in names[2]
+    for case in report["cases"] + report["scaling"]:
+        assert case["max_abs_diff"] < 1e-6  # agreement was checked before timing
+        assert case["package"]["wall_ms"] > 0 and case["baseline"]["cpu_ms"] > 0
+        assert case["speedup_cpu"] == pytest.approx(case["baseline"]["cpu_ms"] / case["package"]["cpu_ms"])
+    assert report["cases"][2]["baseline_extrapolated_from"] == 3
+    assert any("extrapolated" in note for note in report["notes"])
+    assert report["scaling"][0]["length_s"] == pytest.approx(0.5)
+    assert report["windowing"] is None and report["environment"]["threads"] == 1
+
+
+def test_bench_aborts_when_the_baseline_disagrees(monkeypatch, capsys):
+    real = bench.naive_describe
+    monkeypatch.setattr(bench, "naive_describe", lambda *a, **k: real(*a, **k) + 1e-3)
+    code = main(["bench", "--sizes", "", "--lengths", "0.5", "--repeat", "1", "--no-windowing"])
+    assert code == 1
+    assert "disagree" in capsys.readouterr().err
+
+
+def test_naive_baseline_equals_describe_window_on_both_robots():
+    hand = bench.load_robot("shadow_hand")
+    assert bench.check_agreement(hand, bench.biotac_window(hand, 0.5)) < 1e-9
+    robot = bench.skin_robot(40, cells_per_part=16)
+    assert len(robot.body_parts) == 3
+    assert bench.check_agreement(robot, bench.skin_window(robot, 0.5, seed=2)) < 1e-9
+
+
+def test_windowing_measurement_counts_messages():
+    res = bench.bench_windowing(stream_s=0.6, message_ms=50.0)
+    assert res.messages == 12 * 116 and res.messages_per_s_needed == pytest.approx(2320.0)
+    assert res.us_per_message > 0 and 0 < res.core_fraction
+
+
+def test_text_report_lists_every_case():
+    hand = bench.load_robot("shadow_hand")
+    with bench.one_core():
+        case = bench.bench_case("hand", hand, bench.biotac_window(hand, 0.5), repeat=1, baseline_repeat=1,
+                                target_ms=1.0)
+    report = bench.BenchReport([case], [], None, {"numpy": np.__version__, "cpus": 2, "load_average": [0, 0, 0]})
+    text = bench.format_report(report)
+    assert "hand" in text and "target" in text
+    assert json.dumps(report.to_dict(), default=float)
