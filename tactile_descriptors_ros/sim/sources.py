@@ -47,6 +47,7 @@ __all__ = [
     "biotac_frame_words",
     "bridge_frames",
     "skin_messages",
+    "SkinRows",
     "BiotacBridgeSource",
     "SkinCanSource",
     "SkinSerialSource",
@@ -126,22 +127,89 @@ def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None) 
     return [(t, f) for t, _, f in out]
 
 
+class SkinRows:
+    """Every skin sample of a chunk in time order, as arrays (cheap to build; one message is made per use).
+
+    Attributes
+    ----------
+    t_ns, cell_id, modality, sequence : numpy.ndarray, shape (n,)
+    corrupt : numpy.ndarray of bool, shape (n,)
+    """
+
+    def __init__(self, result: SimResult) -> None:
+        parts_t, parts_c, parts_m, parts_s, parts_bad, parts_vals = [], [], [], [], [], []
+        self._values: list[np.ndarray] = []
+        for cell in result.cells.values():
+            if cell.kind != "skin":
+                continue
+            for name, mod in SKIN_STREAM_MODALITY.items():
+                st = cell.streams.get(name)
+                if st is None or not st.seq.size:
+                    continue
+                n = st.seq.size
+                parts_t.append(st.t_ns)
+                parts_c.append(np.full(n, cell.cell_id, dtype=np.int64))
+                parts_m.append(np.full(n, mod, dtype=np.int64))
+                parts_s.append(st.seq & 0xFF)
+                parts_bad.append((st.fault == FAULT_CORRUPT).any(axis=0))
+                parts_vals.append((len(self._values), n))
+                self._values.append(st.counts.T.tolist())
+        if not parts_t:
+            self.t_ns = np.zeros(0, dtype=np.int64)
+            self._order = np.zeros(0, dtype=np.intp)
+            return
+        t = np.concatenate(parts_t)
+        c = np.concatenate(parts_c)
+        m = np.concatenate(parts_m)
+        order = np.lexsort((c, m, t))
+        self.t_ns = t[order]
+        self.cell_id = c[order]
+        self.modality = m[order]
+        self.sequence = np.concatenate(parts_s)[order]
+        self.corrupt = np.concatenate(parts_bad)[order]
+        block = np.concatenate([np.full(n, k) for k, (_, n) in enumerate(parts_vals)])
+        column = np.concatenate([np.arange(n) for _, n in parts_vals])
+        self._block = block[order].tolist()
+        self._column = column[order].tolist()
+        self._cells = self.cell_id.tolist()
+        self._mods = self.modality.tolist()
+        self._seqs = self.sequence.tolist()
+        self._stamps = self.t_ns.tolist()
+        from ..codecs.skin import Modality
+
+        self._modality_enum = {int(m): m for m in Modality}
+
+    def __len__(self) -> int:
+        return int(self.t_ns.size)
+
+    def values(self, i: int) -> tuple[int, ...]:
+        return tuple(self._values[self._block[i]][self._column[i]])
+
+    def sample(self, i: int) -> Any:
+        """The :class:`~tactile_descriptors_ros.codecs.skin.SkinSample` of row ``i``."""
+        from ..codecs.skin import SkinSample
+
+        return SkinSample(self._cells[i], self._modality_enum[self._mods[i]], self._seqs[i],
+                          tuple(self._values[self._block[i]][self._column[i]]), self._stamps[i])
+
+
 def skin_messages(result: SimResult) -> list[tuple[int, int, int, int, tuple[int, ...], bool]]:
     """Every skin sample of a chunk as ``(t_ns, cell_id, modality, sequence, values, corrupt)``, in time order."""
-    rows = []
-    for cell in result.cells.values():
-        if cell.kind != "skin":
-            continue
-        for name, mod in SKIN_STREAM_MODALITY.items():
-            st = cell.streams.get(name)
-            if st is None or not st.seq.size:
-                continue
-            corrupt = (st.fault == FAULT_CORRUPT).any(axis=0)
-            vals = st.counts.T.tolist()
-            for i, (t, s) in enumerate(zip(st.t_ns.tolist(), st.seq.tolist())):
-                rows.append((t, cell.cell_id, mod, s & 0xFF, tuple(vals[i]), bool(corrupt[i])))
-    rows.sort(key=lambda r: (r[0], r[2], r[1]))
-    return rows
+    rows = SkinRows(result)
+    return [(int(rows.t_ns[i]), int(rows.cell_id[i]), int(rows.modality[i]), int(rows.sequence[i]), rows.values(i),
+             bool(rows.corrupt[i])) for i in range(len(rows))]
+
+
+class _Chunk:
+    """Time-ordered items of one simulated chunk, made on demand."""
+
+    def __init__(self, t_ns: np.ndarray, make: Any) -> None:
+        self.t_ns = t_ns
+        self.make = make
+        self.pos = 0
+
+    def __len__(self) -> int:
+        return int(self.t_ns.size) - self.pos
 
 
 class _PacedSource:
@@ -155,7 +223,7 @@ class _PacedSource:
         self.speed = speed
         self.clock = clock
         self._chunks = iter_simulate(scene, max_chunk_s=chunk_s)
-        self._items: deque[tuple[int, Any]] = deque()
+        self._items: deque[_Chunk] = deque()
         self._t0_wall: float | None = None
         self.exhausted = False
         self.results: list[dict[str, Any]] = []  # ground truth of the chunks simulated so far
@@ -166,7 +234,7 @@ class _PacedSource:
     def close(self) -> None:
         pass
 
-    def _convert(self, result: SimResult) -> list[tuple[int, Any]]:
+    def _convert(self, result: SimResult) -> _Chunk:
         raise NotImplementedError
 
     def _fill(self) -> bool:
@@ -179,7 +247,7 @@ class _PacedSource:
             return False
         self.results.append({"explorations": [e.to_dict() for e in result.explorations],
                              "faults": result.faults, "end_ns": result.end_ns})
-        self._items.extend(self._convert(result))
+        self._items.append(self._convert(result))
         return True
 
     def _due_ns(self) -> int | None:
@@ -189,22 +257,36 @@ class _PacedSource:
             self._t0_wall = self.clock()
         return self.scene.start_ns + int((self.clock() - self._t0_wall) * self.speed * 1e9)
 
-    def _pop_due(self) -> tuple[int, Any] | None:
+    def _head(self) -> _Chunk | None:
+        while self._items and not len(self._items[0]):
+            self._items.popleft()
         while not self._items:
             if not self._fill():
                 return None
-        due = self._due_ns()
-        if due is not None and self._items[0][0] > due:
+            while self._items and not len(self._items[0]):
+                self._items.popleft()
+        return self._items[0]
+
+    def _pop_due(self) -> tuple[int, Any] | None:
+        chunk = self._head()
+        if chunk is None:
             return None
-        return self._items.popleft()
+        i = chunk.pos
+        due = self._due_ns()
+        if due is not None and chunk.t_ns[i] > due:
+            return None
+        chunk.pos += 1
+        return int(chunk.t_ns[i]), chunk.make(i)
 
     def __iter__(self) -> Iterator[tuple[int, Any]]:
         """All items in time order, ignoring pacing."""
         while True:
-            while not self._items:
-                if not self._fill():
-                    return
-            yield self._items.popleft()
+            chunk = self._head()
+            if chunk is None:
+                return
+            i = chunk.pos
+            chunk.pos += 1
+            yield int(chunk.t_ns[i]), chunk.make(i)
 
 
 class _ByteSource(_PacedSource):
@@ -242,43 +324,46 @@ class BiotacBridgeSource(_ByteSource):
         super().__init__(scene, speed, chunk_s, clock)
         self.pattern = pattern
 
-    def _convert(self, result: SimResult) -> list[tuple[int, bytes]]:
-        return bridge_frames(result, self.pattern)
+    def _convert(self, result: SimResult) -> _Chunk:
+        frames = bridge_frames(result, self.pattern)
+        return _Chunk(np.array([t for t, _ in frames], dtype=np.int64), lambda i, _f=frames: _f[i][1])
 
 
 class SkinSerialSource(_ByteSource):
     """Skin cells on the serial framing (:mod:`~tactile_descriptors_ros.codecs.skin_serial`)."""
 
-    def _convert(self, result: SimResult) -> list[tuple[int, bytes]]:
-        from ..codecs.skin import Modality, SkinSample
+    def _convert(self, result: SimResult) -> _Chunk:
         from ..codecs.skin_serial import encode_skin_frame
 
-        out = []
-        for t, cid, mod, seq, vals, corrupt in skin_messages(result):
-            frame = encode_skin_frame(SkinSample(cid, Modality(mod), seq, vals))
-            if corrupt:
+        rows = SkinRows(result)
+
+        def make(i: int) -> bytes:
+            frame = encode_skin_frame(rows.sample(i))
+            if rows.corrupt[i]:
                 b = bytearray(frame)
                 b[-5] ^= 0x5A  # last payload byte: the CRC no longer matches
                 frame = bytes(b)
-            out.append((t, frame))
-        return out
+            return frame
+
+        return _Chunk(rows.t_ns, make)
 
 
 class SkinCanSource(_PacedSource):
     """Skin cells on the CAN layout: ``recv(timeout_s) -> can.Message | None`` for ``SimulatedTransport``."""
 
-    def _convert(self, result: SimResult) -> list[tuple[int, Any]]:
-        from ..codecs.skin import Modality, SkinSample
+    def _convert(self, result: SimResult) -> _Chunk:
         from ..codecs.skin_can import encode_can_message
 
-        out = []
-        for t, cid, mod, seq, vals, corrupt in skin_messages(result):
-            msg = encode_can_message(SkinSample(cid, Modality(mod), seq, vals, t))
-            if corrupt:
+        rows = SkinRows(result)
+
+        def make(i: int) -> Any:
+            msg = encode_can_message(rows.sample(i))
+            if rows.corrupt[i]:
                 msg.data = msg.data[:-1]
                 msg.dlc = len(msg.data)
-            out.append((t, msg))
-        return out
+            return msg
+
+        return _Chunk(rows.t_ns, make)
 
     def recv(self, timeout_s: float | None = None) -> Any:
         """The next due message, or None (after waiting up to ``timeout_s`` when paced)."""
@@ -287,7 +372,7 @@ class SkinCanSource(_PacedSource):
             item = self._pop_due()
             if item is not None:
                 return item[1]
-            if self.exhausted and not self._items:
+            if self._head() is None:
                 return None
             if deadline is None or time.monotonic() >= deadline:
                 return None
