@@ -62,8 +62,8 @@ __all__ = [
     "parse_index_ranges",
 ]
 
-#: Default topic of BioTac frame batches (remap on replay if the graph uses another).
-DEFAULT_BIOTAC_TOPIC = "/tactile/biotac"
+#: Default topic of BioTac frame batches, as the window node subscribes (``{body_part}`` is filled in).
+DEFAULT_BIOTAC_TOPIC = "/tactile/{body_part}/frames"
 #: Default topic of true labels.
 DEFAULT_LABEL_TOPIC = "/tactile/label"
 #: BioTac static-pressure resolution from the SynTouch product manual (0..100 kPa over 12 bit).
@@ -104,6 +104,7 @@ class ImportOptions:
         Crop every trial to its first ``max_frames`` frames (the data set's
         README asks for a common length so duration cannot give the class away).
     biotac_topic, label_topic : str
+        ``{body_part}`` in ``biotac_topic`` is replaced by the body part.
     frame_id : str or None
         ``header.frame_id``; the sensor name when None.
     """
@@ -363,6 +364,7 @@ def import_biotac_slide(
     """
     opts = options or ImportOptions()
     opts.validate()
+    biotac_topic = opts.biotac_topic.format(body_part=opts.body_part)
     robot: RobotDescription = load_robot(opts.robot)
     part = robot.body_part(opts.body_part)
     cell_type = robot.cell_types[part.cell_type]
@@ -395,7 +397,7 @@ def import_biotac_slide(
     seq = 0
     next_start_ns: int | None = None
     with BagWriter(bag_path, storage=storage, typestore=store, custom_data=custom) as bag:
-        bag.add_topic(opts.biotac_topic, _BATCH, [BIOTAC_QOS])
+        bag.add_topic(biotac_topic, _BATCH, [BIOTAC_QOS])
         bag.add_topic(opts.label_topic, _LABEL, [LABEL_QOS])
         for path in (progress(paths) if progress else paths):
             rec = read_biotac_csv(path)
@@ -414,7 +416,7 @@ def import_biotac_slide(
                 msg = factory.batch(seq, frame_t[s:e], pac_t[s * PAC_PER_FRAME:e * PAC_PER_FRAME],
                                     rec.pac[s * PAC_PER_FRAME:e * PAC_PER_FRAME], rec.pdc[s:e], rec.tac[s:e],
                                     rec.tdc[s:e], electrodes_fm[s:e])
-                bag.write(opts.biotac_topic, int(frame_t[e - 1]) + period_ns, msg)
+                bag.write(biotac_topic, int(frame_t[e - 1]) + period_ns, msg)
                 seq += e - s
                 report.batches += 1
             end_ns = int(frame_t[-1]) + period_ns
@@ -447,7 +449,7 @@ def import_biotac_slide(
                         bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.material_name))
                         label_written = True
                         report.labels += 1
-                    bag.write(opts.biotac_topic, log_ns, msg)
+                    bag.write(biotac_topic, log_ns, msg)
                     seq += k
                     report.batches += 1
                     report.release_frames += k

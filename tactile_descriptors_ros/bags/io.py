@@ -141,9 +141,14 @@ def msgdef_text(store: Typestore, msgtype: str) -> str:
     path = msg_dir() / f"{name}.msg"
     if not path.is_file():
         return generated
+    text = path.read_text()
+    from rosbags.typesys import get_types_from_msg
+
+    parsed = get_types_from_msg(text, msgtype)[msgtype]
+    if [(f[0], f[1]) for f in parsed[1]] != [(f[0], f[1]) for f in store.fielddefs[msgtype][1]]:
+        return generated  # the store holds another definition (e.g. copied from an older bag)
     separator = "=" * 80 + "\n"
     _main, sep, deps = generated.partition(separator)
-    text = path.read_text()
     if not text.endswith("\n"):
         text += "\n"
     return text + (sep + deps if sep else "")

@@ -219,6 +219,10 @@ class EchoTracker:
             "stamp_backwards": s.stamp_backwards,
         }
 
+    def stream_health(self) -> dict[str, dict[str, Any]]:
+        """Per stream (topic, or topic#sensor): messages, rate, lost items, stamp gaps."""
+        return {key: self._health(s) for key, s in self.streams.items()}
+
     # ------------------------------------------------------------------ messages
     def summarize(self, topic: str, msgtype: str, msg: Any, log_ns: int) -> dict[str, Any]:
         """One message's summary (JSON-friendly), updating the stream state of ``topic``."""

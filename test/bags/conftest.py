@@ -1,0 +1,116 @@
+"""Shared builders for the bag tests: messages in rosbags form (no rclpy) and in rclpy form."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+
+def _time(store, t_ns: int):
+    return store.types["builtin_interfaces/msg/Time"](sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)
+
+
+def _header(store, t_ns: int, frame_id: str = "biotac_index"):
+    return store.types["std_msgs/msg/Header"](stamp=_time(store, t_ns), frame_id=frame_id)
+
+
+def make_batch(store, stamp_ns: int, first_seq: int, frames: int = 2, pac=None, pdc=None, invalid_at=()):
+    """A rosbags BioTacFrameBatch with ``frames`` frames (22 PAC samples each, 10 ms frames)."""
+    cls = store.types["tactile_descriptors_msgs/msg/BioTacFrameBatch"]
+    n_pac = 22 * frames
+    pac = np.arange(n_pac, dtype=np.uint16) if pac is None else np.asarray(pac, dtype=np.uint16)
+    for i in invalid_at:
+        pac[i] = cls.INVALID_COUNT
+    pdc = np.full(frames, 10, dtype=np.uint16) if pdc is None else np.asarray(pdc, dtype=np.uint16)
+    return cls(
+        header=_header(store, stamp_ns), sensor_name="biotac_index", body_part="index", serial_number="BT1",
+        chip_select=1, first_frame_sequence=first_seq, frame_count=frames, electrode_count=19,
+        pac=pac, pac_offset_ns=(np.arange(n_pac, dtype=np.int64) * 10_000_000) // 22,
+        frame_offset_ns=np.arange(frames, dtype=np.int64) * 10_000_000, pdc=pdc,
+        tac=np.full(frames, 2000, dtype=np.uint16), tdc=np.full(frames, 1500, dtype=np.uint16),
+        electrodes=np.arange(19 * frames, dtype=np.uint16), pac_pa_per_count=0.37, pdc_pa_per_count=36.5,
+        force_n_per_count=0.05, pdc_tare_counts=0.0, electrode_tare_counts=np.zeros(0), bad_words=0,
+    )
+
+
+def make_label(store, stamp_ns: int, name: str = "cork"):
+    return store.types["tactile_descriptors_msgs/msg/Label"](header=_header(store, stamp_ns, ""), exploration_id=3,
+                                                             class_name=name)
+
+
+def make_descriptor(store, stamp_ns: int):
+    cls = store.types["tactile_descriptors_msgs/msg/Descriptor"]
+    return cls(
+        header=_header(store, stamp_ns, ""), robot="shadow_hand", exploration_id=4,
+        window_start=_time(store, stamp_ns - 2_000_000_000), window_end=_time(store, stamp_ns),
+        window_mode="exploration", layout_mode="concat", channel_mode="averaged",
+        body_parts=["thumb", "index"], contact=np.array([False, True]),
+        cells_in_contact=np.array([0, 1], dtype=np.uint16), cells_total=np.array([1, 1], dtype=np.uint16),
+        mean_force_n=np.array([0.0, 1.25]),
+        quality=np.array([cls.QUALITY_NO_CONTACT | cls.QUALITY_SHORT, cls.QUALITY_INVALID | 1024], dtype=np.uint32),
+        labels=["thumb/A_pac", "index/A_pac", "index/M_pac"], values=np.array([0.0, 1500.0, 310.5]),
+    )
+
+
+def make_prediction(store, stamp_ns: int):
+    cls = store.types["tactile_descriptors_msgs/msg/Prediction"]
+    return cls(
+        header=_header(store, stamp_ns, ""), exploration_id=4, window_end=_time(store, stamp_ns), has_model=True,
+        class_name="felt", class_names=["cork", "felt", "steel", "cotton"],
+        scores=np.array([0.25, 1.5, -2.0, 1.0]), model_version=7, updates=7,
+    )
+
+
+@pytest.fixture
+def store():
+    from tactile_descriptors_ros.bags.types import tactile_typestore
+
+    return tactile_typestore()
+
+
+def rclpy_examples():
+    """One rclpy message of each tactile type (needs rclpy)."""
+    from builtin_interfaces.msg import Time
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, Label, Prediction, SkinCellFrame
+
+    b = BioTacFrameBatch()
+    b.header.stamp = Time(sec=12, nanosec=345)
+    b.header.frame_id = "biotac_index"
+    b.sensor_name, b.body_part, b.serial_number = "biotac_index", "index", "BT0042"
+    b.chip_select, b.first_frame_sequence, b.frame_count, b.electrode_count = 1, 7, 2, 19
+    b.pac = list(range(44))
+    b.pac[3] = BioTacFrameBatch.INVALID_COUNT
+    b.pac_offset_ns = [i * 454_545 for i in range(44)]
+    b.frame_offset_ns = [0, 10_000_000]
+    b.pdc, b.tac, b.tdc = [100, 101], [2000, 2001], [1500, 1501]
+    b.electrodes = list(range(38))
+    b.pac_pa_per_count, b.force_n_per_count, b.pdc_tare_counts = 0.37, 0.05, 1980.0
+    b.electrode_tare_counts = [float(i) for i in range(19)]
+    b.bad_words = 1
+
+    s = SkinCellFrame()
+    s.cell_id, s.body_part, s.sequence = 17, "chest", 99
+    s.accel_x, s.accel_y, s.accel_z = [-512, 0, 511, SkinCellFrame.INVALID_ACCEL], [1, 2, 3, 4], [5, 6, 7, 8]
+    s.accel_offset_ns = [0, 1_000_000, 2_000_000, 3_000_000]
+    s.force = [1, 2, 3]
+    s.force_offset_ns = [0]
+    s.force_tare_counts = [1.0, 2.0, 3.0]
+    s.proximity = [400]
+    s.temperature_c = 31.5
+
+    d = Descriptor()
+    d.robot, d.exploration_id = "shadow_hand", 5
+    d.window_mode, d.layout_mode, d.channel_mode = "exploration", "concat", "averaged"
+    d.body_parts, d.contact, d.cells_in_contact, d.cells_total = ["thumb", "index"], [False, True], [0, 1], [1, 1]
+    d.mean_force_n = [0.0, 1.5]
+    d.quality = [Descriptor.QUALITY_NO_CONTACT, 0]
+    d.labels = ["index/A_pac", "index/M_pac"]
+    d.values = [1234.5, 287.25]
+
+    p = Prediction()
+    p.exploration_id, p.has_model, p.class_name = 5, True, "cork"
+    p.class_names, p.scores, p.model_version, p.updates = ["cork", "felt"], [0.5, -0.5], 3, 3
+
+    lab = Label()
+    lab.exploration_id, lab.class_name = 5, "cork"
+    return [b, s, d, p, lab]
