@@ -357,10 +357,6 @@ def _timeline(scene: Scene) -> tuple[list[ExplorationTiming], float]:
     return out, t
 
 
-def _grid_t_s(n: int, rate_hz: float) -> np.ndarray:
-    return np.arange(n, dtype=np.float64) / rate_hz
-
-
 def _grid_t_ns(start_ns: int, first: int, n: int, rate_hz: float) -> np.ndarray:
     k = np.arange(first, first + n, dtype=np.int64)
     period_ns = 1e9 / rate_hz
