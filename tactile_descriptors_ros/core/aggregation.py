@@ -72,6 +72,12 @@ class CellSignals:
     valid : bool
         False when the window holds invalid samples (parity errors, lost
         frames) for this cell: the cell is left out and flagged ``INVALID``.
+    gap : bool
+        True when the cell's samples have a hole in time inside the window
+        (a sensor unplugged, frames dropped): the body part is flagged ``GAP``.
+    invalid_samples : int
+        Invalid samples already removed from this window's arrays: the body
+        part is flagged ``INVALID`` but the cell still counts.
     """
 
     vibration: np.ndarray
@@ -80,6 +86,8 @@ class CellSignals:
     deformation_t_ns: np.ndarray
     force_n: np.ndarray
     valid: bool = True
+    gap: bool = False
+    invalid_samples: int = 0
 
 
 @dataclass
@@ -275,21 +283,21 @@ def reduce_body_part(features: CellFeatures, in_contact: np.ndarray, cell_type: 
     pairs = cell_type.correlation_pairs()
 
     def cells_mean(a: np.ndarray) -> np.ndarray:
-        return a[mask].mean(axis=0)
+        return _finite_mean(a[mask], axis=0)
 
     parts: list[np.ndarray] = []
     for s_arr, v_arr in ((features.act_s, features.act_v), (features.mob_s, features.mob_v),
                          (features.com_s, features.com_v)):
         s_m, v_m = cells_mean(s_arr), cells_mean(v_arr)
         if channels == "averaged":
-            parts.append(np.array([s_m[sl].mean() for sl in s_axes]))
-            parts.append(np.array([v_m[sl].mean() for sl in v_axes]))
+            parts.append(np.array([_finite_mean(s_m[sl]) for sl in s_axes]))
+            parts.append(np.array([_finite_mean(v_m[sl]) for sl in v_axes]))
         else:
             parts += [s_m, v_m]
     for corr in (features.lin, features.nonlin):
         c_m = cells_mean(corr)
         if channels == "averaged":
-            parts.append(np.array([c_m[s_axes[i], v_axes[j]].mean() for i, j in pairs]))
+            parts.append(np.array([_finite_mean(c_m[s_axes[i], v_axes[j]]) for i, j in pairs]))
         else:
             parts.append(np.concatenate([c_m[s_axes[i], v_axes[j]].ravel() for i, j in pairs]))
     values = np.concatenate(parts)
@@ -304,16 +312,18 @@ def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[in
     quality = 0
     if len(present) < len(part.cells):
         quality |= int(Quality.GAP)
+    if any(cells[c.id].gap for c in present):
+        quality |= int(Quality.GAP)
     usable = [c for c in present if cells[c.id].valid]
-    if len(usable) < len(present):
+    if len(usable) < len(present) or any(cells[c.id].invalid_samples for c in present):
         quality |= int(Quality.INVALID)
     gate = contact_gate([cells[c.id].force_n for c in usable], threshold_n) if usable else np.zeros(0, bool)
     touching = [c for c, g in zip(usable, gate) if g]
     if not touching:
         return BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
                                   len(part.cells), 0.0, quality | int(Quality.NO_CONTACT))
-    values_sum = np.zeros(len(labels))
-    n_sum = 0
+    group_values: list[np.ndarray] = []
+    group_sizes: list[int] = []
     # Batch cells whose windows have identical shapes (the common case).
     groups: dict[tuple, list[int]] = {}
     for c in touching:
@@ -328,13 +338,15 @@ def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[in
             np.stack([sg.deformation for sg in sigs]), _stack_times([sg.deformation_t_ns for sg in sigs]),
             cell_type.vibration.rate_hz, cell_type.deformation.rate_hz,
         )
-        values_sum += reduce_body_part(feats, np.ones(len(ids), bool), cell_type, channels) * len(ids)
-        n_sum += len(ids)
+        group_values.append(reduce_body_part(feats, np.ones(len(ids), bool), cell_type, channels))
+        group_sizes.append(len(ids))
         quality |= int(np.bitwise_or.reduce(feats.quality)) if len(ids) else 0
         quality |= _saturation(sigs, cell_type)
     forces = [float(np.mean(np.asarray(cells[c.id].force_n, dtype=float)[np.isfinite(cells[c.id].force_n)]))
               for c in touching]
-    return BodyPartDescriptor(part.name, part.cell_type, values_sum / n_sum, labels, True, len(touching),
+    weights = np.asarray(group_sizes, dtype=np.float64) / sum(group_sizes)
+    values = np.sum([v * w for v, w in zip(group_values, weights)], axis=0)
+    return BodyPartDescriptor(part.name, part.cell_type, values, labels, True, len(touching),
                               len(part.cells), float(np.mean(forces)), quality)
 
 
@@ -355,9 +367,19 @@ def _saturation(sigs: list[CellSignals], cell_type: CellType) -> int:
             a = np.asarray(arr)
             if a.size and np.issubdtype(a.dtype, np.integer):
                 lo, hi = mod.adc_range
-                if np.count_nonzero((a <= lo) & (lo != 0) | (a >= hi)) > 0.01 * a.size:
+                if np.count_nonzero((a <= lo) | (a >= hi)) > 0.01 * a.size:
                     return int(Quality.SATURATED)
     return 0
+
+
+def _finite_mean(a: np.ndarray, axis: int | None = None) -> np.ndarray:
+    """Mean as a sum of ``a / n``: values up to the float64 maximum (clipped
+    Activity, flagged OVERFLOW) average without overflowing to inf."""
+    a = np.asarray(a, dtype=np.float64)
+    n = a.size if axis is None else a.shape[axis]
+    if n == 0:
+        return np.zeros(()) if axis is None else np.zeros(np.delete(a.shape, axis))
+    return np.sum(a / n, axis=axis)
 
 
 def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ...]
@@ -375,7 +397,7 @@ def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ..
     for ct in order:
         mine = [bp for bp in parts if bp.cell_type == ct]
         touching = [bp.values for bp in mine if bp.contact]
-        values.append(np.mean(touching, axis=0) if touching else np.zeros(len(mine[0].labels)))
+        values.append(_finite_mean(np.asarray(touching), axis=0) if touching else np.zeros(len(mine[0].labels)))
         labels += [f"{ct}/{lab}" for lab in mine[0].labels]
     return np.concatenate(values), tuple(labels)
 

@@ -31,7 +31,11 @@ from ..errors import ConfigError, SignalError
 from .aggregation import CellSignals
 from .robot import RobotDescription
 
-__all__ = ["CellChunk", "Window", "Windower", "SampleStream"]
+__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS"]
+
+#: A cell whose vibration samples leave a hole longer than this many sample
+#: periods inside a window (or at its edges) is marked ``gap`` and counted.
+GAP_PERIODS = 3.0
 
 
 @dataclass
@@ -169,7 +173,7 @@ class _CellState:
         self.vib = SampleStream(n_s, dtype_s)
         self.dfm = SampleStream(n_v, dtype_v)
         self.force = SampleStream(1, np.float64)
-        self.last_force_n = 0.0
+        self.last_force_n = 0.0  # mean over the last ``smooth_s`` of force samples
         self.below_since_ns: int | None = None
 
 
@@ -191,13 +195,21 @@ class Windower:
         How long after a fixed window's end to wait for late cells.
     clock_jump_s : float, default 1.0
         A stamp this far behind a cell's last one is a clock jump (buffer reset).
+    smooth_s : float, default 0.05
+        Onset and release are judged on each cell's mean force over this long,
+        not on single noisy samples.
+    max_invalid_fraction : float, default 0.05
+        Invalid samples (parity errors, error words) are removed from a
+        cell's window and the body part is flagged ``INVALID``; a cell with a
+        larger fraction of invalid samples is left out of the window entirely.
     """
 
     def __init__(self, robot: RobotDescription, *, mode: str | None = None, length_s: float | None = None,
                  hop_s: float | None = None, min_duration_s: float | None = None,
                  max_duration_s: float | None = None, release_s: float | None = None,
                  force_threshold_n: float | None = None, release_threshold_n: float | None = None,
-                 lateness_s: float = 0.05, clock_jump_s: float = 1.0) -> None:
+                 lateness_s: float = 0.05, clock_jump_s: float = 1.0, smooth_s: float = 0.05,
+                 max_invalid_fraction: float = 0.05) -> None:
         w, c = robot.window, robot.contact
         self.robot = robot
         self.mode = mode or w.mode
@@ -217,6 +229,10 @@ class Windower:
             raise ConfigError("release threshold must not exceed the onset threshold", key="contact.release_threshold_n")
         self.lateness_ns = _ns(lateness_s, "lateness_s", allow_zero=True)
         self.clock_jump_ns = _ns(clock_jump_s, "clock_jump_s")
+        self.smooth_ns = _ns(smooth_s, "smooth_s", allow_zero=True)
+        if not 0.0 <= float(max_invalid_fraction) <= 1.0:
+            raise ConfigError(f"must be a fraction in [0, 1], got {max_invalid_fraction!r}", key="max_invalid_fraction")
+        self.max_invalid_fraction = float(max_invalid_fraction)
         self.faults: Counter[str] = Counter()
         self._cells: dict[int, _CellState] = {}
         self._index = robot.cell_index()
@@ -278,9 +294,12 @@ class Windower:
         if t_f.size:
             keep = np.ones(t_f.size, bool) if st.force.last_t_ns is None else t_f > st.force.last_t_ns
             st.force.append(t_f[keep], f[None, keep])
-            finite = f[np.isfinite(f)]
-            if finite.size:
-                st.last_force_n = float(finite[-1])
+            last_f = st.force.last_t_ns
+            if last_f is not None:
+                _, recent, _ = st.force.between(last_f - self.smooth_ns, last_f + 1)
+                finite = recent[0][np.isfinite(recent[0])]
+                if finite.size:
+                    st.last_force_n = float(finite.mean())
         end = int(t_v[-1])
         self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
         return True
@@ -356,30 +375,44 @@ class Windower:
             self._released_since = None
         return out
 
+    def _smoothed_force(self, st: _CellState, start_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Force stamps since ``start_ns``, the mean force over the ``smooth_s`` before each, and the raw force."""
+        t, f, _ = st.force.between(start_ns - self.smooth_ns, self._latest_ns + 1)
+        f = np.where(np.isfinite(f[0]), f[0], 0.0)
+        csum = np.concatenate(([0.0], np.cumsum(f)))
+        first = np.searchsorted(t, t - self.smooth_ns, side="right")
+        last = np.arange(1, t.size + 1)
+        mean = (csum[last] - csum[first]) / np.maximum(last - first, 1)
+        keep = t >= start_ns
+        return t[keep], mean[keep], f[keep]
+
     def _onset_time(self) -> int:
-        """First force stamp at or above the onset threshold in the recent data."""
+        """Start of the current run of smoothed force at or above onset, over cells touching now."""
         best = self._latest_ns
         for st in self._cells.values():
-            t, f, _ = st.force.between(self._latest_ns - self._retain_ns, self._latest_ns + 1)
-            above = np.nonzero(f[0] >= self.onset_n)[0]
-            if above.size:
-                # the start of the last run of samples at or above the threshold
-                run_start = above[-1]
-                while run_start > 0 and f[0, run_start - 1] >= self.onset_n:
-                    run_start -= 1
+            if st.last_force_n < self.onset_n:
+                continue  # an older touch of a cell that has since let go is not this onset
+            t, f, _ = self._smoothed_force(st, self._latest_ns - self._retain_ns)
+            below = np.nonzero(f < self.onset_n)[0]
+            run_start = below[-1] + 1 if below.size else 0
+            if run_start < t.size:
                 best = min(best, int(t[run_start]))
         return best
 
     def _release_time(self) -> int:
-        """Latest stamp at which any cell was still at or above the release threshold."""
+        """First stamp after which every cell's smoothed force stayed below release."""
         best = self._onset_ns
         for st in self._cells.values():
-            t, f, _ = st.force.between(self._onset_ns, self._latest_ns + 1)
-            above = np.nonzero(f[0] >= self.release_n)[0]
-            if above.size and above[-1] + 1 < t.size:
-                best = max(best, int(t[above[-1] + 1]))
-            elif above.size:
-                best = max(best, int(t[above[-1]]))
+            t, f, raw = self._smoothed_force(st, self._onset_ns)
+            above = np.nonzero(f >= self.release_n)[0]
+            if not above.size:
+                continue
+            # The smoothed force lags by up to smooth_s: the release is the
+            # stamp after the last raw sample above the threshold before it.
+            k = above[-1]
+            raw_above = np.nonzero(raw[: k + 1] >= self.release_n)[0]
+            r = raw_above[-1] if raw_above.size else k
+            best = max(best, int(t[min(r + 1, t.size - 1)]))
         return best
 
     def _close_exploration(self, end_ns: int) -> Window | None:
@@ -397,9 +430,27 @@ class Windower:
                 continue
             td, d, okd = st.dfm.between(start, end, hold_before=True)
             tf, f, _ = st.force.between(start, end)
-            valid = bool(okv.all() and okd.all())
-            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid)
+            n_bad = int(np.count_nonzero(~okv) + np.count_nonzero(~okd))
+            valid = n_bad <= self.max_invalid_fraction * (okv.size + okd.size)
+            if n_bad:
+                # Invalid samples are removed, never replaced: the time stamps stay
+                # true, so the hold of V and the derivative see a short hole.
+                self.faults["windows_with_invalid_samples"] += 1
+                tv, v, td, d = tv[okv], v[:, okv], td[okd], d[:, okd]
+                if tv.size == 0:
+                    continue
+            gap = self._has_gap(cid, tv, start, end)
+            if gap:
+                self.faults["gap"] += 1
+            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid, gap, n_bad)
         return w
+
+    def _has_gap(self, cell_id: int, t_ns: np.ndarray, start: int, end: int) -> bool:
+        """A hole of more than :data:`GAP_PERIODS` vibration periods inside the window."""
+        part, _ = self._index[cell_id]
+        limit = GAP_PERIODS * 1e9 / self.robot.cell_types[part.cell_type].vibration.rate_hz
+        edges = np.concatenate(([start], t_ns, [end]))
+        return bool(np.max(np.diff(edges)) > limit)
 
     def _trim(self) -> None:
         horizon = self._latest_ns - self._retain_ns

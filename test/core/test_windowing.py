@@ -80,17 +80,26 @@ def test_faults_are_counted_not_hidden():
                               "clock_jump": 1}
 
 
-def test_invalid_samples_mark_the_cell_invalid():
+def test_invalid_samples_are_removed_not_replaced_and_too_many_exclude_the_cell():
     rng = np.random.default_rng(4)
     w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=1.0)
-    for k in range(25):
+    sent = {}
+    for k in range(35):
         c = _chunk(k * 100 * MS, 1.0, rng)
-        if k == 3:
+        if k == 3:  # one bad PAC word
             c.vibration_valid = np.ones(c.vibration.shape[1], bool)
             c.vibration_valid[5] = False
+            sent["bad_t"] = c.vibration_t_ns[5]
+        if 20 <= k < 25:  # half the frames of a window bad: more than 5 %
+            c.vibration_valid = np.arange(c.vibration.shape[1]) % 2 == 0
         w.add(1, c)
     wins = w.poll()
-    assert [x.cells[1].valid for x in wins] == [False, True]
+    first, second, third = (x.cells[1] for x in wins[:3])
+    assert first.valid and first.invalid_samples == 1
+    assert first.vibration.shape[1] == 2200 - 1 and sent["bad_t"] not in first.vibration_t_ns
+    assert second.valid and second.invalid_samples == 0
+    assert not third.valid and third.invalid_samples == 550
+    assert w.faults["windows_with_invalid_samples"] == 2
 
 
 def test_bad_parameters_name_the_key():
@@ -98,3 +107,38 @@ def test_bad_parameters_name_the_key():
         Windower(load_robot("nao"), length_s=0.0)
     with pytest.raises(ConfigError, match="window.min_duration_s"):
         Windower(load_robot("nao"), min_duration_s=5.0, max_duration_s=2.0)
+
+
+def test_onset_comes_from_the_cell_touching_now_not_an_older_touch():
+    # Regression: the thumb's earlier touch used to set the onset of the
+    # index finger's later exploration, stretching it back over no-contact time.
+    rng = np.random.default_rng(5)
+    w = Windower(load_robot("shadow_hand"), mode="exploration")
+    wins, t = [], 0
+    for k in range(80):
+        thumb = 1.0 if 5 <= k < 25 else 0.0
+        index = 1.0 if 45 <= k < 70 else 0.0
+        w.add(0, _chunk(t, thumb, rng))
+        w.add(1, _chunk(t, index, rng))
+        wins += w.poll()
+        t += 100 * MS
+    assert [x.exploration_id for x in wins] == [1, 2]
+    assert wins[0].start_ns == 500 * MS and wins[0].end_ns == pytest.approx(2500 * MS, abs=20 * MS)
+    assert wins[1].start_ns == 4500 * MS and wins[1].end_ns == pytest.approx(7000 * MS, abs=20 * MS)
+
+
+def test_release_is_judged_on_smoothed_force_not_single_noisy_samples():
+    # Force hovering at 0.05 N with single samples spiking to 0.15 N (above the
+    # 0.1 N release threshold) must still release.
+    rng = np.random.default_rng(6)
+    w = Windower(load_robot("shadow_hand"), mode="exploration")
+    wins, t = [], 0
+    for k in range(60):
+        c = _chunk(t, 1.0 if 10 <= k < 30 else 0.05, rng)
+        if k >= 30:
+            c.force_n = c.force_n.copy()
+            c.force_n[::7] = 0.15
+        w.add(1, c)
+        wins += w.poll()
+        t += 100 * MS
+    assert len(wins) == 1 and wins[0].end_ns == pytest.approx(3000 * MS, abs=20 * MS)

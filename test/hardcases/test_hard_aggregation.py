@@ -107,10 +107,6 @@ def test_clipped_12bit_adc_at_the_top_is_saturated():
     assert d.body_parts[0].quality & Quality.SATURATED and _finite(d)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core/aggregation.py _saturation (core owner): '(a <= lo) & (lo != 0)' never counts the lower limit of "
-    "an unsigned ADC, so PAC clipped at 0 in 30 % of samples is not SATURATED (docs/numerics.md: 'at its ADC "
-    "limits')"))
 def test_clipped_12bit_adc_at_zero_is_saturated():
     rng = np.random.default_rng(5)
     pac = np.clip(rng.normal(200, 400, (1, 2200)), 0, 4095).astype(np.int64)
@@ -120,8 +116,8 @@ def test_clipped_12bit_adc_at_zero_is_saturated():
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "core/aggregation.py reduce_body_part/_body_part_descriptor (core owner): per-cell Activity clipped to "
-    "float64 max (OVERFLOW) is summed/averaged again and overflows to inf with a RuntimeWarning"))
+    "core/fast.py _weighted_squares (speed kernel): squares of samples near 1e160 overflow with a "
+    "RuntimeWarning before the averaging; the reference path is fixed"))
 def test_overflowing_activity_keeps_the_robot_descriptor_finite():
     rng = np.random.default_rng(6)
     cells = {cid: _biotac(rng, dtype=np.float64) for cid in range(2)}

@@ -120,10 +120,6 @@ def test_unplug_and_replug_recovers_within_one_second():
     assert np.all(np.isfinite(d.values))
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core/windowing.py Windower._make_window (core owner): a cell silent for part of a window (unplugged "
-    "0.6 s) gives a window with a hole but no GAP flag and no fault count; the descriptor of a window "
-    "holding a hole is a silent wrong value"))
 def test_unplug_gap_inside_a_window_is_reported():
     result = simulate(parse_scene(_scene({"unplug": {"events": [{"cell": 1, "at_s": 2.5, "for_s": 0.6}]}})))
     (ev,) = result.faults["unplugged"]
