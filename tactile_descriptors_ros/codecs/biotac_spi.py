@@ -665,8 +665,8 @@ class FramePattern:
 
     def rates(self, word_rate_hz: float = 4400.0) -> PatternRates:
         """Rates that follow from a word-slot rate (4400 slots/s by default)."""
-        if not word_rate_hz > 0:
-            raise ConfigError(f"word rate must be positive, got {word_rate_hz}", key="word_rate_hz")
+        if not (np.isfinite(word_rate_hz) and word_rate_hz > 0):
+            raise ConfigError(f"word rate must be a positive finite rate, got {word_rate_hz}", key="word_rate_hz")
         frame = word_rate_hz / self.slot_count
         return PatternRates(float(word_rate_hz), frame, frame * self.pac_count, frame * self.word_count)
 

@@ -113,9 +113,6 @@ def test_impossible_word_rate(rate):
     assert info.value.key == "word_rate_hz"
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "codecs/biotac_spi.py FramePattern.rates (codecs owner): 'not word_rate_hz > 0' lets inf through; "
-    "frame rate becomes inf and slot offsets 0 ns instead of a ConfigError"))
 def test_infinite_word_rate_is_rejected():
     with pytest.raises(ConfigError):
         FramePattern.default().rates(float("inf"))
