@@ -196,7 +196,7 @@ def trial_folds(trials: Sequence[int], folds: int) -> list[list[int]]:
     t = sorted(set(trials))
     if folds < 2 or folds > len(t):
         raise ConfigError(f"trial CV needs 2..{len(t)} folds, got {folds}")
-    return [list(b) for b in np.array_split(np.array(t), folds)]
+    return [[int(x) for x in b] for b in np.array_split(np.array(t), folds)]
 
 
 def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int = 3) -> dict:
@@ -207,7 +207,7 @@ def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int 
         test = [r for r in recordings if r.trial in block]
         train = [r for r in recordings if r.trial not in block]
         results.append(evaluate(train, test, cfg))
-    out: dict = {"folds": [[min(b), max(b)] for b in trial_folds(trials, folds)], "classifiers": {}}
+    out: dict = {"folds": [[int(min(b)), int(max(b))] for b in trial_folds(trials, folds)], "classifiers": {}}
     for name in cfg.classifiers:
         accs = [r["classifiers"][name]["accuracy"] for r in results]
         out["classifiers"][name] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
