@@ -53,6 +53,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--latency", action="store_true",
                    help="also measure sensor stamp -> Prediction latency through window_node + classifier_node")
     p.add_argument("--latency-s", type=float, default=8.0, help="seconds of NAO data for --latency (default 8)")
+    p.add_argument("--latency-batch-s", type=float, default=0.05,
+                   help="sample time per SkinCellFrame for --latency (default 0.05, the skin driver's batch_s)")
+    p.add_argument("--latency-lateness-s", type=float, default=0.05,
+                   help="window_node window.lateness_s for --latency (default 0.05)")
+    p.add_argument("--latency-in-process", action="store_true",
+                   help="run window_node and classifier_node in the bench process (default: own processes)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -84,7 +90,13 @@ def run(args: argparse.Namespace) -> int:
     if args.latency:
         from ..perf.latency import measure_latency
 
-        report.latency = measure_latency(duration_s=args.latency_s)
+        try:
+            report.latency = measure_latency(duration_s=args.latency_s, batch_s=args.latency_batch_s,
+                                             lateness_s=args.latency_lateness_s,
+                                             in_process=args.latency_in_process)
+        except (ImportError, RuntimeError, ValueError) as exc:
+            print(f"tactile bench: error: latency measurement failed: {exc}", file=sys.stderr)
+            return 1
     if args.json:
         print(json.dumps(report.to_dict(), default=float))
     else:
