@@ -57,7 +57,7 @@ class ReportPlan:
 
 
 FULL_PLAN = ReportPlan(
-    headline_modes=("paper", "per_channel", "multiband", "baseline"),
+    headline_modes=("paper", "multiband"),
     headline_windows=("2", "whole"),
     sweep_modes=("paper", "multiband"),
     sweep_windows=("0.25", "0.5", "1", "2", "4", "whole"),
@@ -137,7 +137,8 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
         ("without contact gate", {"gate": False}), ("scaling: none", {"scaling": "none"}),
         ("scaling: standardise only", {"scaling": "standardize"}),
         ("one training window per trial", {"train_per_trial": 1})]
-    ablations_multiband = [("+ electrode/PDC/TDC/TAC levels (multiband_levels)", {"mode": "multiband_levels"})]
+    ablations_multiband = [("without the PAC bands (per_channel)", {"mode": "per_channel"}),
+                           ("+ electrode/PDC/TDC/TAC levels (multiband_levels)", {"mode": "multiband_levels"})]
     for m in plan.ablation_modes:
         for name, kw in ablations:
             todo.append(("ablation", (m, name), replace(abl, mode=m, **kw), "split"))
