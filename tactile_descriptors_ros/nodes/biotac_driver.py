@@ -215,6 +215,7 @@ class _SensorState:
     tare_pdc: float = 0.0
     tare_electrodes: np.ndarray | None = None
     tared: bool = False
+    tracked_frames: int = 0
     counts: WordCounts = field(default_factory=WordCounts)
     frames_total: int = 0
     messages: int = 0
@@ -262,6 +263,14 @@ class BiotacDriver(LifecycleNode):
         self.tare_window_s = declare(self, "tare.window_s", 0.2, "frames averaged by ~/tare [s]", minimum=0.01)
         self.contact_threshold_n = declare(self, "contact_threshold_n", full.contact.force_threshold_n,
                                            "~/tare is refused at or above this force [N]", minimum=0.0)
+        self.track_s = declare(self, "tare.track_s", 0.5, "PDC baseline follows drift with this time constant while "
+                               "the force is below tare.track_band_n [s] (0 = tare only at start and on ~/tare)",
+                               minimum=0.0)
+        self.track_band_n = declare(self, "tare.track_band_n", self.contact_threshold_n,
+                                    "baseline tracking only while |force| is below this [N]", minimum=0.0)
+        # weight of one frame in the tracked baseline (exponential, time constant tare.track_s)
+        frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
+        self._track_alpha = min(1.0, 1.0 / (frame_hz * self.track_s)) if self.track_s > 0 else 0.0
         self.pdc_pa_per_count = declare(self, "pdc_pa_per_count", 0.0,
                                         "static pressure scale [Pa/count] (0 = not calibrated)", minimum=0.0)
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
@@ -325,12 +334,18 @@ class BiotacDriver(LifecycleNode):
         if self._transport_factory is not None:
             return self._transport_factory(self)
         if self.transport_name == "simulated":
-            from .sim_sources import biotac_bridge_source
+            from ..sim.sources import BiotacBridgeSource, load_scene_for
 
             if not self.sim_scene:
                 raise ConfigError("transport 'simulated' needs the parameter sim.scene", key="sim.scene")
-            source = biotac_bridge_source(self.sim_scene, self.robot, self.pattern, self.word_rate_hz,
-                                          {cs: c.sensor_name for cs, c in self.sensors.items()}, self.sim_speed)
+            scene = load_scene_for(self.sim_scene, self.robot.name)
+            rates = self.pattern.rates(self.word_rate_hz)
+            sim_hz = scene.robot.cell_types[self.robot.body_parts[0].cell_type].deformation.rate_hz
+            if abs(rates.frame_rate_hz - sim_hz) > 1e-6 * sim_hz:
+                raise ConfigError(f"the frame pattern at {self.word_rate_hz} words/s gives {rates.frame_rate_hz:.3f} "
+                                  f"frames/s; the scene simulates {sim_hz} frames/s", key="word_rate_hz")
+            source = BiotacBridgeSource(scene, self.pattern, speed=self.sim_speed, chip_selects=set(self.sensors),
+                                        serial_prefix="BTSIM")
             return create_transport("simulated", source=source)
         if self.transport_name == "loopback":
             return create_transport("loopback", timeout_s=0.05)
@@ -469,6 +484,8 @@ class BiotacDriver(LifecycleNode):
             for k in range(len(frames)):
                 if frames.pdc_valid[k]:
                     st.recent_pdc.append((stamp, float(frames.pdc[k])))
+                    if st.tared and self._track_alpha > 0:
+                        self._track_baseline(st, float(frames.pdc[k]))
                 if frames.electrodes_valid[k].all():
                     st.recent_el.append((stamp, frames.electrodes[k].astype(np.float64)))
             if not st.tared and self.tare_on_start_s > 0:
@@ -514,6 +531,18 @@ class BiotacDriver(LifecycleNode):
             st.messages += 1
 
     # ------------------------------------------------------------------- tare
+    def _track_baseline(self, st: _SensorState, pdc: float) -> None:
+        """Follow slow PDC drift (temperature) while the finger is clearly not touching.
+
+        A start tare alone lets the baseline drift by tenths of a newton
+        within a minute, above the release threshold, so explorations never
+        end.  Frames whose tared force is under ``tare.track_band_n`` move the
+        baseline towards them; a touch (force above the band) freezes it.
+        """
+        if abs(pdc - st.tare_pdc) * self.force_n_per_count < self.track_band_n:
+            st.tare_pdc += (pdc - st.tare_pdc) * self._track_alpha
+            st.tracked_frames += 1
+
     def _force_now(self, st: _SensorState) -> float | None:
         if not st.tared or not st.recent_pdc:
             return None
@@ -594,7 +623,8 @@ class BiotacDriver(LifecycleNode):
         values.update({"frame_rate_hz": fr, "pac_rate_hz": fr * self.pattern.pac_count,
                        "expected_frame_rate_hz": rates.frame_rate_hz, "frames": st.frames_total,
                        "messages": st.messages, "lost_frames": st.lost_frames, "tared": st.tared,
-                       "pdc_tare_counts": st.tare_pdc, "bad_words_per_s": st.bad_rate.rate_hz,
+                       "pdc_tare_counts": st.tare_pdc,
+                       "baseline_tracked_frames": st.tracked_frames, "bad_words_per_s": st.bad_rate.rate_hz,
                        "bad_words_total": st.counts.bad})
         values.update({f"bad_{k}": v for k, v in st.counts.as_dict().items()})
         f = self._force_now(st)

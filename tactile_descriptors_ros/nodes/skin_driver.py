@@ -120,6 +120,8 @@ class SkinDriver(LifecycleNode):
             self.tp["can"]["bitrate"] = bitrate
         self.sim_scene = declare(self, "sim.scene", "", "scene played by the simulated transport")
         self.sim_speed = declare(self, "sim.speed", 1.0, "simulated time per wall time", minimum=1e-3)
+        self.sim_wire = declare(self, "sim.wire", "can", "framing of the simulated bus: can (skin CAN layout) or "
+                                "serial (skin serial framing)", choices=("can", "serial"))
         autostart = declare(self, "autostart", True, "configure and activate at start")
         self.qos_frames = declare_qos(self, "frames", QosDefaults("reliable", "volatile", 200))
 
@@ -159,12 +161,13 @@ class SkinDriver(LifecycleNode):
         if self._transport_factory is not None:
             return self._transport_factory(self)
         if self.transport_name == "simulated":
-            from .sim_sources import skin_can_source
+            from ..sim.sources import SkinCanSource, SkinSerialSource, load_scene_for
 
             if not self.sim_scene:
                 raise ConfigError("transport 'simulated' needs the parameter sim.scene", key="sim.scene")
-            return create_transport("simulated", source=skin_can_source(self.sim_scene, self.full_robot, None,
-                                                                        self.sim_speed))
+            scene = load_scene_for(self.sim_scene, self.full_robot.name)
+            source_cls = SkinCanSource if self.sim_wire == "can" else SkinSerialSource
+            return create_transport("simulated", source=source_cls(scene, speed=self.sim_speed))
         if self.transport_name == "loopback":
             return create_transport("loopback", timeout_s=0.05)
         return create_transport(self.transport_name, **self.tp[self.transport_name])
@@ -178,7 +181,7 @@ class SkinDriver(LifecycleNode):
             self.get_logger().error(f"cannot open {self.transport_name} transport: {exc}")
             self.transport = None
             return TransitionCallbackReturn.FAILURE
-        self.is_can = hasattr(self.transport, "recv") and self.transport_name in ("can", "simulated")
+        self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
         self.decoder = SkinCanDecoder(known_cell_ids=self.known) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known)
         self.cells = {cid: _Cell(cid, part, self.frame_ids[cid]) for cid, part in self.served.items()}

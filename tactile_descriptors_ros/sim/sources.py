@@ -32,7 +32,7 @@ from __future__ import annotations
 import heapq
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from typing import Any
 
 import numpy as np
@@ -46,17 +46,37 @@ from .scene import Scene
 __all__ = [
     "biotac_frame_words",
     "bridge_frames",
+    "serial_number_frames",
     "skin_messages",
     "SkinRows",
     "BiotacBridgeSource",
     "SkinCanSource",
     "SkinSerialSource",
     "biotac_spi_bus",
+    "load_scene_for",
     "SKIN_STREAM_MODALITY",
 ]
 
 #: Skin streams and their codec modality numbers (imported lazily with the codec).
 SKIN_STREAM_MODALITY = {"accel": 1, "force": 2, "proximity": 3, "temperature": 4}
+
+
+def load_scene_for(scene: str | Scene, robot_name: str) -> Scene:
+    """Load a scene (name, path or :class:`Scene`) and check it was written for the robot ``robot_name``.
+
+    Raises
+    ------
+    SceneError
+        When the scene's robot is another one (a driver would decode the
+        wrong cells), or the scene cannot be loaded.
+    """
+    from .scene import load_scene
+
+    sc = scene if isinstance(scene, Scene) else load_scene(scene)
+    if sc.robot.name != robot_name:
+        raise SceneError(f"scene {sc.name!r} is for robot {sc.robot.name!r}, not {robot_name!r}",
+                         key="scene.robot", source=sc.source)
+    return sc
 
 
 def _pattern_for(result: SimResult, pattern: FramePattern | str | None) -> FramePattern:
@@ -100,14 +120,40 @@ def biotac_frame_words(cell: Any, pattern: FramePattern) -> tuple[np.ndarray, np
     return words, fault, pdc.seq, pdc.t_ns
 
 
-def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None) -> list[tuple[int, bytes]]:
-    """``(t_ns, frame bytes)`` of every BioTac frame of a simulation chunk, in time order."""
+def _chip_select(cell: Any, k: int) -> int:
+    return int(cell.extra.get("chip_select", k))
+
+
+def serial_number_frames(result: SimResult, serial_prefix: str = "BTSIM",
+                         chip_selects: Collection[int] | None = None) -> list[bytes]:
+    """One bridge ``SERIAL_NUMBER`` frame per simulated BioTac (what a bridge sends when it starts).
+
+    The serial number is ``serial_prefix`` and the cell id in 11 digits
+    (16 ASCII characters at the most), as :func:`biotac_spi_bus` answers it.
+    """
+    out = []
+    for k, cell in enumerate(result.cells.values()):
+        cs = _chip_select(cell, k)
+        if cell.kind != "biotac" or (chip_selects is not None and cs not in chip_selects):
+            continue
+        serial = f"{serial_prefix}{cell.cell_id:011d}"[:16].encode("ascii")
+        out.append(encode_bridge_frame(BridgeFrame(BridgeFrameType.SERIAL_NUMBER, cs, 0, 0, serial)))
+    return out
+
+
+def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None,
+                  chip_selects: Collection[int] | None = None) -> list[tuple[int, bytes]]:
+    """``(t_ns, frame bytes)`` of every BioTac frame of a simulation chunk, in time order.
+
+    ``chip_selects``: only these BioTacs (default: all), as a bridge wired to
+    some of the hand's fingertips.
+    """
     pat = _pattern_for(result, pattern)
     out: list[tuple[int, int, bytes]] = []
     for k, cell in enumerate(result.cells.values()):
-        if cell.kind != "biotac":
+        cs = _chip_select(cell, k)
+        if cell.kind != "biotac" or (chip_selects is not None and cs not in chip_selects):
             continue
-        cs = int(cell.extra.get("chip_select", k))
         words, fault, seq, t_ns = biotac_frame_words(cell, pat)
         raw = np.frombuffer(encode_words(words.ravel()), dtype=np.uint8).reshape(len(seq), -1).copy()
         parity = np.nonzero(fault == FAULT_PARITY)
@@ -317,15 +363,28 @@ class BiotacBridgeSource(_ByteSource):
         Frame pattern (default: the 44-word default frame).
     speed : float, optional
         Pace on the wall clock (1 = real time); default: as fast as read.
+    chip_selects : collection of int, optional
+        Only these BioTacs (default: every BioTac of the scene's robot).
+    serial_prefix : str, optional
+        When given, a ``SERIAL_NUMBER`` frame per BioTac comes first
+        (:func:`serial_number_frames`), as a real bridge sends.
     """
 
     def __init__(self, scene: Scene, pattern: FramePattern | str | None = None, speed: float | None = None,
-                 chunk_s: float = 10.0, clock: Any = time.monotonic) -> None:
+                 chunk_s: float = 10.0, clock: Any = time.monotonic, chip_selects: Collection[int] | None = None,
+                 serial_prefix: str | None = None) -> None:
         super().__init__(scene, speed, chunk_s, clock)
         self.pattern = pattern
+        self.chip_selects = None if chip_selects is None else frozenset(int(c) for c in chip_selects)
+        self.serial_prefix = serial_prefix
+        self._serials_sent = serial_prefix is None
 
     def _convert(self, result: SimResult) -> _Chunk:
-        frames = bridge_frames(result, self.pattern)
+        frames = bridge_frames(result, self.pattern, self.chip_selects)
+        if not self._serials_sent:  # the bridge announces its BioTacs before the first sample
+            t0 = result.scene.start_ns - 1
+            frames = [(t0, f) for f in serial_number_frames(result, self.serial_prefix, self.chip_selects)] + frames
+            self._serials_sent = True
         return _Chunk(np.array([t for t, _ in frames], dtype=np.int64), lambda i, _f=frames: _f[i][1])
 
 
@@ -410,7 +469,7 @@ def biotac_spi_bus(result: SimResult, serial_prefix: str = "BTSIM") -> Any:
             _c[channel] += 1
             return int(data[i])
 
-        cs = int(cell.extra.get("chip_select", k))
+        cs = _chip_select(cell, k)
         devices[cs] = BiotacSpiResponder(sample, serial_number=f"{serial_prefix}{cell.cell_id:011d}",
                                          electrode_count=cell.streams["electrodes"].counts.shape[0])
     return SpiBus(devices)

@@ -60,5 +60,7 @@ def test_launcher_runs_the_simulated_graph_and_predictions_learn(tmp_path):
         codes = procs.stop()
         node.destroy_node()
         rclpy.try_shutdown(context=ros_context)
-    assert all(c in (0, -2, 130) for c in codes.values()), codes  # SIGINT stops every node cleanly
+    # SIGINT stops every node cleanly
+    assert all(c in (0, -2, 130) for c in codes.values()), {n.spec.name: (codes[n.spec.name], n.lines[-25:])
+                                                            for n in procs.nodes if codes[n.spec.name] not in (0, -2, 130)}
     assert (tmp_path / "model.json").is_file()  # the classifier saved its model after the update

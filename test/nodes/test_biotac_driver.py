@@ -98,7 +98,8 @@ def test_tare_refused_in_contact_and_accepted_out_of_contact(ros_context):
         assert not resp.success and "in contact" in resp.message
         assert spin_until(ex, lambda: any(m.pdc_tare_counts == 2000.0 for m in got["index"]))
         send(30, 2002, 40)
-        assert spin_until(ex, lambda: drv.state[1].recent_pdc[-1][1] == 2002)
+        # every frame read (not just the first at rest: the tare window must not straddle the contact)
+        assert spin_until(ex, lambda: all(s.frames_total == 70 for s in drv.state.values()))
         resp = drv._srv_tare(Trigger.Request(), Trigger.Response())
         assert resp.success, resp.message
         assert drv.state[1].tare_pdc == pytest.approx(2002.0)

@@ -171,3 +171,24 @@ def test_bad_speed_is_rejected():
 
     with pytest.raises(SceneError):
         BiotacBridgeSource(_scene(HAND), speed=0.0)
+
+
+def test_bridge_source_announces_serial_numbers_and_serves_only_its_chip_selects():
+    from tactile_descriptors_ros.codecs.bridge_serial import BridgeFrameType
+
+    scene = _scene(HAND)
+    with SimulatedTransport(BiotacBridgeSource(scene, chip_selects={1}, serial_prefix="BTSIM")) as tr:
+        frames = BridgeDecoder().feed(_read_all(tr))
+    assert {f.chip_select for f in frames} == {1}
+    assert frames[0].kind == BridgeFrameType.SERIAL_NUMBER and frames[0].payload == b"BTSIM00000000001"
+    assert all(f.kind == BridgeFrameType.SAMPLE for f in frames[1:])
+    assert len(frames) - 1 == simulate(scene).cells[1].streams["pdc"].seq.size
+
+
+def test_scene_for_another_robot_is_refused():
+    from tactile_descriptors_ros.errors import SceneError
+    from tactile_descriptors_ros.sim.sources import load_scene_for
+
+    assert load_scene_for(_scene(HAND), "shadow_hand").name == "wire"
+    with pytest.raises(SceneError, match="not 'nao'"):
+        load_scene_for(_scene(HAND), "nao")
