@@ -102,7 +102,7 @@ def batches(draw):
     return s, ts, v, tv
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=150, deadline=None)
 @given(batches(), st.sampled_from([100.0, 1000.0]), st.sampled_from([25.0, 250.0]))
 def test_cell_quantities_equal_reference(batch, fs_s, fs_v):
     s, ts, v, tv = batch
@@ -110,7 +110,7 @@ def test_cell_quantities_equal_reference(batch, fs_s, fs_v):
                  fast.cell_quantities_reference(s, ts, v, tv, fs_s, fs_v))
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(batches(), st.integers(1, 3))
 def test_chunking_does_not_change_results(batch, chunk):
     s, ts, v, tv = batch
@@ -119,7 +119,7 @@ def test_chunking_does_not_change_results(batch, chunk):
     _assert_same(chunked, whole, rtol=1e-12, atol=1e-15)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(batches())
 def test_kernel_thresholds_do_not_change_results(batch):
     """float64 ranks instead of float32, one-row rank blocks, reduceat run sums."""
@@ -134,7 +134,7 @@ def test_kernel_thresholds_do_not_change_results(batch):
     _assert_same(got, ref)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(st.integers(1, 3), st.integers(1, 3), st.integers(3, 200), st.integers(2, 30),
        st.sampled_from([1, 7, 4095]), st.data())
 def test_held_correlations_match_scipy_on_expanded_series(n_cells, n_s, n_fast, n_slow, hi, data):
@@ -158,7 +158,7 @@ def test_held_correlations_match_scipy_on_expanded_series(n_cells, n_s, n_fast, 
                 assert nonlin[c, i, j] == pytest.approx(stats.spearmanr(a, b)[0], abs=1e-10)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(st.integers(1, 5), st.integers(0, 80), st.sampled_from([1, 2, 20, 1023, 4095]), st.data())
 def test_hjorth_fast_equals_hjorth(rows, n, hi, data):
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
@@ -183,7 +183,7 @@ def test_hjorth_fast_exact_where_float_cancels():
     assert h.mobility[0] == pytest.approx(2.0 * np.sqrt(1.0 - 999.0**-2), rel=1e-15)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(st.integers(1, 4), st.integers(1, 40), st.sampled_from(["int", "float"]), st.data())
 def test_weighted_ranks_equal_ranks_of_repeated_samples(rows, m, kind, data):
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
@@ -199,7 +199,7 @@ def test_weighted_ranks_equal_ranks_of_repeated_samples(rows, m, kind, data):
     np.testing.assert_allclose(ss, (want**2).sum(axis=1))
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(st.integers(1, 5), st.integers(1, 60), st.sampled_from([0, 1, 3, 500]), st.integers(1, 9), st.data())
 def test_centred_ranks_equal_scipy(rows, n, hi, max_run, data):
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
@@ -210,7 +210,7 @@ def test_centred_ranks_equal_scipy(rows, n, hi, max_run, data):
     np.testing.assert_allclose(ss, (want**2).sum(axis=1))
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(st.integers(0, 40), st.integers(0, 15), st.data())
 def test_hold_runs_match_hold_indices(n_fast, n_slow, data):
     t_fast = data.draw(stamps(n_fast, strictly=False))
@@ -226,7 +226,7 @@ def test_hold_runs_match_hold_indices(n_fast, n_slow, data):
         assert sum(b - a for a, b, _ in runs.segments) == runs.weights.size
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(st.integers(1, 6), st.integers(3, 300), st.data())
 def test_run_sums_equal_reduceat(rows, n, data):
     rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))

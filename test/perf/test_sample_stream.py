@@ -25,7 +25,7 @@ ops = st.lists(
 )
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(ops, st.integers(1, 3))
 def test_sample_stream_matches_a_list_model(sequence, n_channels):
     stream = SampleStream(n_channels, np.int32)
