@@ -64,9 +64,9 @@ class CellSignals:
     deformation : numpy.ndarray, shape (n_deformation_channels, n_slow)
         Deformation samples V.
     deformation_t_ns : numpy.ndarray of int64, shape (n_slow,)
-        Their time stamps.  For the correlations the window should include the
-        last V sample at or before the first S sample; S samples before the
-        first V sample are not paired.
+        Their time stamps.  S samples before the first V sample are not
+        paired; every V sample given here enters V's Hjorth parameters, so
+        give only the window's own samples.
     force_n : numpy.ndarray, shape (n_force,)
         Normal force samples in newtons over the window (for the gate).
     valid : bool

@@ -392,11 +392,17 @@ class Windower:
         for st in self._cells.values():
             if st.last_force_n < self.onset_n:
                 continue  # an older touch of a cell that has since let go is not this onset
-            t, f, _ = self._smoothed_force(st, self._latest_ns - self._retain_ns)
+            t, f, raw = self._smoothed_force(st, self._latest_ns - self._retain_ns)
             below = np.nonzero(f < self.onset_n)[0]
             run_start = below[-1] + 1 if below.size else 0
-            if run_start < t.size:
-                best = min(best, int(t[run_start]))
+            if run_start >= t.size:
+                continue
+            # The smoothed force lags by up to smooth_s: the onset is the first
+            # raw sample of the run at or above the threshold within that lag.
+            lag_start = int(np.searchsorted(t, t[run_start] - self.smooth_ns, side="left"))
+            raw_below = np.nonzero(raw[lag_start:run_start + 1] < self.onset_n)[0]
+            onset = lag_start + raw_below[-1] + 1 if raw_below.size else lag_start
+            best = min(best, int(t[min(onset, run_start)]))
         return best
 
     def _release_time(self) -> int:
@@ -428,7 +434,10 @@ class Windower:
             tv, v, okv = st.vib.between(start, end)
             if tv.size == 0:
                 continue
-            td, d, okd = st.dfm.between(start, end, hold_before=True)
+            # Only samples inside the window: a V sample from before it would
+            # enter V's Hjorth parameters (S samples before the first V sample
+            # of the window are simply not paired, at most one V period).
+            td, d, okd = st.dfm.between(start, end)
             tf, f, _ = st.force.between(start, end)
             n_bad = int(np.count_nonzero(~okv) + np.count_nonzero(~okd))
             valid = n_bad <= self.max_invalid_fraction * (okv.size + okd.size)
