@@ -284,6 +284,18 @@ def _prepare_pair(a: np.ndarray, b: np.ndarray, axis: int) -> tuple[np.ndarray, 
     return (np.broadcast_to(a, shape + (n,)).copy(), np.broadcast_to(b, shape + (n,)).copy())
 
 
+def _checked_pair(a: np.ndarray, b: np.ndarray, axis: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Validated float64 rows of a pair, non-finite rows zeroed and flagged ``NONFINITE``."""
+    a, b = _prepare_pair(a, b, axis)
+    quality = np.zeros(a.shape[:-1], dtype=np.uint32)
+    a, bad_a = _sanitize(a)
+    b, bad_b = _sanitize(b)
+    bad = bad_a | bad_b
+    quality[bad] |= np.uint32(Quality.NONFINITE)
+    return a, b, quality, bad
+
+
 def _pearson_rows(a: np.ndarray, b: np.ndarray, quality: np.ndarray) -> np.ndarray:
     """Pearson r of float64 rows of equal shape (rows already finite)."""
     n = a.shape[-1]
@@ -327,12 +339,7 @@ def pearson(a: np.ndarray, b: np.ndarray, axis: int = -1, *, return_quality: boo
         ``SHORT`` (fewer than 3 samples), ``FLAT`` (a constant signal) or
         ``NONFINITE`` (a NaN or inf sample in either signal); r is 0 for each.
     """
-    a, b = _prepare_pair(a, b, axis)
-    quality = np.zeros(a.shape[:-1], dtype=np.uint32)
-    a, bad_a = _sanitize(a)
-    b, bad_b = _sanitize(b)
-    bad = bad_a | bad_b
-    quality[bad] |= np.uint32(Quality.NONFINITE)
+    a, b, quality, bad = _checked_pair(a, b, axis)
     r = _pearson_rows(a, b, quality)
     r[bad] = 0.0
     quality[bad] &= ~np.uint32(Quality.FLAT)
@@ -410,12 +417,7 @@ def spearman(a: np.ndarray, b: np.ndarray, axis: int = -1, *, return_quality: bo
     """
     a_arr = np.asarray(a)
     b_arr = np.asarray(b)
-    a_f, b_f = _prepare_pair(a_arr, b_arr, axis)  # validates shapes and dtypes
-    quality = np.zeros(a_f.shape[:-1], dtype=np.uint32)
-    a_f, bad_a = _sanitize(a_f)
-    b_f, bad_b = _sanitize(b_f)
-    bad = bad_a | bad_b
-    quality[bad] |= np.uint32(Quality.NONFINITE)
+    a_f, b_f, quality, bad = _checked_pair(a_arr, b_arr, axis)
     n = a_f.shape[-1]
     if n < 3:
         quality |= np.uint32(Quality.SHORT)
