@@ -40,24 +40,22 @@ reader thread, deactivate stops it, cleanup closes the device.  With
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import TransitionCallbackReturn
 
 from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
 from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
-from ..core.robot import load_robot
-from ..errors import CodecError, ConfigError, TactileError, TransportError
-from ..transports import create_transport
-from .common import Diagnostics, RateMeter, Status, declare, run_node
+from ..errors import CodecError, ConfigError
+from .common import RateMeter, Status, declare, run_node
 from .conversions import BioTacBatch, biotac_batch_to_msg
+from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from .window_node import FRAMES_TOPIC, message_kind, select_body_parts
+from .window_node import FRAMES_TOPIC
 
 __all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "Unwrapper", "main"]
 
@@ -227,7 +225,7 @@ class _SensorState:
     first_stamp_ns: int | None = None
 
 
-class BiotacDriver(LifecycleNode):
+class BiotacDriver(DriverBase):
     """The BioTac driver; ``kwargs`` go to :class:`rclpy.lifecycle.LifecycleNode`.
 
     Parameters
@@ -237,17 +235,11 @@ class BiotacDriver(LifecycleNode):
         For tests: ``f(node) -> Transport`` replacing the ``transport`` parameter's backend.
     """
 
+    reader_thread_name = "biotac-reader"
+
     def __init__(self, node_name: str = "biotac_driver", transport_factory=None, **kwargs) -> None:
-        super().__init__(node_name, **kwargs)
-        self._transport_factory = transport_factory
-        robot_arg = declare(self, "robot", "", "robot description: shipped name or YAML path")
-        if not robot_arg:
-            raise ConfigError("parameter 'robot' is required (e.g. shadow_hand or a YAML path)", key="robot")
-        full = load_robot(robot_arg)
-        biotac_parts = [p.name for p in full.body_parts if message_kind(full.cell_types[p.cell_type]) == "biotac"]
-        if not biotac_parts:
-            raise ConfigError(f"robot {full.name!r} has no BioTac body parts", key="body_parts")
-        self.robot = select_body_parts(full, declare(self, "body_parts", biotac_parts, "body parts served"))
+        super().__init__(node_name, transport_factory, **kwargs)
+        full, self.robot = self._declare_robot("biotac", "shadow_hand", "BioTac")
         self.transport_name = declare(self, "transport", "cheetah", "device transport", choices=TRANSPORTS)
         self.pattern = FramePattern.parse(declare(self, "frame_pattern", "default",
                                                   "frame pattern: default | paper_50hz | biotac_sp | channel list"))
@@ -255,14 +247,8 @@ class BiotacDriver(LifecycleNode):
         self.batch_frames = declare(self, "batch_frames", 10, "frames per message", minimum=1)
         self.wire = declare(self, "wire", "auto", "framing on the transport: spi (SPI sampling), bridge (our "
                             "serial framing); auto = spi for cheetah, bridge otherwise", choices=("auto", "spi", "bridge"))
-        self.stamp_source = declare(self, "stamp_source", "clock", "time stamps", choices=("clock", "device"))
-        self.resync_s = declare(self, "resync_s", 1.0, "re-anchor clock stamps beyond this drift [s] (0 = never)",
-                                minimum=0.0)
-        self.tare_on_start_s = declare(self, "tare_on_start_s", 0.5, "baseline from the first frames [s] (0 = off)",
-                                       minimum=0.0)
-        self.tare_window_s = declare(self, "tare.window_s", 0.2, "frames averaged by ~/tare [s]", minimum=0.01)
-        self.contact_threshold_n = declare(self, "contact_threshold_n", full.contact.force_threshold_n,
-                                           "~/tare is refused at or above this force [N]", minimum=0.0)
+        self._declare_stamps_and_tare(full.contact.force_threshold_n, "baseline from the first frames [s] (0 = off)",
+                                      "frames averaged by ~/tare [s]")
         self.track_s = declare(self, "tare.track_s", 0.5, "PDC baseline follows drift with this time constant while "
                                "the force is below tare.track_band_n [s] (0 = tare only at start and on ~/tare)",
                                minimum=0.0)
@@ -304,74 +290,40 @@ class BiotacDriver(LifecycleNode):
             raise ConfigError(f"frame pattern samples {self.pattern.electrode_count} electrodes but the robot's "
                               f"cell type has {n_el}", key="frame_pattern")
 
-        self.transport = None
         self.source = None
         self.state: dict[int, _SensorState] = {}
-        self.faults: Counter[str] = Counter()
         self.publishers_by_cs: dict[int, object] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._offset_ns: int | None = None
-        self._started_monotonic: float | None = None
-        self.last_error: str | None = None
-        from std_srvs.srv import Trigger
-
-        self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01), hardware_id=self.transport_name)
-        self.diagnostics.add("transport", self._transport_status)
-        for cs, cfg in sorted(self.sensors.items()):
-            self.diagnostics.add(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
-        if autostart:
-            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                raise TransportError(f"configure failed: {self.last_error}")
-            if self.trigger_activate() != TransitionCallbackReturn.SUCCESS:
-                raise TransportError(f"activate failed: {self.last_error}")
+        self._start(autostart, [("transport", self._transport_status)]
+                    + [(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
+                       for cs, cfg in sorted(self.sensors.items())])
 
     # ------------------------------------------------------------- lifecycle
-    def _make_transport(self):
-        if self._transport_factory is not None:
-            return self._transport_factory(self)
-        if self.transport_name == "simulated":
-            from ..sim.sources import BiotacBridgeSource, load_scene_for
+    def _simulated_source(self):
+        from ..sim.sources import BiotacBridgeSource, load_scene_for
 
-            if not self.sim_scene:
-                raise ConfigError("transport 'simulated' needs the parameter sim.scene", key="sim.scene")
-            scene = load_scene_for(self.sim_scene, self.robot.name)
-            rates = self.pattern.rates(self.word_rate_hz)
-            sim_hz = scene.robot.cell_types[self.robot.body_parts[0].cell_type].deformation.rate_hz
-            if abs(rates.frame_rate_hz - sim_hz) > 1e-6 * sim_hz:
-                raise ConfigError(f"the frame pattern at {self.word_rate_hz} words/s gives {rates.frame_rate_hz:.3f} "
-                                  f"frames/s; the scene simulates {sim_hz} frames/s", key="word_rate_hz")
-            source = BiotacBridgeSource(scene, self.pattern, speed=self.sim_speed, chip_selects=set(self.sensors),
-                                        serial_prefix="BTSIM")
-            return create_transport("simulated", source=source)
-        if self.transport_name == "loopback":
-            return create_transport("loopback", timeout_s=0.05)
-        return create_transport(self.transport_name, **self.tp[self.transport_name])
+        scene = load_scene_for(self.sim_scene, self.robot.name)
+        rates = self.pattern.rates(self.word_rate_hz)
+        sim_hz = scene.robot.cell_types[self.robot.body_parts[0].cell_type].deformation.rate_hz
+        if abs(rates.frame_rate_hz - sim_hz) > 1e-6 * sim_hz:
+            raise ConfigError(f"the frame pattern at {self.word_rate_hz} words/s gives {rates.frame_rate_hz:.3f} "
+                              f"frames/s; the scene simulates {sim_hz} frames/s", key="word_rate_hz")
+        return BiotacBridgeSource(scene, self.pattern, speed=self.sim_speed, chip_selects=set(self.sensors),
+                                  serial_prefix="BTSIM")
 
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        try:
-            self.transport = self._make_transport()
-            self.transport.open()
-            decoder = BiotacFrameDecoder(self.pattern, sorted(self.sensors))
-            wire = self.wire if self.wire != "auto" else ("spi" if self.transport_name == "cheetah" else "bridge")
-            if wire == "spi":
-                self.source = SpiFrameSource(self.transport, self.pattern, sorted(self.sensors), self.word_rate_hz,
-                                             decoder)
-            else:
-                self.source = BridgeFrameSource(self.transport, self.pattern, sorted(self.sensors), decoder)
-            self.source.read_serial_numbers()
-            for cs, err in self.source.serial_errors.items():
-                self.get_logger().warning(f"{self.sensors[cs].sensor_name} (chip select {cs}): no serial number: {err}")
-        except TactileError as exc:
-            self.last_error = str(exc)
-            self.get_logger().error(f"cannot open {self.transport_name} transport: {exc}")
-            if self.transport is not None:
-                self.transport.close()
-                self.transport = None
-            return TransitionCallbackReturn.FAILURE
+    def _open_source(self) -> None:
+        decoder = BiotacFrameDecoder(self.pattern, sorted(self.sensors))
+        wire = self.wire if self.wire != "auto" else ("spi" if self.transport_name == "cheetah" else "bridge")
+        if wire == "spi":
+            self.source = SpiFrameSource(self.transport, self.pattern, sorted(self.sensors), self.word_rate_hz,
+                                         decoder)
+        else:
+            self.source = BridgeFrameSource(self.transport, self.pattern, sorted(self.sensors), decoder)
+        self.source.read_serial_numbers()
+        for cs, err in self.source.serial_errors.items():
+            self.get_logger().warning(f"{self.sensors[cs].sensor_name} (chip select {cs}): no serial number: {err}")
+
+    def _configured(self) -> TransitionCallbackReturn:
         self.state = {cs: _SensorState(cfg) for cs, cfg in self.sensors.items()}
         from tactile_descriptors_msgs.msg import BioTacFrameBatch
 
@@ -387,67 +339,18 @@ class BiotacDriver(LifecycleNode):
             f"{self.pattern.word_count} words, PAC {self.pattern.rates(self.word_rate_hz).pac_rate_hz:.0f} Hz")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop.clear()
-        self._started_monotonic = time.monotonic()
-        self._thread = threading.Thread(target=self._run, daemon=True, name="biotac-reader")
-        self._thread.start()
-        return super().on_activate(state)
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_thread()
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_thread()
-        self._close_transport()
+    def _destroy_publishers(self) -> None:
         for pub in set(self.publishers_by_cs.values()):
             self.destroy_lifecycle_publisher(pub)
         self.publishers_by_cs.clear()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_thread()
-        self._close_transport()
-        return TransitionCallbackReturn.SUCCESS
-
-    def close(self) -> None:
-        """Stop reading and close the device (called on every exit path by ``main``)."""
-        self._stop_thread()
-        self._close_transport()
-
-    def _stop_thread(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-
-    def _close_transport(self) -> None:
-        if self.transport is not None:
-            try:
-                self.transport.close()
-            finally:
-                self.transport = None
 
     # ---------------------------------------------------------------- reading
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                items = self.source.read()
-            except TransportError as exc:
-                self.faults["transport_errors"] += 1
-                self.last_error = str(exc)
-                self.get_logger().error(f"transport: {exc}", throttle_duration_sec=5.0)
-                self._stop.wait(0.5)
-                continue
-            except Exception as exc:  # noqa: BLE001 - report and keep the node alive
-                self.faults["reader_errors"] += 1
-                self.last_error = repr(exc)
-                self.get_logger().error(f"reader: {exc!r}", throttle_duration_sec=5.0)
-                self._stop.wait(0.5)
-                continue
-            for item in items:
-                self._handle(item)
+    def _read(self) -> list[ReadItem]:
+        return self.source.read()
+
+    def _consume(self, items: list[ReadItem]) -> None:
+        for item in items:
+            self._handle(item)
 
     def _stamp(self, device_t_ns: int) -> int:
         if self.stamp_source == "device":
@@ -590,11 +493,7 @@ class BiotacDriver(LifecycleNode):
 
     # ------------------------------------------------------------ diagnostics
     def _transport_status(self) -> Status:
-        values = {"transport": self.transport_name, "frame_pattern": str(self.pattern),
-                  "word_rate_hz": self.word_rate_hz, "stamp_source": self.stamp_source}
-        if self.transport is not None:
-            values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
-        values.update({k: v for k, v in self.faults.items()})
+        values = self._transport_values({"frame_pattern": str(self.pattern), "word_rate_hz": self.word_rate_hz})
         src = self.source
         if isinstance(src, BridgeFrameSource):
             values.update({f"bridge_{k}": v for k, v in src.bridge.stats.as_dict().items()})
@@ -603,10 +502,9 @@ class BiotacDriver(LifecycleNode):
             values["payload_decode_errors"] = src.decode_errors
         elif isinstance(src, SpiFrameSource):
             values["schedule_overruns"] = src.overruns
-        if self.transport is None:
-            return Status("error", f"not open{': ' + self.last_error if self.last_error else ''}", values)
-        if self.faults.get("transport_errors") or self.faults.get("reader_errors"):
-            return Status("error", self.last_error or "transport errors", values)
+        error = self._transport_error(values)
+        if error is not None:
+            return error
         if isinstance(src, BridgeFrameSource) and (src.bridge.stats.crc_errors or src.unconfigured_frames):
             return Status("warn", "bridge frames rejected (CRC errors or unconfigured chip selects)", values)
         return Status("ok", "open", values)

@@ -29,26 +29,23 @@ or above the contact threshold).  Lifecycle as in
 
 from __future__ import annotations
 
-import threading
 import time
 from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import TransitionCallbackReturn
 
 from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
-from ..core.robot import load_robot
-from ..errors import ConfigError, TactileError, TransportError
-from ..transports import create_transport
 from .biotac_driver import Unwrapper
-from .common import Diagnostics, RateMeter, Status, declare, run_node
+from .common import RateMeter, Status, declare, run_node
 from .conversions import SkinFrame, skin_frame_to_msg
+from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from .window_node import FRAMES_TOPIC, message_kind, select_body_parts
+from .window_node import FRAMES_TOPIC
 
 __all__ = ["SkinDriver", "main"]
 
@@ -78,36 +75,22 @@ class _Cell:
     seq: dict = field(default_factory=dict)  # modality -> (Unwrapper, first unwrapped, anchor_ns)
 
 
-class SkinDriver(LifecycleNode):
+class SkinDriver(DriverBase):
     """The skin driver; ``kwargs`` go to :class:`rclpy.lifecycle.LifecycleNode`.
 
     ``transport_factory(node) -> Transport`` replaces the ``transport`` parameter's backend (tests).
     """
 
-    def __init__(self, node_name: str = "skin_driver", transport_factory=None, **kwargs) -> None:
-        super().__init__(node_name, **kwargs)
-        from std_srvs.srv import Trigger
+    reader_thread_name = "skin-reader"
+    close_on_failed_configure = False
 
-        self._transport_factory = transport_factory
-        robot_arg = declare(self, "robot", "", "robot description: shipped name or YAML path")
-        if not robot_arg:
-            raise ConfigError("parameter 'robot' is required (e.g. nao or a YAML path)", key="robot")
-        self.full_robot = load_robot(robot_arg)
-        skin_parts = [p.name for p in self.full_robot.body_parts
-                      if message_kind(self.full_robot.cell_types[p.cell_type]) == "skin"]
-        if not skin_parts:
-            raise ConfigError(f"robot {self.full_robot.name!r} has no skin-cell body parts", key="body_parts")
-        self.robot = select_body_parts(self.full_robot, declare(self, "body_parts", skin_parts, "body parts served"))
+    def __init__(self, node_name: str = "skin_driver", transport_factory=None, **kwargs) -> None:
+        super().__init__(node_name, transport_factory, **kwargs)
+        self.full_robot, self.robot = self._declare_robot("skin", "nao", "skin-cell")
         self.transport_name = declare(self, "transport", "can", "device transport", choices=TRANSPORTS)
         self.batch_s = declare(self, "batch_s", 0.05, "sample time per message and cell [s]", minimum=0.001)
-        self.stamp_source = declare(self, "stamp_source", "clock", "time stamps", choices=("clock", "device"))
-        self.resync_s = declare(self, "resync_s", 1.0, "re-anchor clock stamps beyond this drift [s] (0 = never)",
-                                minimum=0.0)
-        self.tare_on_start_s = declare(self, "tare_on_start_s", 0.5, "force baseline from the first samples [s]",
-                                       minimum=0.0)
-        self.tare_window_s = declare(self, "tare.window_s", 0.2, "samples averaged by ~/tare [s]", minimum=0.01)
-        self.contact_threshold_n = declare(self, "contact_threshold_n", self.full_robot.contact.force_threshold_n,
-                                           "~/tare is refused at or above this force [N]", minimum=0.0)
+        self._declare_stamps_and_tare(self.full_robot.contact.force_threshold_n,
+                                      "force baseline from the first samples [s]", "samples averaged by ~/tare [s]")
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
         self.tp = {
             "can": {"interface": declare(self, "can.interface", "socketcan", "python-can interface"),
@@ -134,53 +117,22 @@ class SkinDriver(LifecycleNode):
         self.frame_ids = {c.id: str(c.extra.get("frame_id", f"skin_cell_{c.id}")) for p in self.robot.body_parts
                           for c in p.cells}
         self.known = set(self.full_robot.cell_index())
-        self.transport = None
         self.decoder = None
         self.cells: dict[int, _Cell] = {}
-        self.faults: Counter[str] = Counter()
         self.other_part_frames: Counter[int] = Counter()
         self.part_publishers: dict[str, object] = {}
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.last_error: str | None = None
-        self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01), hardware_id=self.transport_name)
-        self.diagnostics.add("bus", self._bus_status)
-        for part in self.robot.body_parts:
-            self.diagnostics.add(part.name, lambda p=part: self._part_status(p))
-        if autostart:
-            if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                raise TransportError(f"configure failed: {self.last_error}")
-            if self.trigger_activate() != TransitionCallbackReturn.SUCCESS:
-                raise TransportError(f"activate failed: {self.last_error}")
+        self._start(autostart, [("bus", self._bus_status)]
+                    + [(part.name, lambda p=part: self._part_status(p)) for part in self.robot.body_parts])
 
     # ------------------------------------------------------------- lifecycle
-    def _make_transport(self):
-        if self._transport_factory is not None:
-            return self._transport_factory(self)
-        if self.transport_name == "simulated":
-            from ..sim.sources import SkinCanSource, SkinSerialSource, load_scene_for
+    def _simulated_source(self):
+        from ..sim.sources import SkinCanSource, SkinSerialSource, load_scene_for
 
-            if not self.sim_scene:
-                raise ConfigError("transport 'simulated' needs the parameter sim.scene", key="sim.scene")
-            scene = load_scene_for(self.sim_scene, self.full_robot.name)
-            source_cls = SkinCanSource if self.sim_wire == "can" else SkinSerialSource
-            return create_transport("simulated", source=source_cls(scene, speed=self.sim_speed))
-        if self.transport_name == "loopback":
-            return create_transport("loopback", timeout_s=0.05)
-        return create_transport(self.transport_name, **self.tp[self.transport_name])
+        scene = load_scene_for(self.sim_scene, self.full_robot.name)
+        source_cls = SkinCanSource if self.sim_wire == "can" else SkinSerialSource
+        return source_cls(scene, speed=self.sim_speed)
 
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        try:
-            self.transport = self._make_transport()
-            self.transport.open()
-        except TactileError as exc:
-            self.last_error = str(exc)
-            self.get_logger().error(f"cannot open {self.transport_name} transport: {exc}")
-            self.transport = None
-            return TransitionCallbackReturn.FAILURE
+    def _configured(self) -> TransitionCallbackReturn:
         self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
         self.decoder = SkinCanDecoder(known_cell_ids=self.known) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known)
@@ -194,45 +146,10 @@ class SkinDriver(LifecycleNode):
                                f"{len(self.robot.body_parts)} body parts")
         return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, daemon=True, name="skin-reader")
-        self._thread.start()
-        return super().on_activate(state)
-
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_thread()
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_thread()
-        self._close_transport()
+    def _destroy_publishers(self) -> None:
         for pub in self.part_publishers.values():
             self.destroy_lifecycle_publisher(pub)
         self.part_publishers.clear()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.close()
-        return TransitionCallbackReturn.SUCCESS
-
-    def close(self) -> None:
-        """Stop reading and close the device."""
-        self._stop_thread()
-        self._close_transport()
-
-    def _stop_thread(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-
-    def _close_transport(self) -> None:
-        if self.transport is not None:
-            try:
-                self.transport.close()
-            finally:
-                self.transport = None
 
     # ---------------------------------------------------------------- reading
     def _read(self) -> list:
@@ -250,35 +167,20 @@ class SkinDriver(LifecycleNode):
         data = self.transport.read(65536, 0.05)
         return self.decoder.feed(data) if data else []
 
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                samples = self._read()
-            except TransportError as exc:
-                self.faults["transport_errors"] += 1
-                self.last_error = str(exc)
-                self.get_logger().error(f"transport: {exc}", throttle_duration_sec=5.0)
-                self._stop.wait(0.5)
-                continue
-            except Exception as exc:  # noqa: BLE001 - report and keep the node alive
-                self.faults["reader_errors"] += 1
-                self.last_error = repr(exc)
-                self.get_logger().error(f"reader: {exc!r}", throttle_duration_sec=5.0)
-                self._stop.wait(0.5)
-                continue
-            if not samples:
-                continue
-            with self._lock:
-                touched = set()
-                for s in samples:
-                    cell = self.cells.get(s.cell_id)
-                    if cell is None:  # a configured cell of a body part this node does not serve
-                        self.other_part_frames[s.cell_id] += 1
-                        continue
-                    self._add(cell, s)
-                    touched.add(cell.cell_id)
-                for cid in touched:
-                    self._maybe_publish(self.cells[cid])
+    def _consume(self, samples: list) -> None:
+        if not samples:
+            return
+        with self._lock:
+            touched = set()
+            for s in samples:
+                cell = self.cells.get(s.cell_id)
+                if cell is None:  # a configured cell of a body part this node does not serve
+                    self.other_part_frames[s.cell_id] += 1
+                    continue
+                self._add(cell, s)
+                touched.add(cell.cell_id)
+            for cid in touched:
+                self._maybe_publish(self.cells[cid])
 
     def _time(self, cell: _Cell, s) -> int:
         """Sample time: bus time (``device``) or a sample clock per cell and modality (``clock``)."""
@@ -400,10 +302,7 @@ class SkinDriver(LifecycleNode):
 
     # ------------------------------------------------------------ diagnostics
     def _bus_status(self) -> Status:
-        values = {"transport": self.transport_name, "stamp_source": self.stamp_source}
-        if self.transport is not None:
-            values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
-        values.update(dict(self.faults))
+        values = self._transport_values({})
         unknown: dict = {}
         if self.decoder is not None:
             if isinstance(self.decoder, SkinCanDecoder):
@@ -418,10 +317,9 @@ class SkinDriver(LifecycleNode):
             values["unknown_cell_ids"] = ", ".join(f"{c} ({n} frames)" for c, n in sorted(unknown.items()))
         if self.other_part_frames:
             values["cells_of_unserved_body_parts"] = len(self.other_part_frames)
-        if self.transport is None:
-            return Status("error", f"not open{': ' + self.last_error if self.last_error else ''}", values)
-        if self.faults.get("transport_errors") or self.faults.get("reader_errors"):
-            return Status("error", self.last_error or "transport errors", values)
+        error = self._transport_error(values)
+        if error is not None:
+            return error
         if unknown:
             return Status("warn", f"frames from {len(unknown)} cell ids not in the robot description: "
                                   f"{', '.join(map(str, sorted(unknown)[:10]))}", values)
