@@ -2,6 +2,8 @@
 
 * :mod:`.graph` -- robot description + options -> :class:`~.graph.NodeSpec` list;
   read by ``launch/*.launch.py`` and by ``tactile launch``;
+* :mod:`.launch_file` -- the body of ``launch/<robot>.launch.py``
+  (imports ``launch``/``launch_ros`` only when called);
 * :mod:`.processes` -- start NodeSpecs as subprocesses (``--ros-args
   --params-file ... -r from:=to``), forward their output with a prefix, stop
   them cleanly.
