@@ -54,7 +54,7 @@ def repo_dir() -> Path:
     return _REPO
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def biotac_data_dir() -> Path:
     """The shared real BioTac recordings (tests using it are marked ``realdata``)."""
     return BIOTAC_DATA_DIR

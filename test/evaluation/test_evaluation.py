@@ -99,11 +99,10 @@ def test_drop_quantities_and_modes():
 
 
 @pytest.fixture(scope="module")
-def small_recs():
-    from conftest import BIOTAC_DATA_DIR
-    if not BIOTAC_DATA_DIR.is_dir():
+def small_recs(biotac_data_dir):
+    if not biotac_data_dir.is_dir():
         pytest.skip("real recordings not found")
-    return load_recordings(BIOTAC_DATA_DIR, trials=range(1, 5), materials=[1, 2, 3])
+    return load_recordings(biotac_data_dir, trials=range(1, 5), materials=[1, 2, 3])
 
 
 @pytest.mark.realdata
