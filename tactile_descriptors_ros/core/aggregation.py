@@ -333,15 +333,17 @@ def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[in
     for ids in groups.values():
         sigs = [cells[i] for i in ids]
         _check_channels(sigs, cell_type, ids)
+        vib = np.stack([sg.vibration for sg in sigs])
+        dfm = np.stack([sg.deformation for sg in sigs])
         feats = cell_features(
-            np.stack([sg.vibration for sg in sigs]), _stack_times([sg.vibration_t_ns for sg in sigs]),
-            np.stack([sg.deformation for sg in sigs]), _stack_times([sg.deformation_t_ns for sg in sigs]),
+            vib, _stack_times([sg.vibration_t_ns for sg in sigs]),
+            dfm, _stack_times([sg.deformation_t_ns for sg in sigs]),
             cell_type.vibration.rate_hz, cell_type.deformation.rate_hz,
         )
         group_values.append(reduce_body_part(feats, np.ones(len(ids), bool), cell_type, channels))
         group_sizes.append(len(ids))
         quality |= int(np.bitwise_or.reduce(feats.quality)) if len(ids) else 0
-        quality |= _saturation(sigs, cell_type)
+        quality |= _saturation(vib, dfm, cell_type)
     forces = [float(np.mean(np.asarray(cells[c.id].force_n, dtype=float)[np.isfinite(cells[c.id].force_n)]))
               for c in touching]
     weights = np.asarray(group_sizes, dtype=np.float64) / sum(group_sizes)
@@ -360,15 +362,17 @@ def _check_channels(sigs: list[CellSignals], cell_type: CellType, ids: list[int]
             )
 
 
-def _saturation(sigs: list[CellSignals], cell_type: CellType) -> int:
-    """SATURATED when an integer signal touches its ADC limits in over 1 % of samples."""
-    for sig in sigs:
-        for arr, mod in ((sig.vibration, cell_type.vibration), (sig.deformation, cell_type.deformation)):
-            a = np.asarray(arr)
-            if a.size and np.issubdtype(a.dtype, np.integer):
-                lo, hi = mod.adc_range
-                if np.count_nonzero((a <= lo) | (a >= hi)) > 0.01 * a.size:
-                    return int(Quality.SATURATED)
+def _saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType) -> int:
+    """SATURATED when a cell's integer signal touches its ADC limits in over 1 % of its samples.
+
+    ``vib`` and ``dfm`` are a group of cells stacked as (cell, channel, sample).
+    """
+    for a, mod in ((vib, cell_type.vibration), (dfm, cell_type.deformation)):
+        if a.size and np.issubdtype(a.dtype, np.integer):
+            lo, hi = mod.adc_range
+            at_limit = np.count_nonzero((a <= lo) | (a >= hi), axis=(1, 2))
+            if np.any(at_limit > 0.01 * a.shape[1] * a.shape[2]):
+                return int(Quality.SATURATED)
     return 0
 
 
