@@ -16,7 +16,6 @@ load time with :class:`~tactile_descriptors_ros.errors.ConfigError`.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from collections.abc import Mapping
@@ -27,6 +26,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
+from .yamlreader import YamlReader
 
 __all__ = [
     "Modality",
@@ -298,56 +298,17 @@ def load_robot(name_or_path: str | os.PathLike[str]) -> RobotDescription:
 # --------------------------------------------------------------------------- parsing
 
 
-class _Reader:
-    """Typed access to a YAML mapping that reports the dotted key on error."""
-
-    def __init__(self, data: Any, key: str, source: str) -> None:
-        if not isinstance(data, Mapping):
-            raise ConfigError(f"expected a mapping, got {type(data).__name__}", key=key or "<root>", source=source)
-        self.data = data
-        self.key = key
-        self.source = source
-        self.used: set[str] = set()
-
-    def path(self, name: str) -> str:
-        return f"{self.key}.{name}" if self.key else name
-
-    def error(self, name: str, message: str) -> ConfigError:
-        return ConfigError(message, key=self.path(name), source=self.source)
-
-    def get(self, name: str, default: Any = ..., kind: type | tuple[type, ...] | None = None) -> Any:
-        self.used.add(name)
-        if name not in self.data:
-            if default is ...:
-                raise self.error(name, "required key is missing")
-            return default
-        value = self.data[name]
-        if kind is not None and not isinstance(value, kind) or isinstance(value, bool) and kind in (int, float, (int, float)):
-            raise self.error(name, f"expected {getattr(kind, '__name__', kind)}, got {value!r}")
-        return value
-
-    def number(self, name: str, default: Any = ..., *, positive: bool = False, minimum: float | None = None) -> float:
-        value = self.get(name, default, (int, float))
-        value = float(value)
-        if not math.isfinite(value):
-            raise self.error(name, f"must be finite, got {value!r}")
-        if positive and value <= 0:
-            raise self.error(name, f"must be positive, got {value!r}")
-        if minimum is not None and value < minimum:
-            raise self.error(name, f"must be at least {minimum}, got {value!r}")
-        return value
-
-    def child(self, name: str, default: Any = ...) -> "_Reader":
-        return _Reader(self.get(name, default), self.path(name), self.source)
-
-    def check_unknown(self, extra_ok: tuple[str, ...] = ()) -> None:
-        unknown = set(self.data) - self.used - set(extra_ok)
-        if unknown:
-            name = sorted(unknown)[0]
-            raise self.error(name, f"unknown key (known here: {', '.join(sorted(self.used))})")
+def _python_kind_name(kind: Any) -> str:
+    """A kind as robot-description errors name it: ``str``, a tuple as Python prints it."""
+    return str(getattr(kind, "__name__", kind))
 
 
-def _parse_modality(r: _Reader) -> Modality:
+def _reader(data: Any, key: str, source: str) -> YamlReader:
+    """Typed access to a YAML mapping that reports the dotted key on error (:class:`ConfigError`)."""
+    return YamlReader(data, key, source, error=ConfigError, kind_name=_python_kind_name)
+
+
+def _parse_modality(r: YamlReader) -> Modality:
     bits = int(r.number("adc_bits", 12, positive=True))
     if not 1 <= bits <= 24:
         raise r.error("adc_bits", f"must be between 1 and 24, got {bits}")
@@ -357,7 +318,7 @@ def _parse_modality(r: _Reader) -> Modality:
     axes, names = [], []
     seen: set[str] = set()
     for i, raw in enumerate(raw_axes):
-        ar = _Reader(raw, r.path(f"axes[{i}]"), r.source)
+        ar = _reader(raw, r.path(f"axes[{i}]"), r.source)
         channels = ar.get("channels", kind=list)
         if not channels or not all(isinstance(c, str) and c for c in channels):
             raise ar.error("channels", "needs a non-empty list of channel names")
@@ -384,7 +345,7 @@ def _parse_modality(r: _Reader) -> Modality:
     return modality
 
 
-def _parse_cell_type(name: str, r: _Reader) -> CellType:
+def _parse_cell_type(name: str, r: YamlReader) -> CellType:
     vib = _parse_modality(r.child("vibration"))
     dfm = _parse_modality(r.child("deformation"))
     fr = r.child("force")
@@ -406,7 +367,7 @@ def _parse_cell_type(name: str, r: _Reader) -> CellType:
 
 def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
     """Validate a robot description given as parsed YAML; see :func:`load_robot`."""
-    root = _Reader(data, "", source)
+    root = _reader(data, "", source)
     rr = root.child("robot")
     name = rr.get("name", kind=str)
     description = rr.get("description", "", str)
@@ -427,7 +388,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
     seen_parts: set[str] = set()
     seen_cells: dict[int, str] = {}
     for i, raw in enumerate(raw_parts):
-        pr = _Reader(raw, f"body_parts[{i}]", source)
+        pr = _reader(raw, f"body_parts[{i}]", source)
         pname = pr.get("name", kind=str)
         if pname in seen_parts:
             raise pr.error("name", f"body part {pname!r} is listed twice")
@@ -440,7 +401,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
         if not raw_cells:
             raise pr.error("cells", f"body part {pname!r} has no cells")
         for j, rc in enumerate(raw_cells):
-            cr = _Reader(rc, pr.path(f"cells[{j}]"), source)
+            cr = _reader(rc, pr.path(f"cells[{j}]"), source)
             cid = cr.get("id", kind=int)
             if cid < 0:
                 raise cr.error("id", f"cell ids are non-negative, got {cid}")

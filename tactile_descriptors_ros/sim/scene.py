@@ -39,6 +39,7 @@ import numpy as np
 import yaml
 
 from ..core.robot import RobotDescription, config_dir, load_robot, robot_config_path
+from ..core.yamlreader import YamlReader
 from ..errors import ConfigError, SceneError
 
 __all__ = [
@@ -204,59 +205,9 @@ def load_scene(name_or_path: str | os.PathLike[str], *, seed: int | None = None)
 # --------------------------------------------------------------------------- parsing
 
 
-class _R:
-    """Typed access to a mapping that names the dotted key in every error."""
-
-    def __init__(self, data: Any, key: str, source: str) -> None:
-        if not isinstance(data, Mapping):
-            raise SceneError(f"expected a mapping, got {type(data).__name__}", key=key or "<root>", source=source)
-        self.data, self.key, self.source = data, key, source
-        self.used: set[str] = set()
-
-    def path(self, name: str) -> str:
-        return f"{self.key}.{name}" if self.key else name
-
-    def error(self, name: str, message: str) -> SceneError:
-        return SceneError(message, key=self.path(name), source=self.source)
-
-    def get(self, name: str, default: Any = ..., kind: type | tuple[type, ...] | None = None) -> Any:
-        self.used.add(name)
-        if name not in self.data:
-            if default is ...:
-                raise self.error(name, "required key is missing")
-            return default
-        value = self.data[name]
-        if kind is not None and (not isinstance(value, kind) or (isinstance(value, bool) and bool not in _tuple(kind))):
-            raise self.error(name, f"expected {_kind_name(kind)}, got {value!r}")
-        return value
-
-    def number(self, name: str, default: Any = ..., *, positive: bool = False, minimum: float | None = None) -> float:
-        value = float(self.get(name, default, (int, float)))
-        _check_number(value, self, name, positive, minimum)
-        return value
-
-    def check_unknown(self, known: set[str] | None = None) -> None:
-        allowed = self.used | (known or set())
-        unknown = sorted(set(self.data) - allowed)
-        if unknown:
-            raise self.error(unknown[0], f"unknown key (known here: {', '.join(sorted(allowed))})")
-
-
-def _tuple(kind: Any) -> tuple:
-    return kind if isinstance(kind, tuple) else (kind,)
-
-
-def _kind_name(kind: Any) -> str:
-    return " or ".join(k.__name__ for k in _tuple(kind))
-
-
-def _check_number(value: float, r: _R, name: str, positive: bool, minimum: float | None) -> None:
-    if not math.isfinite(value):
-        raise r.error(name, f"must be finite, got {value!r}")
-    if positive and value <= 0:
-        raise r.error(name, f"must be positive, got {value!r}")
-    if minimum is not None and value < minimum:
-        raise r.error(name, f"must be at least {minimum}, got {value!r}")
+def _reader(data: Any, key: str, source: str) -> YamlReader:
+    """Typed access to a mapping that names the dotted key in every error (:class:`SceneError`)."""
+    return YamlReader(data, key, source, error=SceneError)
 
 
 def _draw(spec: Any, key: str, source: str, rng: random.Random, *, numeric: bool,
@@ -343,7 +294,7 @@ def _parse_parts(spec: Any, key: str, source: str, robot: RobotDescription, rng:
     if spec == "all":
         return tuple(known)
     if isinstance(spec, Mapping):
-        r = _R(spec, key, source)
+        r = _reader(spec, key, source)
         pool = r.get("random_subset", kind=list)
         minimum = int(r.number("min", 1, positive=True))
         maximum = int(r.number("max", len(pool), positive=True))
@@ -369,7 +320,7 @@ def _parse_parts(spec: Any, key: str, source: str, robot: RobotDescription, rng:
     return tuple(spec)
 
 
-def _parse_effects(r: _R, robot: RobotDescription) -> dict[str, dict[str, Any]]:
+def _parse_effects(r: YamlReader, robot: RobotDescription) -> dict[str, dict[str, Any]]:
     raw = r.get("effects", {}, dict)
     out: dict[str, dict[str, Any]] = {}
     cell_ids = {c.id for p in robot.body_parts for c in p.cells}
@@ -378,7 +329,7 @@ def _parse_effects(r: _R, robot: RobotDescription) -> dict[str, dict[str, Any]]:
         if name not in EFFECTS:
             raise SceneError(f"unknown effect (known: {', '.join(EFFECTS)})", key=key, source=r.source)
         params = {} if params is None else params
-        er = _R(params, key, r.source)
+        er = _reader(params, key, r.source)
         merged = dict(EFFECTS[name])
         for pname, default in EFFECTS[name].items():
             if isinstance(default, float):
@@ -399,7 +350,7 @@ def _parse_effects(r: _R, robot: RobotDescription) -> dict[str, dict[str, Any]]:
         if name == "unplug":
             events = []
             for i, ev in enumerate(merged["events"]):
-                vr = _R(ev, f"{key}.events[{i}]", r.source)
+                vr = _reader(ev, f"{key}.events[{i}]", r.source)
                 cell = vr.get("cell", kind=int)
                 if cell not in cell_ids:
                     raise vr.error("cell", f"no cell with id {cell} on robot {robot.name!r}")
@@ -415,8 +366,8 @@ def _parse_effects(r: _R, robot: RobotDescription) -> dict[str, dict[str, Any]]:
 
 def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -> Scene:
     """Validate a scene given as parsed YAML and resolve its explorations; see :func:`load_scene`."""
-    root = _R(data, "", source)
-    sr = _R(root.get("scene"), "scene", source)
+    root = _reader(data, "", source)
+    sr = _reader(root.get("scene"), "scene", source)
     name = sr.get("name", kind=str)
     description = sr.get("description", "", str)
     robot_name = sr.get("robot", kind=str)
@@ -443,7 +394,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
         _validate_sensor(params, f"sensors.{ct}", source, _kind_of(robot, ct))
 
     defaults = root.get("defaults", {}, dict)
-    dr = _R(defaults, "defaults", source)
+    dr = _reader(defaults, "defaults", source)
     for k in defaults:
         if k not in _DEFAULT_KEYS:
             raise dr.error(k, f"unknown key (known here: {', '.join(sorted(_DEFAULT_KEYS))})")
@@ -457,7 +408,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
     explorations: list[Exploration] = []
     for i, entry in enumerate(raw):
         key = f"explorations[{i}]"
-        er = _R(entry, key, source)
+        er = _reader(entry, key, source)
         for k in entry:
             if k not in _EXPLORATION_KEYS:
                 raise er.error(k, f"unknown key (known here: {', '.join(sorted(_EXPLORATION_KEYS))})")
@@ -507,7 +458,7 @@ def _materials_of(entry: Mapping[str, Any], key: str, source: str) -> list[str]:
         return [m]
     ms = entry["materials"]
     if isinstance(ms, Mapping):
-        r = _R(ms, f"{key}.materials", source)
+        r = _reader(ms, f"{key}.materials", source)
         out: list[str] = []
         fitted = r.get("fitted", [], (str, list))
         if fitted == "all":
@@ -556,7 +507,7 @@ def sensor_defaults(kind: str) -> dict[str, float]:
 
 
 def _validate_sensor(params: Any, key: str, source: str, kind: str) -> None:
-    r = _R(params, key, source)
+    r = _reader(params, key, source)
     if kind not in _SENSOR_KEYS:
         raise SceneError("the simulator renders BioTac and 3-axis skin cells only", key=key, source=source)
     for k, default in _SENSOR_KEYS[kind].items():

@@ -1,0 +1,106 @@
+"""Typed access to parsed YAML that names the dotted key and the file in every error (pure, no ROS).
+
+Shared by the robot description parser (:mod:`tactile_descriptors_ros.core.robot`,
+raising :class:`~tactile_descriptors_ros.errors.ConfigError`) and the scene
+parser (:mod:`tactile_descriptors_ros.sim.scene`, raising
+:class:`~tactile_descriptors_ros.errors.SceneError`): the error class is a
+parameter of :class:`YamlReader`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
+
+from ..errors import ConfigError
+
+__all__ = ["YamlReader", "kind_names"]
+
+
+def _kinds(kind: Any) -> tuple:
+    return kind if isinstance(kind, tuple) else (kind,)
+
+
+def kind_names(kind: type | tuple[type, ...]) -> str:
+    """``int`` -> ``"int"``, ``(int, float)`` -> ``"int or float"`` (for "expected ..." messages)."""
+    return " or ".join(k.__name__ for k in _kinds(kind))
+
+
+class YamlReader:
+    """One mapping of a YAML document; remembers which keys were read.
+
+    Parameters
+    ----------
+    data : Any
+        The mapping (anything else raises ``error``).
+    key : str
+        Dotted path of ``data`` in the document (``""`` for the root).
+    source : str
+        File (or ``"<dict>"``) named in errors.
+    error : type of ConfigError
+        Class of the errors raised (``ConfigError`` or a subclass).
+    kind_name : callable
+        Names an expected type (or tuple of types) in "expected ..., got ..." errors.
+    """
+
+    def __init__(self, data: Any, key: str, source: str, *, error: type[ConfigError] = ConfigError,
+                 kind_name: Callable[[Any], str] = kind_names) -> None:
+        if not isinstance(data, Mapping):
+            raise error(f"expected a mapping, got {type(data).__name__}", key=key or "<root>", source=source)
+        self.data = data
+        self.key = key
+        self.source = source
+        self.error_class = error
+        self.kind_name = kind_name
+        self.used: set[str] = set()
+
+    def path(self, name: str) -> str:
+        """Dotted path of ``name`` below this mapping."""
+        return f"{self.key}.{name}" if self.key else name
+
+    def error(self, name: str, message: str) -> ConfigError:
+        """An error (of the reader's class) about key ``name``, to raise."""
+        return self.error_class(message, key=self.path(name), source=self.source)
+
+    def reader(self, data: Any, key: str) -> YamlReader:
+        """A reader of ``data`` at dotted path ``key``, same source and error class."""
+        return YamlReader(data, key, self.source, error=self.error_class, kind_name=self.kind_name)
+
+    def get(self, name: str, default: Any = ..., kind: type | tuple[type, ...] | None = None) -> Any:
+        """Value of ``name`` (``default`` when missing; required when no default), checked against ``kind``.
+
+        A ``bool`` is accepted only where ``bool`` is one of the kinds (YAML's
+        ``true`` is not a number).
+        """
+        self.used.add(name)
+        if name not in self.data:
+            if default is ...:
+                raise self.error(name, "required key is missing")
+            return default
+        value = self.data[name]
+        if kind is not None and (not isinstance(value, kind) or (isinstance(value, bool) and bool not in _kinds(kind))):
+            raise self.error(name, f"expected {self.kind_name(kind)}, got {value!r}")
+        return value
+
+    def number(self, name: str, default: Any = ..., *, positive: bool = False, minimum: float | None = None) -> float:
+        """A finite number (int or float, not bool) as float, optionally positive or at least ``minimum``."""
+        value = float(self.get(name, default, (int, float)))
+        if not math.isfinite(value):
+            raise self.error(name, f"must be finite, got {value!r}")
+        if positive and value <= 0:
+            raise self.error(name, f"must be positive, got {value!r}")
+        if minimum is not None and value < minimum:
+            raise self.error(name, f"must be at least {minimum}, got {value!r}")
+        return value
+
+    def child(self, name: str, default: Any = ...) -> YamlReader:
+        """A reader of the mapping under ``name``."""
+        return self.reader(self.get(name, default), self.path(name))
+
+    def check_unknown(self, known: Iterable[str] = ()) -> None:
+        """Raise on the first (sorted) key that was neither read nor is in ``known``."""
+        allowed = self.used | set(known)
+        unknown = sorted(set(self.data) - allowed)
+        if unknown:
+            raise self.error(unknown[0], f"unknown key (known here: {', '.join(sorted(allowed))})")
