@@ -298,14 +298,9 @@ def load_robot(name_or_path: str | os.PathLike[str]) -> RobotDescription:
 # --------------------------------------------------------------------------- parsing
 
 
-def _python_kind_name(kind: Any) -> str:
-    """A kind as robot-description errors name it: ``str``, a tuple as Python prints it."""
-    return str(getattr(kind, "__name__", kind))
-
-
 def _reader(data: Any, key: str, source: str) -> YamlReader:
     """Typed access to a YAML mapping that reports the dotted key on error (:class:`ConfigError`)."""
-    return YamlReader(data, key, source, error=ConfigError, kind_name=_python_kind_name)
+    return YamlReader(data, key, source, error=ConfigError)
 
 
 def _parse_modality(r: YamlReader) -> Modality:
