@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import SignalError
 from .descriptors import Quality
-from .fast import cell_quantities
+from .fast import cell_quantities, cell_quantities_reference
 from .robot import BodyPart, CellType, RobotDescription
 
 __all__ = [
@@ -183,8 +183,19 @@ def cell_features(
     # Exact fast path (core/fast.py): run sums over the held V instead of the
     # expanded series, counting ranks for integer counts, exact integer moments.
     # Equal to the straightforward computation (fast.cell_quantities_reference).
-    return CellFeatures(*cell_quantities(s, vibration_t_ns, v, deformation_t_ns,
-                                         vibration_rate_hz, deformation_rate_hz))
+    # Float signals beyond 2**500 would overflow its sums of squares: those
+    # take the reference path, which scales every signal first.
+    compute = cell_quantities_reference if _extreme(s) or _extreme(v) else cell_quantities
+    return CellFeatures(*compute(s, vibration_t_ns, v, deformation_t_ns,
+                                 vibration_rate_hz, deformation_rate_hz))
+
+
+def _extreme(a: np.ndarray) -> bool:
+    """True for float data with a finite magnitude above 2**500."""
+    if a.dtype.kind != "f" or a.size == 0 or float(np.finfo(a.dtype).max) <= 2.0**500:
+        return False  # float32 and float16 cannot get there
+    with np.errstate(invalid="ignore"):
+        return bool(np.any(np.abs(a) > 2.0**500) and np.any(np.isfinite(a) & (np.abs(a) > 2.0**500)))
 
 
 def contact_gate(force_n: np.ndarray, threshold_n: float) -> np.ndarray:

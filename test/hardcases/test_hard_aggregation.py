@@ -115,9 +115,6 @@ def test_clipped_12bit_adc_at_zero_is_saturated():
     assert d.body_parts[0].quality & Quality.SATURATED
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "core/fast.py _weighted_squares (speed kernel): squares of samples near 1e160 overflow with a "
-    "RuntimeWarning before the averaging; the reference path is fixed"))
 def test_overflowing_activity_keeps_the_robot_descriptor_finite():
     rng = np.random.default_rng(6)
     cells = {cid: _biotac(rng, dtype=np.float64) for cid in range(2)}
