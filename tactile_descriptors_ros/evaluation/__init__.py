@@ -6,10 +6,7 @@ Modules: :mod:`.windows` (trial ranges, crop rule, seeded windows),
 (one split, trial CV) and :mod:`.report` (``tactile report``).
 """
 
-from .classifiers import C_GRID, C_GRID_TEXT, SCALINGS, fit_svm, gmm_nmi, pa_curve
-from .experiments import CLASSIFIERS, EvalConfig, evaluate, trial_cv
-from .features import DESCRIPTOR_MODES, compute_bank, select_features
-from .windows import common_length_frames, draw_windows, parse_trials
+import importlib
 
 __all__ = [
     "C_GRID", "C_GRID_TEXT", "SCALINGS", "fit_svm", "gmm_nmi", "pa_curve",
@@ -17,3 +14,18 @@ __all__ = [
     "DESCRIPTOR_MODES", "compute_bank", "select_features",
     "common_length_frames", "draw_windows", "parse_trials",
 ]
+
+# Names are imported on first use (PEP 562): scikit-learn takes seconds to
+# import, and `tactile --help` or an unrelated subcommand should not pay it.
+_HOME = {
+    **dict.fromkeys(("C_GRID", "C_GRID_TEXT", "SCALINGS", "fit_svm", "gmm_nmi", "pa_curve"), "classifiers"),
+    **dict.fromkeys(("CLASSIFIERS", "EvalConfig", "evaluate", "trial_cv"), "experiments"),
+    **dict.fromkeys(("DESCRIPTOR_MODES", "compute_bank", "select_features"), "features"),
+    **dict.fromkeys(("common_length_frames", "draw_windows", "parse_trials"), "windows"),
+}
+
+
+def __getattr__(name: str):
+    if name in _HOME:
+        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -61,8 +61,7 @@ C_GRID_TEXT = "{1e-4, 5^-4, 3^-4, 2^-4, 2^-3, 2^-2, 2^-1, 1, 2, 4, 8, 16, 3^4, 5
 #: Iteration cap of libsvm per binary problem (reached only without feature scaling at large C).
 SVC_MAX_ITER: int = 10_000
 
-#: Feature scalings: none, standardise only, log1p(Activity) + standardise.
-SCALINGS: tuple[str, ...] = ("none", "standardize", "log_standardize")
+from .modes import SCALINGS  # noqa: E402  (light module, also read by the CLI)
 
 
 def make_scaler(scaling: str, labels: Sequence[str]) -> Pipeline | None:

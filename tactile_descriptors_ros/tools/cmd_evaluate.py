@@ -20,7 +20,7 @@ __all__ = ["register", "run"]
 
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
-    from ..evaluation.classifiers import SCALINGS
+    from ..evaluation.modes import SCALINGS
     from ..evaluation.features import DESCRIPTOR_MODES
 
     p = subparsers.add_parser(
