@@ -228,9 +228,22 @@ def save_json_atomic(path: str | os.PathLike[str], obj: dict) -> None:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+        _fsync_dir(path.parent)  # make the rename itself survive a power loss
     except OSError as exc:
         try:
             os.unlink(tmp)
         except OSError:
             pass
         raise ModelError(f"cannot save model to {path}: {exc}") from None
+
+
+def _fsync_dir(folder: Path) -> None:
+    """fsync a folder so a rename inside it is on disk (a no-op where folders cannot be opened)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
