@@ -11,7 +11,6 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import rclpy_examples
 
 from tactile_descriptors_ros.bags.io import BagReader, BagWriter, bag_info
 from tactile_descriptors_ros.bags.types import tactile_typestore
@@ -51,11 +50,11 @@ class _Spinner:
         self.executor.shutdown(timeout_sec=0.5)
 
 
-def test_cdr_round_trip_between_rclpy_and_rosbags():
+def test_cdr_round_trip_between_rclpy_and_rosbags(ros_message_examples):
     from rclpy.serialization import deserialize_message, serialize_message
 
     store = tactile_typestore()
-    for msg in rclpy_examples():
+    for msg in ros_message_examples:
         msgtype = f"tactile_descriptors_msgs/msg/{type(msg).__name__}"
         data = serialize_message(msg)
         decoded = store.deserialize_cdr(data, msgtype)  # rclpy -> rosbags
@@ -65,14 +64,14 @@ def test_cdr_round_trip_between_rclpy_and_rosbags():
         assert bytes(store.serialize_cdr(store.deserialize_cdr(ours, msgtype), msgtype)) == ours
 
 
-def test_bag_hashes_equal_live_rclpy_hashes(ros_context, tmp_path):
+def test_bag_hashes_equal_live_rclpy_hashes(ros_context, tmp_path, ros_message_examples):
     """The hash written into the bag is the one rclpy announces for a live publisher of the type."""
     import rclpy
 
     node = rclpy.create_node("hash_probe", context=ros_context)
     path = tmp_path / "bag"
     with BagWriter(path) as bag:
-        for i, msg in enumerate(rclpy_examples()):
+        for i, msg in enumerate(ros_message_examples):
             node.create_publisher(type(msg), f"/hash_{i}", 1)
             bag.add_topic(f"/hash_{i}", f"tactile_descriptors_msgs/msg/{type(msg).__name__}")
     info = bag_info(path)
@@ -83,7 +82,7 @@ def test_bag_hashes_equal_live_rclpy_hashes(ros_context, tmp_path):
     node.destroy_node()
 
 
-def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path):
+def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path, ros_message_examples):
     import rclpy
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from rclpy.serialization import serialize_message
@@ -93,7 +92,7 @@ def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path):
     from tactile_descriptors_ros.bags.record import record
     from tactile_descriptors_ros.bags.replay import PlayOptions, Player
 
-    examples = rclpy_examples()
+    examples = ros_message_examples
     qos = {0: qos_profile_sensor_data,
            4: QoSProfile(depth=5, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)}
     pub_node = rclpy.create_node("bag_source", context=ros_context)
