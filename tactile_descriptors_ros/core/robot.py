@@ -26,7 +26,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
-from .yamlreader import YamlReader
+from .yamlreader import YamlReader, resolve_yaml
 
 __all__ = [
     "Modality",
@@ -257,17 +257,7 @@ def config_dir() -> Path:
 
 def robot_config_path(name_or_path: str | os.PathLike[str]) -> Path:
     """Resolve ``"nao"`` to ``config/nao.yaml``; paths are returned as they are."""
-    text = os.fspath(name_or_path)
-    path = Path(text)
-    if path.suffix in {".yaml", ".yml"} or os.sep in text:
-        if not path.is_file():
-            raise ConfigError(f"robot description file not found: {path}")
-        return path
-    candidate = config_dir() / f"{text}.yaml"
-    if not candidate.is_file():
-        known = ", ".join(sorted(p.stem for p in config_dir().glob("*.yaml")))
-        raise ConfigError(f"unknown robot {text!r} (known: {known})")
-    return candidate
+    return resolve_yaml(name_or_path, config_dir(), noun="robot", file_noun="robot description file")
 
 
 def load_robot(name_or_path: str | os.PathLike[str]) -> RobotDescription:

@@ -10,12 +10,14 @@ parameter of :class:`YamlReader`.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
 
-__all__ = ["YamlReader", "kind_names"]
+__all__ = ["YamlReader", "kind_names", "resolve_yaml"]
 
 
 def _kinds(kind: Any) -> tuple:
@@ -104,3 +106,31 @@ class YamlReader:
         unknown = sorted(set(self.data) - allowed)
         if unknown:
             raise self.error(unknown[0], f"unknown key (known here: {', '.join(sorted(allowed))})")
+
+
+def resolve_yaml(name_or_path: str | os.PathLike[str], folder: Path, *, noun: str, file_noun: str,
+                 error: type[ConfigError] = ConfigError) -> Path:
+    """Resolve a shipped file's name (``"nao"`` -> ``folder/nao.yaml``) or return a YAML path as it is.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A bare name, or a path (anything ending in .yaml/.yml or holding a separator).
+    folder : Path
+        Where the shipped files live.
+    noun, file_noun : str
+        How errors name the thing (``"robot"``) and its file (``"robot description file"``).
+    error : type of ConfigError
+        Raised for a missing file or an unknown name; the message lists the known names.
+    """
+    text = os.fspath(name_or_path)
+    path = Path(text)
+    if path.suffix in {".yaml", ".yml"} or os.sep in text:
+        if not path.is_file():
+            raise error(f"{file_noun} not found: {path}")
+        return path
+    candidate = folder / f"{text}.yaml"
+    if not candidate.is_file():
+        known = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
+        raise error(f"unknown {noun} {text!r} (known: {known})")
+    return candidate

@@ -39,7 +39,7 @@ import numpy as np
 import yaml
 
 from ..core.robot import RobotDescription, config_dir, load_robot, robot_config_path
-from ..core.yamlreader import YamlReader
+from ..core.yamlreader import YamlReader, resolve_yaml
 from ..errors import ConfigError, SceneError
 
 __all__ = [
@@ -173,17 +173,7 @@ def scenes_dir() -> Path:
 
 def scene_path(name_or_path: str | os.PathLike[str]) -> Path:
     """Resolve a shipped scene name (``demo_nao``) or a path."""
-    text = os.fspath(name_or_path)
-    path = Path(text)
-    if path.suffix in {".yaml", ".yml"} or os.sep in text:
-        if not path.is_file():
-            raise SceneError(f"scene file not found: {path}")
-        return path
-    candidate = scenes_dir() / f"{text}.yaml"
-    if not candidate.is_file():
-        known = ", ".join(sorted(p.stem for p in scenes_dir().glob("*.yaml")))
-        raise SceneError(f"unknown scene {text!r} (known: {known})")
-    return candidate
+    return resolve_yaml(name_or_path, scenes_dir(), noun="scene", file_noun="scene file", error=SceneError)
 
 
 def load_scene(name_or_path: str | os.PathLike[str], *, seed: int | None = None) -> Scene:
