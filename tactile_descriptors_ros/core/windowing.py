@@ -140,14 +140,12 @@ class SampleStream:
         ok[:size] = self._ok[self._lo:self._hi]
         self._t, self._v, self._ok, self._lo, self._hi = t, v, ok, 0, size
 
-    def trim_before(self, t_ns: int, keep_one: bool = False) -> None:
-        """Drop samples older than ``t_ns`` (keeping the last one before it if asked)."""
+    def trim_before(self, t_ns: int) -> None:
+        """Drop samples older than ``t_ns``."""
         if self._hi == self._lo or t_ns <= self._t[self._lo]:
             return  # nothing older than t_ns
         t = self._t[self._lo:self._hi]
         i = int(np.searchsorted(t, t_ns, side="left"))
-        if keep_one and i > 0:
-            i -= 1
         self._lo += i
         if self._lo == self._hi:
             self._last = None
@@ -156,14 +154,11 @@ class SampleStream:
         self._lo = self._hi = 0
         self._last = None
 
-    def between(self, start_ns: int, end_ns: int, hold_before: bool = False
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Samples with ``start <= t < end`` (plus the last one before ``start`` when ``hold_before``)."""
+    def between(self, start_ns: int, end_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Samples with ``start <= t < end``."""
         t = self._t[self._lo:self._hi]
         i = int(np.searchsorted(t, start_ns, side="left"))
         j = int(np.searchsorted(t, end_ns, side="left"))
-        if hold_before and i > 0:
-            i -= 1
         sl = slice(self._lo + i, self._lo + j)
         return self._t[sl].copy(), self._v[:, sl].copy(), self._ok[sl].copy()
 
@@ -468,9 +463,8 @@ class Windower:
         if self.mode == "exploration" and self._onset_ns is not None:
             horizon = min(horizon, self._onset_ns)
         for st in self._cells.values():
-            st.vib.trim_before(horizon)
-            st.dfm.trim_before(horizon, keep_one=True)
-            st.force.trim_before(horizon)
+            for stream in (st.vib, st.dfm, st.force):
+                stream.trim_before(horizon)
 
     @property
     def exploration_id(self) -> int:
