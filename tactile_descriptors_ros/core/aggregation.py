@@ -213,12 +213,18 @@ def contact_gate(force_n: np.ndarray, threshold_n: float) -> np.ndarray:
     -------
     numpy.ndarray of bool, shape (n_cells,)
     """
-    out = []
-    for f in force_n:
+    return _mean_forces(force_n) >= threshold_n  # NaN (no finite sample) compares False
+
+
+def _mean_forces(force_n) -> np.ndarray:
+    """Mean of each cell's finite force samples; NaN for a cell with none."""
+    out = np.full(len(force_n), np.nan)
+    for k, f in enumerate(force_n):
         f = np.asarray(f, dtype=np.float64)
         f = f[np.isfinite(f)]
-        out.append(bool(f.size) and float(f.mean()) >= threshold_n)
-    return np.array(out, dtype=bool)
+        if f.size:
+            out[k] = f.mean()
+    return out
 
 
 def _axis_suffix(name: str) -> str:
@@ -328,7 +334,8 @@ def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[in
     usable = [c for c in present if cells[c.id].valid]
     if len(usable) < len(present) or any(cells[c.id].invalid_samples for c in present):
         quality |= int(Quality.INVALID)
-    gate = contact_gate([cells[c.id].force_n for c in usable], threshold_n) if usable else np.zeros(0, bool)
+    means = _mean_forces([cells[c.id].force_n for c in usable])
+    gate = means >= threshold_n  # eq. 13, as contact_gate
     touching = [c for c, g in zip(usable, gate) if g]
     if not touching:
         return BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
@@ -355,12 +362,10 @@ def _body_part_descriptor(part: BodyPart, cell_type: CellType, cells: Mapping[in
         group_sizes.append(len(ids))
         quality |= int(np.bitwise_or.reduce(feats.quality)) if len(ids) else 0
         quality |= _saturation(vib, dfm, cell_type)
-    forces = [float(np.mean(np.asarray(cells[c.id].force_n, dtype=float)[np.isfinite(cells[c.id].force_n)]))
-              for c in touching]
     weights = np.asarray(group_sizes, dtype=np.float64) / sum(group_sizes)
     values = np.sum([v * w for v, w in zip(group_values, weights)], axis=0)
     return BodyPartDescriptor(part.name, part.cell_type, values, labels, True, len(touching),
-                              len(part.cells), float(np.mean(forces)), quality)
+                              len(part.cells), float(means[gate].mean()), quality)
 
 
 def _check_channels(sigs: list[CellSignals], cell_type: CellType, ids: list[int]) -> None:
