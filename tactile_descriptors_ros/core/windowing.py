@@ -22,7 +22,9 @@ cell's buffer and is counted as a clock jump.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -115,10 +117,11 @@ class SampleStream:
         if n == 0:
             return
         hi = self._hi
-        if hi + n > self._t.shape[0]:
+        end = hi + n
+        if end > self._t.shape[0]:
             self._compact(n)
             hi = self._hi
-        end = hi + n
+            end = hi + n
         self._t[hi:end] = t_ns
         self._v[:, hi:end] = values
         self._ok[hi:end] = True if valid is None else valid
@@ -210,6 +213,7 @@ class Windower:
         self.mode = mode or w.mode
         if self.mode not in ("fixed", "exploration"):
             raise ConfigError(f"window mode must be 'fixed' or 'exploration', got {self.mode!r}", key="window.mode")
+        self._exploration = self.mode == "exploration"
         self.length_ns = _ns(length_s if length_s is not None else w.length_s, "window.length_s")
         self.hop_ns = _ns(hop_s if hop_s is not None else w.hop_s, "window.hop_s")
         self.min_ns = _ns(min_duration_s if min_duration_s is not None else w.min_duration_s,
@@ -231,6 +235,9 @@ class Windower:
         self.faults: Counter[str] = Counter()
         self._cells: dict[int, _CellState] = {}
         self._index = robot.cell_index()
+        self._shapes = {cid: (len(robot.cell_types[part.cell_type].vibration.channels),
+                              len(robot.cell_types[part.cell_type].deformation.channels))
+                        for cid, (part, _) in self._index.items()}
         self._latest_ns: int | None = None
         self._next_start_ns: int | None = None
         self._exploration_id = 0
@@ -242,15 +249,79 @@ class Windower:
     # ------------------------------------------------------------------ input
     def add(self, cell_id: int, chunk: CellChunk) -> bool:
         """Buffer one chunk; return False (and count why) when it was dropped."""
-        if cell_id not in self._index:
+        return self._ingest(cell_id, chunk, None)
+
+    def add_many(self, items: Iterable[tuple[int, CellChunk]]) -> list[bool]:
+        """Buffer several chunks in one call; the same as :meth:`add` on each, in order.
+
+        For a window node that drains several messages at once (e.g. all
+        ``SkinCellFrame`` s of a body part received in one batch): the
+        checks that :meth:`add` makes per message with small numpy calls
+        (stamps strictly increasing) are made once over all chunks, so the
+        cost per chunk is a few slice assignments into the cell's buffers.
+        Call :meth:`poll` afterwards, as after :meth:`add`.  Windows are cut
+        on sensor stamps, so in fixed mode one poll per batch gives the
+        windows a poll per chunk would (except for a first window started
+        by a cell whose data is older than the batch's first chunk); in
+        exploration mode onset and release are judged at each poll.
+
+        Parameters
+        ----------
+        items : iterable of (int, CellChunk)
+            ``(cell_id, chunk)`` pairs, in arrival order; a cell may appear
+            more than once (its chunks in time order), cells in any order.
+            A ``dict[int, CellChunk]`` 's ``.items()`` works.
+
+        Returns
+        -------
+        list of bool
+            Per item, whether it was buffered (False: dropped and counted in
+            :attr:`faults`, exactly as :meth:`add` would).
+
+        Raises
+        ------
+        SignalError
+            As :meth:`add` (e.g. vibration samples and stamps of different
+            lengths); the items before the offending one stay buffered.
+        """
+        items = list(items)
+        unsorted = self._unsorted_flags(items)
+        if unsorted is None:
+            return [self._ingest(cid, chunk, None) for cid, chunk in items]
+        return [self._ingest(cid, chunk, bad) for (cid, chunk), bad in zip(items, unsorted)]
+
+    @staticmethod
+    def _unsorted_flags(items: list[tuple[int, CellChunk]]) -> list[bool] | None:
+        """Per item, whether its vibration stamps fail to increase strictly (one pass over all)."""
+        if not items:
+            return []
+        try:
+            ts = [np.asarray(chunk.vibration_t_ns, dtype=np.int64) for _, chunk in items]
+            if any(t.ndim != 1 for t in ts):
+                return None
+            sizes = np.fromiter((t.shape[0] for t in ts), dtype=np.int64, count=len(ts))
+            bad = np.diff(np.concatenate(ts)) <= 0
+        except (TypeError, ValueError, OverflowError):
+            return None  # odd input: the per-chunk checks decide (and fault) as add does
+        ends = np.cumsum(sizes)
+        inner = ends[:-1] - 1  # the step from one chunk's last stamp to the next chunk's first
+        bad[inner[(inner >= 0) & (inner < bad.size)]] = False
+        if not bad.any():
+            return [False] * len(items)
+        hit = np.searchsorted(ends, np.flatnonzero(bad), side="right")
+        flags = np.zeros(len(items), dtype=bool)
+        flags[hit] = True
+        return flags.tolist()
+
+    def _ingest(self, cell_id: int, chunk: CellChunk, unsorted: bool | None) -> bool:
+        """:meth:`add`, with the stamp-order check already made when ``unsorted`` is not None."""
+        shape = self._shapes.get(cell_id)
+        if shape is None:
             self.faults["unknown_cell"] += 1
             return False
-        part, _ = self._index[cell_id]
-        ct = self.robot.cell_types[part.cell_type]
         vib = np.asarray(chunk.vibration)
         dfm = np.asarray(chunk.deformation)
-        if vib.ndim != 2 or vib.shape[0] != len(ct.vibration.channels) or \
-                dfm.ndim != 2 or dfm.shape[0] != len(ct.deformation.channels):
+        if vib.ndim != 2 or dfm.ndim != 2 or (vib.shape[0], dfm.shape[0]) != shape:
             self.faults["bad_shape"] += 1
             return False
         st = self._cells.get(cell_id)
@@ -273,31 +344,55 @@ class Windower:
             else:
                 self.faults["out_of_order"] += 1
                 return False
-        if np.any(np.diff(t_v) <= 0):
+        if unsorted is None:
+            unsorted = bool(np.any(np.diff(t_v) <= 0))
+        if unsorted:
             self.faults["unsorted_stamps"] += 1
             return False
         st.vib.append(t_v, vib, chunk.vibration_valid)
         t_d = np.asarray(chunk.deformation_t_ns, dtype=np.int64)
         if t_d.size:
-            keep = np.ones(t_d.size, bool)
-            if st.dfm.last_t_ns is not None:
-                keep = t_d > st.dfm.last_t_ns
-            dv = None if chunk.deformation_valid is None else np.asarray(chunk.deformation_valid)[keep]
-            st.dfm.append(t_d[keep], dfm[:, keep], dv)
+            last_d = st.dfm.last_t_ns
+            keep = None if last_d is None else t_d > last_d
+            if keep is None or keep.all():  # the usual case: no copies
+                st.dfm.append(t_d, dfm, chunk.deformation_valid)
+            else:
+                dv = None if chunk.deformation_valid is None else np.asarray(chunk.deformation_valid)[keep]
+                st.dfm.append(t_d[keep], dfm[:, keep], dv)
         t_f = np.asarray(chunk.force_t_ns, dtype=np.int64)
-        f = np.asarray(chunk.force_n, dtype=np.float64)
         if t_f.size:
-            keep = np.ones(t_f.size, bool) if st.force.last_t_ns is None else t_f > st.force.last_t_ns
-            st.force.append(t_f[keep], f[None, keep])
+            f = np.asarray(chunk.force_n, dtype=np.float64)
             last_f = st.force.last_t_ns
-            if last_f is not None:
-                _, recent, _ = st.force.between(last_f - self.smooth_ns, last_f + 1)
-                finite = recent[0][np.isfinite(recent[0])]
-                if finite.size:
-                    st.last_force_n = float(finite.mean())
+            keep = None if last_f is None else t_f > last_f
+            if keep is None or keep.all():
+                st.force.append(t_f, f[None, :])
+            else:
+                st.force.append(t_f[keep], f[None, keep])
+            if self._exploration:  # onset and release only; fixed windows never read it
+                self._update_last_force(st)
         end = int(t_v[-1])
         self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
         return True
+
+    def _update_last_force(self, st: _CellState) -> None:
+        """The cell's mean finite force over the last ``smooth_s`` (kept when none is finite)."""
+        fs = st.force
+        last_f = fs.last_t_ns
+        if last_f is None:
+            return
+        t = fs._t[fs._lo:fs._hi]
+        i = int(t.searchsorted(last_f - self.smooth_ns, side="left"))
+        j = int(t.searchsorted(last_f + 1, side="left"))
+        recent = fs._v[0, fs._lo + i:fs._lo + j]
+        if recent.size == 0:
+            return
+        total = np.add.reduce(recent)
+        if math.isfinite(total):  # all finite: the mean of the finite ones is the plain mean
+            st.last_force_n = float(total / recent.size)
+            return
+        finite = recent[np.isfinite(recent)]
+        if finite.size:
+            st.last_force_n = float(finite.mean())
 
     def _reset_time(self) -> None:
         self._next_start_ns = None
