@@ -32,6 +32,8 @@ from dataclasses import dataclass, fields
 from enum import IntEnum
 from typing import Generic, TypeVar
 
+import numpy as np
+
 from ..errors import CodecError, ConfigError
 
 __all__ = [
@@ -143,6 +145,86 @@ class SequenceTracker:
             event = SequenceEvent.LATE
         self._state[key] = (low, high, seen)
         return event
+
+    def update_many(self, codes: np.ndarray, seqs: np.ndarray, key_of: Callable[[int], Hashable]) -> np.ndarray:
+        """Register many numbers at once; the same events and counters as :meth:`update` one by one.
+
+        Keys are independent, so the numbers are taken key by key (in their
+        order within each key).  A key whose numbers all move forward (the
+        usual case: in order or with gaps) is handled with array operations;
+        any other key (duplicates, late frames, restarts) goes through
+        :meth:`update` number by number.
+
+        Parameters
+        ----------
+        codes : array of int, shape (n,)
+            An integer code of each number's key.
+        seqs : array of int, shape (n,)
+            The sequence numbers, in arrival order.
+        key_of : callable(int) -> hashable
+            The key of a code, as :meth:`update` would be given it (so the
+            two methods can be mixed on one tracker).
+
+        Returns
+        -------
+        numpy.ndarray of int8, shape (n,)
+            The :class:`SequenceEvent` of each number.
+        """
+        codes = np.asarray(codes, dtype=np.int64)
+        n = codes.size
+        events = np.empty(n, dtype=np.int8)
+        if not n:
+            return events
+        m = self.modulus
+        order = np.argsort(codes, kind="stable")
+        sc = codes[order]
+        ss = np.asarray(seqs, dtype=np.int64)[order] % m
+        starts = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
+        ends = np.r_[starts[1:], n]
+        keys = [key_of(c) for c in sc[starts].tolist()]
+        states = [self._state.get(k) for k in keys]
+        first_seq = ss[starts]
+        is_new = np.array([st is None for st in states], dtype=bool)
+        high = np.array([0 if st is None else st[1] for st in states], dtype=np.int64)
+        diff = np.empty(n, dtype=np.int64)
+        diff[1:] = (ss[1:] - ss[:-1]) % m
+        diff[starts] = (first_seq - high) % m
+        diff = np.where(diff >= m // 2, diff - m, diff)
+        diff[starts[is_new]] = 1  # placeholder, the FIRST number of a new key
+        fast = np.minimum.reduceat(diff, starts) > 0
+        base = np.where(is_new, first_seq - 1, high)
+        cs = np.cumsum(diff)
+        before = cs[starts] - diff[starts]
+        unwrapped = cs + np.repeat(base - before, ends - starts)
+        ev = np.where(diff == 1, SequenceEvent.IN_ORDER, SequenceEvent.GAP).astype(np.int8)
+        ev[starts[is_new]] = SequenceEvent.FIRST
+        in_fast = np.repeat(fast, ends - starts)
+        gap = in_fast & (diff > 1)
+        self.gaps += int(gap.sum())
+        self.lost += int((diff[gap] - 1).sum())
+        u_list = unwrapped.tolist()
+        s_list = ss.tolist()
+        ev_sorted = ev
+        w = self.window
+        for g, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+            key = keys[g]
+            if fast[g]:
+                st = states[g]
+                if st is None:
+                    low, seen = s_list[a], set()
+                else:
+                    low, _, seen = st
+                seen.update(u_list[a:b])
+                new_high = u_list[b - 1]
+                if len(seen) > 2 * w + 2:
+                    cut = new_high - w
+                    seen = {x for x in seen if x >= cut}
+                self._state[key] = (low, new_high, seen)
+            else:
+                for i in range(a, b):
+                    ev_sorted[i] = self.update(key, s_list[i])
+        events[order] = ev_sorted
+        return events
 
 
 @dataclass

@@ -25,6 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+import numpy as np
+
 from ..errors import CodecError, FrameError
 
 __all__ = [
@@ -36,9 +38,13 @@ __all__ = [
     "FORCE_N_PER_COUNT",
     "TEMPERATURE_C_PER_COUNT",
     "SkinSample",
+    "SkinSampleBatch",
+    "NO_STAMP",
     "pack_values",
     "unpack_values",
     "validate_values",
+    "pack_values_batch",
+    "unpack_values_batch",
 ]
 
 
@@ -168,3 +174,181 @@ def unpack_values(modality: int, data: bytes) -> tuple[int, ...]:
     if v == -32768:
         raise CodecError("TEMPERATURE value -32768 is reserved")
     return (v,)
+
+
+#: ``SkinSampleBatch.stamp_ns`` of a sample without a bus time stamp (``SkinSample.stamp_ns is None``).
+NO_STAMP: int = int(np.iinfo(np.int64).min)
+
+_SIZE_BY_NUMBER = np.zeros(16, dtype=np.int64)
+_COUNT_BY_NUMBER = np.zeros(16, dtype=np.int64)
+for _m in Modality:
+    _SIZE_BY_NUMBER[int(_m)] = PAYLOAD_SIZE[_m]
+    _COUNT_BY_NUMBER[int(_m)] = VALUE_COUNT[_m]
+
+
+@dataclass(frozen=True)
+class SkinSampleBatch:
+    """Many skin samples as arrays (what the batch decoders return), in arrival order.
+
+    Attributes
+    ----------
+    cell_id, modality, sequence : numpy.ndarray of int64, shape (n,)
+    values : numpy.ndarray of int64, shape (n, 3)
+        Counts; a one-value modality (proximity, temperature) uses column 0
+        and has zeros in columns 1 and 2.
+    stamp_ns : numpy.ndarray of int64, shape (n,)
+        Bus time stamps [ns]; :data:`NO_STAMP` where the bus gave none.
+    """
+
+    cell_id: np.ndarray
+    modality: np.ndarray
+    sequence: np.ndarray
+    values: np.ndarray
+    stamp_ns: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.cell_id.size)
+
+    @classmethod
+    def empty(cls) -> SkinSampleBatch:
+        """A batch of no samples."""
+        z = np.zeros(0, dtype=np.int64)
+        return cls(z, z.copy(), z.copy(), np.zeros((0, 3), dtype=np.int64), z.copy())
+
+    @classmethod
+    def from_samples(cls, samples: list[SkinSample]) -> SkinSampleBatch:
+        """Batch of :class:`SkinSample` objects (``stamp_ns=None`` becomes :data:`NO_STAMP`)."""
+        if not samples:
+            return cls.empty()
+        vals = np.zeros((len(samples), 3), dtype=np.int64)
+        for i, s in enumerate(samples):
+            vals[i, :len(s.values)] = s.values
+        return cls(np.array([s.cell_id for s in samples], dtype=np.int64),
+                   np.array([int(s.modality) for s in samples], dtype=np.int64),
+                   np.array([s.sequence for s in samples], dtype=np.int64), vals,
+                   np.array([NO_STAMP if s.stamp_ns is None else s.stamp_ns for s in samples], dtype=np.int64))
+
+    @classmethod
+    def concat(cls, parts: list[SkinSampleBatch]) -> SkinSampleBatch:
+        """The samples of several batches, in order."""
+        parts = [p for p in parts if len(p)]
+        if not parts:
+            return cls.empty()
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, f) for p in parts])
+                     for f in ("cell_id", "modality", "sequence", "values", "stamp_ns")))
+
+    def take(self, index: np.ndarray) -> SkinSampleBatch:
+        """The samples at ``index`` (a boolean mask or integer positions)."""
+        return SkinSampleBatch(self.cell_id[index], self.modality[index], self.sequence[index],
+                               self.values[index], self.stamp_ns[index])
+
+    def to_samples(self) -> list[SkinSample]:
+        """The same samples as :class:`SkinSample` objects (for tests and small batches)."""
+        counts = _COUNT_BY_NUMBER[self.modality].tolist()
+        return [SkinSample(c, Modality(m), q, tuple(v[:k]), None if t == NO_STAMP else t)
+                for c, m, q, v, k, t in zip(self.cell_id.tolist(), self.modality.tolist(), self.sequence.tolist(),
+                                            self.values.tolist(), counts, self.stamp_ns.tolist())]
+
+
+def pack_values_batch(modality: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Payload bytes of many samples at once, as :func:`pack_values` makes them one by one.
+
+    Parameters
+    ----------
+    modality : array of int, shape (n,)
+        Modality numbers (all known).
+    values : array of int, shape (n, 3)
+        Counts; columns beyond a modality's value count are ignored.
+
+    Returns
+    -------
+    numpy.ndarray of uint8, shape (n, 5)
+        Row ``i`` holds the ``PAYLOAD_SIZE`` bytes of sample ``i`` followed by zeros.
+
+    Raises
+    ------
+    CodecError
+        An unknown modality or a value outside its modality's range.
+    """
+    mod = np.asarray(modality, dtype=np.int64)
+    vals = np.asarray(values, dtype=np.int64).reshape(mod.size, 3)
+    known = (mod >= 1) & (mod <= 4)
+    if not known.all():
+        raise CodecError(f"unknown skin modality {int(mod[~known][0])}")
+    word = np.zeros(mod.size, dtype=np.int64)
+    for m in Modality:
+        sel = mod == int(m)
+        if not sel.any():
+            continue
+        v = vals[sel, :VALUE_COUNT[m]]
+        lo, hi = _RANGES[m]
+        bad = (v < lo) | (v > hi)
+        if bad.any():
+            raise CodecError(f"{m.name} value {int(v[bad][0])} outside {lo}..{hi}")
+        if m is Modality.ACCEL:
+            u = v & 0x3FF
+            word[sel] = (u[:, 0] << 20) | (u[:, 1] << 10) | u[:, 2]
+        elif m is Modality.FORCE:
+            word[sel] = (v[:, 0] << 28) | (v[:, 1] << 16) | (v[:, 2] << 4)
+        else:
+            word[sel] = v[:, 0] & 0xFFFF
+    size = _SIZE_BY_NUMBER[mod]
+    out = np.zeros((mod.size, 5), dtype=np.uint8)
+    for k in range(5):
+        shift = 8 * (size - 1 - k)
+        inside = shift >= 0
+        out[:, k] = np.where(inside, (word >> np.maximum(shift, 0)) & 0xFF, 0)
+    return out
+
+
+def unpack_values_batch(modality: np.ndarray, payload: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values of many payloads at once, validated as :func:`unpack_values` validates one.
+
+    Parameters
+    ----------
+    modality : array of int, shape (n,)
+        Known modality numbers (1..4; lengths must already be checked).
+    payload : array of uint8, shape (n, >= 5)
+        Payload bytes, left aligned (``PAYLOAD_SIZE`` bytes used per row).
+
+    Returns
+    -------
+    values : numpy.ndarray of int64, shape (n, 3)
+    ok : numpy.ndarray of bool, shape (n,)
+        False where :func:`unpack_values` raises :class:`CodecError`
+        (must-be-zero bits set, a reserved value).
+    """
+    mod = np.asarray(modality, dtype=np.int64)
+    pay = np.asarray(payload, dtype=np.int64)[:, :5]
+    size = _SIZE_BY_NUMBER[mod]
+    word = np.zeros(mod.size, dtype=np.int64)
+    for k in range(5):
+        shift = 8 * (size - 1 - k)
+        word |= np.where(shift >= 0, pay[:, k] << np.maximum(shift, 0), 0)
+    vals = np.zeros((mod.size, 3), dtype=np.int64)
+    ok = np.ones(mod.size, dtype=bool)
+    acc = mod == int(Modality.ACCEL)
+    if acc.any():
+        w = word[acc]
+        v = np.stack([(w >> 20) & 0x3FF, (w >> 10) & 0x3FF, w & 0x3FF], axis=1)
+        vals[acc] = np.where(v & 0x200, v - 1024, v)
+        ok[acc] = (w >> 30) == 0
+    frc = mod == int(Modality.FORCE)
+    if frc.any():
+        w = word[frc]
+        vals[frc] = np.stack([(w >> 28) & 0xFFF, (w >> 16) & 0xFFF, (w >> 4) & 0xFFF], axis=1)
+        ok[frc] = (w & 0xF) == 0
+    prx = mod == int(Modality.PROXIMITY)
+    if prx.any():
+        w = word[prx]
+        vals[prx, 0] = w
+        ok[prx] = w != 0xFFFF
+    tmp = mod == int(Modality.TEMPERATURE)
+    if tmp.any():
+        w = word[tmp]
+        v = np.where(w & 0x8000, w - 0x10000, w)
+        vals[tmp, 0] = v
+        ok[tmp] = v != -32768
+    return vals, ok
