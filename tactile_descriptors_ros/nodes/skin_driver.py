@@ -30,17 +30,16 @@ or above the contact threshold).  Lifecycle as in
 from __future__ import annotations
 
 import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
-from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality
+from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
-from .biotac_driver import Unwrapper
 from .common import RateMeter, Status, declare, run_node
 from .conversions import SkinFrame, skin_frame_to_msg
 from .driver_base import DriverBase
@@ -52,19 +51,65 @@ __all__ = ["SkinDriver", "main"]
 TRANSPORTS = ("can", "serial", "simulated", "loopback")
 
 
+class _Stream:
+    """Pending samples of one modality of one cell: time stamps and counts, as a list of array pieces."""
+
+    __slots__ = ("t", "v")
+
+    def __init__(self) -> None:
+        self.t: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+
+    def add(self, t_ns: np.ndarray, values: np.ndarray) -> None:
+        self.t.append(t_ns)
+        self.v.append(values)
+
+    def clear(self) -> None:
+        self.t, self.v = [], []
+
+    def __bool__(self) -> bool:
+        return bool(self.t)
+
+    def arrays(self, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """All pending samples, sorted by time (late, reordered frames back in place)."""
+        if not self.t:
+            return np.zeros(0, np.int64), np.zeros((0, width), np.int64)
+        t = np.concatenate(self.t) if len(self.t) > 1 else self.t[0]
+        v = np.concatenate(self.v) if len(self.v) > 1 else self.v[0]
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order]
+
+    def keep(self, t_ns: np.ndarray, values: np.ndarray) -> None:
+        """Replace the pending samples by these (sorted) ones."""
+        self.t, self.v = ([t_ns], [values]) if t_ns.size else ([], [])
+
+
+@dataclass
+class _Clock:
+    """Sequence unwrapping and sample clock of one cell and modality."""
+
+    last_raw: int | None = None
+    value: int = 0
+    last: int | None = None  # highest unwrapped sequence number seen
+    first: int | None = None
+    anchor: int | None = None
+
+
 @dataclass
 class _Cell:
     cell_id: int
     body_part: str
     frame_id: str
-    accel: list = field(default_factory=list)  # (t_ns, (x, y, z))
-    force: list = field(default_factory=list)  # (t_ns, (f0, f1, f2))
-    proximity: list = field(default_factory=list)  # (t_ns, p)
+    accel: _Stream = field(default_factory=_Stream)  # (t_ns, (x, y, z))
+    force: _Stream = field(default_factory=_Stream)  # (t_ns, (f0, f1, f2))
+    proximity: _Stream = field(default_factory=_Stream)  # (t_ns, p)
     temperature_c: float = float("nan")
-    recent_force: deque = field(default_factory=lambda: deque(maxlen=500))  # (t_ns, mean counts, (f0,f1,f2))
+    recent_force_t: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # last 500 force samples
+    recent_force_v: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     tare: np.ndarray = field(default_factory=lambda: np.zeros(3))
     tared: bool = False
     first_t_ns: int | None = None
+    last_accel_t_ns: int | None = None
     sequence: int = 0
     lost: int = 0
     lost_since_msg: int = 0
@@ -72,7 +117,11 @@ class _Cell:
     messages: int = 0
     last_monotonic: float | None = None
     rate: RateMeter = field(default_factory=RateMeter)
-    seq: dict = field(default_factory=dict)  # modality -> (Unwrapper, first unwrapped, anchor_ns)
+    seq: dict = field(default_factory=dict)  # modality -> _Clock
+
+
+#: Force samples kept per cell for ~/tare and the contact check.
+RECENT_FORCE = 500
 
 
 class SkinDriver(DriverBase):
@@ -137,6 +186,7 @@ class SkinDriver(DriverBase):
         self.decoder = SkinCanDecoder(known_cell_ids=self.known) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known)
         self.cells = {cid: _Cell(cid, part, self.frame_ids[cid]) for cid, part in self.served.items()}
+        self._served_ids = np.array(sorted(self.cells), dtype=np.int64)
         from tactile_descriptors_msgs.msg import SkinCellFrame
 
         for part in self.robot.body_parts:
@@ -152,86 +202,116 @@ class SkinDriver(DriverBase):
         self.part_publishers.clear()
 
     # ---------------------------------------------------------------- reading
-    def _read(self) -> list:
-        if self.is_can:
-            samples = []
-            msg = self.transport.recv(0.05)
-            while msg is not None:
-                s = self.decoder.decode(msg)
-                if s is not None:
-                    samples.append(s)
-                if len(samples) >= 5000:
-                    break
-                msg = self.transport.recv(0.0)
-            return samples
-        data = self.transport.read(65536, 0.05)
-        return self.decoder.feed(data) if data else []
+    def _read(self) -> SkinSampleBatch:
+        if self.is_can:  # every queued frame at once, decoded with array operations
+            return self.decoder.decode_frames(self.transport.recv_batch(65536, 0.05))
+        data = self.transport.read(1 << 20, 0.05)
+        if not data:
+            return SkinSampleBatch.empty()
+        return self.decoder.feed_batch(data)
 
-    def _consume(self, samples: list) -> None:
-        if not samples:
+    def _consume(self, batch: SkinSampleBatch) -> None:
+        if not len(batch):
             return
         with self._lock:
-            touched = set()
-            for s in samples:
-                cell = self.cells.get(s.cell_id)
-                if cell is None:  # a configured cell of a body part this node does not serve
-                    self.other_part_frames[s.cell_id] += 1
-                    continue
-                self._add(cell, s)
-                touched.add(cell.cell_id)
-            for cid in touched:
-                self._maybe_publish(self.cells[cid])
+            cell_ids = batch.cell_id
+            served = np.isin(cell_ids, self._served_ids)
+            if not served.all():  # configured cells of body parts this node does not serve
+                ids, counts = np.unique(cell_ids[~served], return_counts=True)
+                for c, k in zip(ids.tolist(), counts.tolist()):
+                    self.other_part_frames[c] += k
+                batch = batch.take(served)
+                if not len(batch):
+                    return
+            code = (batch.cell_id << 4) | batch.modality
+            order = np.argsort(code, kind="stable")  # per cell and modality, in arrival order
+            sc = code[order]
+            starts = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
+            ends = np.r_[starts[1:], sc.size]
+            now_ns = self.get_clock().now().nanoseconds
+            mono = time.monotonic()
+            touched = {}
+            for c, a, b in zip(sc[starts].tolist(), starts.tolist(), ends.tolist()):
+                cell = self.cells[c >> 4]
+                idx = order[a:b]
+                self._add(cell, c & 0xF, batch.sequence[idx], batch.values[idx], batch.stamp_ns[idx], now_ns)
+                cell.last_monotonic = mono
+                touched[cell.cell_id] = cell
+            for cell in touched.values():
+                self._maybe_publish(cell)
 
-    def _time(self, cell: _Cell, s) -> int:
-        """Sample time: bus time (``device``) or a sample clock per cell and modality (``clock``)."""
-        mod = int(s.modality)
+    def _times(self, cell: _Cell, mod: int, seq: np.ndarray, stamp_ns: np.ndarray, now_ns: int) -> np.ndarray:
+        """Sample times of one cell's samples of one modality (arrival order): bus time (``device``) or a
+        sample clock (``clock``); counts lost frames from the sequence numbers."""
         rate = {1: self.accel_rate_hz, 2: self.force_rate_hz, 3: self.force_rate_hz}.get(
             mod, NOMINAL_RATE_HZ[Modality(mod)])
         clk = cell.seq.get(mod)
         if clk is None:
-            clk = cell.seq[mod] = {"unwrap": Unwrapper(256), "first": None, "last": None, "anchor": None}
-        useq = clk["unwrap"](s.sequence)
-        if clk["last"] is not None and useq > clk["last"] + 1:
-            gap = useq - clk["last"] - 1
-            cell.lost += gap
-            cell.lost_since_msg += gap
-        clk["last"] = useq if clk["last"] is None else max(useq, clk["last"])
+            clk = cell.seq[mod] = _Clock()
+        raw = seq.astype(np.int64) & 0xFF
+        d = np.diff(raw, prepend=raw[0] if clk.last_raw is None else clk.last_raw) % 256
+        d = np.where(d >= 128, d - 256, d)
+        useq = (raw[0] if clk.last_raw is None else clk.value) + np.cumsum(d)
+        clk.last_raw, clk.value = int(raw[-1]), int(useq[-1])
+        # frames lost: jumps beyond the highest number seen so far
+        prev = np.maximum.accumulate(np.r_[useq[0] - 1 if clk.last is None else clk.last, useq[:-1]])
+        lost = int(np.maximum(useq - prev - 1, 0).sum())
+        cell.lost += lost
+        cell.lost_since_msg += lost
+        clk.last = int(max(prev[-1], useq[-1]))
+        t = np.empty(useq.size, np.int64)
+        need_clock = np.ones(useq.size, bool)
         if self.stamp_source == "device":
-            if s.stamp_ns is not None:
-                return int(s.stamp_ns)
-            self.faults["no_device_time"] += 1
-        now = self.get_clock().now().nanoseconds
-        if clk["anchor"] is None:
-            clk["anchor"], clk["first"] = now, useq
-        t = clk["anchor"] + int(round((useq - clk["first"]) * 1e9 / rate))
-        if self.resync_s > 0 and abs(t - now) > self.resync_s * 1e9:
-            self.faults["clock_resync"] += 1
-            clk["anchor"], clk["first"] = now, useq
-            t = now
+            has = stamp_ns != NO_STAMP
+            t[has] = stamp_ns[has]
+            need_clock = ~has
+            if need_clock.any():
+                self.faults["no_device_time"] += int(need_clock.sum())
+        if need_clock.any():
+            u = useq[need_clock]
+            if clk.anchor is None:
+                clk.anchor, clk.first = now_ns, int(u[0])
+            period_ns = 1e9 / rate
+            tc = clk.anchor + np.rint((u - clk.first) * period_ns).astype(np.int64)
+            if self.resync_s > 0:
+                limit = self.resync_s * 1e9
+                while True:
+                    far = np.flatnonzero(np.abs(tc - now_ns) > limit)
+                    if not far.size:
+                        break
+                    j = int(far[0])
+                    self.faults["clock_resync"] += 1
+                    clk.anchor, clk.first = now_ns, int(u[j])
+                    tc[j:] = now_ns + np.rint((u[j:] - u[j]) * period_ns).astype(np.int64)
+            t[need_clock] = tc
         return t
 
-    def _add(self, cell: _Cell, s) -> None:
-        t = self._time(cell, s)
-        cell.samples += 1
-        cell.rate.add()
-        cell.last_monotonic = time.monotonic()
+    def _add(self, cell: _Cell, mod: int, seq: np.ndarray, values: np.ndarray, stamp_ns: np.ndarray,
+             now_ns: int) -> None:
+        t = self._times(cell, mod, seq, stamp_ns, now_ns)
+        cell.samples += t.size
+        cell.rate.add(t.size)
         if cell.first_t_ns is None:
-            cell.first_t_ns = t
-        if s.modality == Modality.ACCEL:
-            cell.accel.append((t, s.values))
-        elif s.modality == Modality.FORCE:
-            cell.force.append((t, s.values))
-            cell.recent_force.append((t, float(np.mean(s.values)), s.values))
-        elif s.modality == Modality.PROXIMITY:
-            cell.proximity.append((t, s.values[0]))
+            cell.first_t_ns = int(t[0])
+        if mod == Modality.ACCEL:
+            cell.accel.add(t, values)
+            last = int(t[-1])
+            cell.last_accel_t_ns = last if cell.last_accel_t_ns is None else max(last, cell.last_accel_t_ns)
+        elif mod == Modality.FORCE:
+            cell.force.add(t, values)
+            cell.recent_force_t = np.concatenate([cell.recent_force_t, t])[-RECENT_FORCE:]
+            cell.recent_force_v = np.concatenate([cell.recent_force_v, values])[-RECENT_FORCE:]
+        elif mod == Modality.PROXIMITY:
+            cell.proximity.add(t, values[:, :1])
         else:
-            cell.temperature_c = s.values[0] * 0.01
+            cell.temperature_c = float(values[-1, 0]) * 0.01
 
     def _maybe_publish(self, cell: _Cell) -> None:
+        """Publish every complete ``batch_s`` of a cell's accelerometer samples, one message each."""
         if not cell.accel:
             return
         if not cell.tared and self.tare_on_start_s > 0:
-            if cell.accel[-1][0] - cell.first_t_ns >= self.tare_on_start_s * 1e9:
+            if cell.last_accel_t_ns - cell.first_t_ns >= self.tare_on_start_s * 1e9:
                 ok, why = self._tare_cell(cell, self.tare_on_start_s)
                 if not ok:
                     self.get_logger().warning(f"cell {cell.cell_id}: start tare failed: {why}", throttle_duration_sec=5.0)
@@ -240,23 +320,37 @@ class SkinDriver(DriverBase):
             cell.force.clear()
             cell.proximity.clear()
             return
-        if cell.accel[-1][0] - cell.accel[0][0] + 1e9 / self.accel_rate_hz < self.batch_s * 1e9:
+        period_ns = 1e9 / self.accel_rate_hz
+        batch_ns = self.batch_s * 1e9
+        acc_t, acc_v = cell.accel.arrays(3)
+        if acc_t[-1] - acc_t[0] + period_ns < batch_ns:
+            cell.accel.keep(acc_t, acc_v)
             return
-        acc = sorted(cell.accel, key=lambda a: a[0])  # late (reordered) frames back in time order
-        t0 = acc[0][0]
-        force = sorted(cell.force, key=lambda f: f[0])
-        prox = sorted(cell.proximity, key=lambda p: p[0])
-        if len(prox) != len(force):
-            prox = []
+        f_t, f_v = cell.force.arrays(3)
+        p_t, p_v = cell.proximity.arrays(1)
+        while acc_t.size and acc_t[-1] - acc_t[0] + period_ns >= batch_ns:
+            t0 = int(acc_t[0])
+            end = t0 + batch_ns - period_ns / 2  # this message: accelerometer samples of [t0, t0 + batch_s)
+            na = int(np.searchsorted(acc_t, end, side="right"))
+            nf = int(np.searchsorted(f_t, end, side="right"))
+            np_ = int(np.searchsorted(p_t, end, side="right"))
+            self._publish(cell, t0, acc_t[:na], acc_v[:na], f_t[:nf], f_v[:nf], p_v[:np_, 0] if np_ == nf else None)
+            acc_t, acc_v = acc_t[na:], acc_v[na:]
+            f_t, f_v, p_t, p_v = f_t[nf:], f_v[nf:], p_t[np_:], p_v[np_:]
+        cell.accel.keep(acc_t, acc_v)
+        cell.force.keep(f_t, f_v)
+        cell.proximity.keep(p_t, p_v)
+
+    def _publish(self, cell: _Cell, t0: int, acc_t: np.ndarray, acc_v: np.ndarray, f_t: np.ndarray,
+                 f_v: np.ndarray, prox: np.ndarray | None) -> None:
         frame = SkinFrame(
             stamp_ns=t0,
-            accel=np.array([v for _, v in acc], np.int16).T.reshape(3, -1),
-            accel_offset_ns=np.array([t - t0 for t, _ in acc], np.int64),
-            force=np.array([v for _, v in force], np.uint16).T.reshape(3, -1),
-            force_offset_ns=np.array([t - t0 for t, _ in force], np.int64),
-            proximity=np.array([p for _, p in prox], np.uint16),
+            accel=acc_v.T.astype(np.int16),
+            accel_offset_ns=acc_t - t0,
+            force=f_v.T.astype(np.uint16),
+            force_offset_ns=f_t - t0,
+            proximity=np.zeros(0, np.uint16) if prox is None else prox.astype(np.uint16),
             temperature_c=cell.temperature_c, sequence=cell.sequence, bad_frames=cell.lost_since_msg)
-        cell.accel, cell.force, cell.proximity = [], [], []
         cell.lost_since_msg = 0
         cell.sequence += 1
         msg = skin_frame_to_msg(frame, cell_id=cell.cell_id, body_part=cell.body_part, frame_id=cell.frame_id,
@@ -267,19 +361,19 @@ class SkinDriver(DriverBase):
 
     # ------------------------------------------------------------------- tare
     def _force_n(self, cell: _Cell) -> float | None:
-        if not cell.recent_force:
+        if not cell.recent_force_t.size:
             return None
-        last = np.array([v for _, _, v in list(cell.recent_force)[-5:]], np.float64)
+        last = cell.recent_force_v[-5:].astype(np.float64)
         return float(np.mean(last - cell.tare[None, :])) * self.force_n_per_count
 
     def _tare_cell(self, cell: _Cell, window_s: float) -> tuple[bool, str]:
-        if not cell.recent_force:
+        if not cell.recent_force_t.size:
             return False, "no force samples yet"
-        newest = cell.recent_force[-1][0]
-        vals = [v for t, _, v in cell.recent_force if t >= newest - window_s * 1e9]
+        newest = cell.recent_force_t[-1]
+        vals = cell.recent_force_v[cell.recent_force_t >= newest - window_s * 1e9]
         if len(vals) < 3:
             return False, f"only {len(vals)} force samples in the last {window_s} s"
-        cell.tare = np.mean(np.array(vals, np.float64), axis=0)
+        cell.tare = np.mean(vals.astype(np.float64), axis=0)
         cell.tared = True
         return True, "ok"
 

@@ -174,17 +174,20 @@ def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None,
 
 
 class SkinRows:
-    """Every skin sample of a chunk in time order, as arrays (cheap to build; one message is made per use).
+    """Every skin sample of a chunk in time order, as arrays (built with array operations only).
+
+    Rows are ordered by time stamp, then modality, then cell id.
 
     Attributes
     ----------
-    t_ns, cell_id, modality, sequence : numpy.ndarray, shape (n,)
+    t_ns, cell_id, modality, sequence : numpy.ndarray of int64, shape (n,)
+    value_array : numpy.ndarray of int64, shape (n, 3)
+        Counts (column 0 only for proximity and temperature, zeros beyond).
     corrupt : numpy.ndarray of bool, shape (n,)
     """
 
     def __init__(self, result: SimResult) -> None:
         parts_t, parts_c, parts_m, parts_s, parts_bad, parts_vals = [], [], [], [], [], []
-        self._values: list[np.ndarray] = []
         for cell in result.cells.values():
             if cell.kind != "skin":
                 continue
@@ -198,45 +201,46 @@ class SkinRows:
                 parts_m.append(np.full(n, mod, dtype=np.int64))
                 parts_s.append(st.seq & 0xFF)
                 parts_bad.append((st.fault == FAULT_CORRUPT).any(axis=0))
-                parts_vals.append((len(self._values), n))
-                self._values.append(st.counts.T.tolist())
+                vals = np.zeros((n, 3), dtype=np.int64)
+                vals[:, :st.counts.shape[0]] = st.counts.T
+                parts_vals.append(vals)
         if not parts_t:
-            self.t_ns = np.zeros(0, dtype=np.int64)
-            self._order = np.zeros(0, dtype=np.intp)
+            z = np.zeros(0, dtype=np.int64)
+            self.t_ns, self.cell_id, self.modality, self.sequence = z, z.copy(), z.copy(), z.copy()
+            self.value_array = np.zeros((0, 3), dtype=np.int64)
+            self.corrupt = np.zeros(0, dtype=bool)
             return
-        t = np.concatenate(parts_t)
+        t = np.concatenate(parts_t).astype(np.int64)
         c = np.concatenate(parts_c)
         m = np.concatenate(parts_m)
         order = np.lexsort((c, m, t))
         self.t_ns = t[order]
         self.cell_id = c[order]
         self.modality = m[order]
-        self.sequence = np.concatenate(parts_s)[order]
+        self.sequence = np.concatenate(parts_s).astype(np.int64)[order]
         self.corrupt = np.concatenate(parts_bad)[order]
-        block = np.concatenate([np.full(n, k) for k, (_, n) in enumerate(parts_vals)])
-        column = np.concatenate([np.arange(n) for _, n in parts_vals])
-        self._block = block[order].tolist()
-        self._column = column[order].tolist()
-        self._cells = self.cell_id.tolist()
-        self._mods = self.modality.tolist()
-        self._seqs = self.sequence.tolist()
-        self._stamps = self.t_ns.tolist()
-        from ..codecs.skin import Modality
-
-        self._modality_enum = {int(m): m for m in Modality}
+        self.value_array = np.concatenate(parts_vals)[order]
 
     def __len__(self) -> int:
         return int(self.t_ns.size)
 
+    def batch(self) -> Any:
+        """All rows as a :class:`~tactile_descriptors_ros.codecs.skin.SkinSampleBatch` (stamps = sample times)."""
+        from ..codecs.skin import SkinSampleBatch
+
+        return SkinSampleBatch(self.cell_id, self.modality, self.sequence, self.value_array, self.t_ns)
+
     def values(self, i: int) -> tuple[int, ...]:
-        return tuple(self._values[self._block[i]][self._column[i]])
+        """The counts of row ``i``."""
+        k = 3 if self.modality[i] <= 2 else 1
+        return tuple(self.value_array[i, :k].tolist())
 
     def sample(self, i: int) -> Any:
         """The :class:`~tactile_descriptors_ros.codecs.skin.SkinSample` of row ``i``."""
-        from ..codecs.skin import SkinSample
+        from ..codecs.skin import Modality, SkinSample
 
-        return SkinSample(self._cells[i], self._modality_enum[self._mods[i]], self._seqs[i],
-                          tuple(self._values[self._block[i]][self._column[i]]), self._stamps[i])
+        return SkinSample(int(self.cell_id[i]), Modality(int(self.modality[i])), int(self.sequence[i]),
+                          self.values(i), int(self.t_ns[i]))
 
 
 def skin_messages(result: SimResult) -> list[tuple[int, int, int, int, tuple[int, ...], bool]]:
@@ -247,12 +251,27 @@ def skin_messages(result: SimResult) -> list[tuple[int, int, int, int, tuple[int
 
 
 class _Chunk:
-    """Time-ordered items of one simulated chunk, made on demand."""
+    """Time-ordered items of one simulated chunk, made on demand.
 
-    def __init__(self, t_ns: np.ndarray, make: Any) -> None:
+    ``frames`` (a CAN frame array) or ``blob`` and ``offsets`` (a byte
+    stream and its frame boundaries) hold the whole chunk's wire data for
+    bulk reads.
+    """
+
+    def __init__(self, t_ns: np.ndarray, make: Any, frames: np.ndarray | None = None, blob: bytes | None = None,
+                 offsets: np.ndarray | None = None) -> None:
         self.t_ns = t_ns
         self.make = make
         self.pos = 0
+        self.frames = frames
+        self.blob = blob
+        self.offsets = offsets
+
+    def due_end(self, due_ns: int | None) -> int:
+        """Index after the last item due at ``due_ns`` (all when ``None``)."""
+        if due_ns is None:
+            return int(self.t_ns.size)
+        return max(self.pos, int(np.searchsorted(self.t_ns, due_ns, side="right")))
 
     def __len__(self) -> int:
         return int(self.t_ns.size) - self.pos
@@ -343,6 +362,18 @@ class _ByteSource(_PacedSource):
     def read(self, max_bytes: int = 4096) -> bytes:
         """Up to ``max_bytes`` of the stream (what is due, when paced)."""
         while len(self._pending) < max_bytes:
+            chunk = self._head()
+            if chunk is not None and chunk.blob is not None:  # bulk: whole frames until max_bytes is reached
+                end = chunk.due_end(self._due_ns())
+                if end <= chunk.pos:
+                    break
+                off = chunk.offsets
+                need = max_bytes - len(self._pending)
+                stop = min(end, int(np.searchsorted(off, off[chunk.pos] + need, side="left")))
+                stop = max(stop, chunk.pos + 1)
+                self._pending += chunk.blob[off[chunk.pos]:off[stop]]
+                chunk.pos = stop
+                continue
             item = self._pop_due()
             if item is None:
                 break
@@ -389,40 +420,47 @@ class BiotacBridgeSource(_ByteSource):
 
 
 class SkinSerialSource(_ByteSource):
-    """Skin cells on the serial framing (:mod:`~tactile_descriptors_ros.codecs.skin_serial`)."""
+    """Skin cells on the serial framing (:mod:`~tactile_descriptors_ros.codecs.skin_serial`).
+
+    A chunk's frames are encoded at once (:func:`~tactile_descriptors_ros.codecs.skin_serial.encode_skin_frames`,
+    byte for byte what :func:`~tactile_descriptors_ros.codecs.skin_serial.encode_skin_frame` makes);
+    a corrupt frame's last payload byte is flipped after its CRC was computed.
+    """
 
     def _convert(self, result: SimResult) -> _Chunk:
-        from ..codecs.skin_serial import encode_skin_frame
+        from ..codecs.skin_serial import encode_skin_frames
 
         rows = SkinRows(result)
-
-        def make(i: int) -> bytes:
-            frame = encode_skin_frame(rows.sample(i))
-            if rows.corrupt[i]:
-                b = bytearray(frame)
-                b[-5] ^= 0x5A  # last payload byte: the CRC no longer matches
-                frame = bytes(b)
-            return frame
-
-        return _Chunk(rows.t_ns, make)
+        blob, offsets = encode_skin_frames(rows.batch(), rows.corrupt)
+        return _Chunk(rows.t_ns, lambda i: blob[offsets[i]:offsets[i + 1]], blob=blob, offsets=offsets)
 
 
 class SkinCanSource(_PacedSource):
-    """Skin cells on the CAN layout: ``recv(timeout_s) -> can.Message | None`` for ``SimulatedTransport``."""
+    """Skin cells on the CAN layout, for ``SimulatedTransport``.
+
+    ``recv(timeout_s) -> can.Message | None`` hands out one python-can
+    message at a time, as a CAN interface does; ``recv_batch(max_frames,
+    timeout_s)`` hands out every due frame at once as a
+    :data:`~tactile_descriptors_ros.codecs.can_frames.CAN_FRAME_DTYPE` array
+    (the same frames, without a Python object per frame).  A chunk's frames
+    are encoded at once (:func:`~tactile_descriptors_ros.codecs.skin_can.encode_can_frames`);
+    a corrupt frame loses its last data byte.
+    """
 
     def _convert(self, result: SimResult) -> _Chunk:
-        from ..codecs.skin_can import encode_can_message
+        from ..codecs.can_frames import messages_from_frames
+        from ..codecs.skin_can import encode_can_frames
 
         rows = SkinRows(result)
+        frames = encode_can_frames(rows.batch(), rows.corrupt)
+        return _Chunk(rows.t_ns, lambda i: messages_from_frames(frames[i:i + 1])[0], frames=frames)
 
-        def make(i: int) -> Any:
-            msg = encode_can_message(rows.sample(i))
-            if rows.corrupt[i]:
-                msg.data = msg.data[:-1]
-                msg.dlc = len(msg.data)
-            return msg
-
-        return _Chunk(rows.t_ns, make)
+    def _wait(self, deadline: float | None) -> bool:
+        """Sleep a little before trying again; False when the time is up or the scene is over."""
+        if self._head() is None or deadline is None or time.monotonic() >= deadline:
+            return False
+        time.sleep(min(0.001, max(0.0, deadline - time.monotonic())))
+        return True
 
     def recv(self, timeout_s: float | None = None) -> Any:
         """The next due message, or None (after waiting up to ``timeout_s`` when paced)."""
@@ -431,11 +469,31 @@ class SkinCanSource(_PacedSource):
             item = self._pop_due()
             if item is not None:
                 return item[1]
-            if self._head() is None:
+            if not self._wait(deadline):
                 return None
-            if deadline is None or time.monotonic() >= deadline:
-                return None
-            time.sleep(min(0.001, max(0.0, deadline - time.monotonic())))
+
+    def recv_batch(self, max_frames: int = 65536, timeout_s: float | None = None) -> np.ndarray:
+        """Every due frame (at most ``max_frames``) as one frame array; waits up to ``timeout_s`` for the first."""
+        from ..codecs.can_frames import empty_frames
+
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        parts: list[np.ndarray] = []
+        got = 0
+        while got < max_frames:
+            chunk = self._head()
+            if chunk is None:
+                break
+            end = min(chunk.due_end(self._due_ns()), chunk.pos + max_frames - got)
+            if end <= chunk.pos:
+                if got or not self._wait(deadline):
+                    break
+                continue
+            parts.append(chunk.frames[chunk.pos:end])
+            got += end - chunk.pos
+            chunk.pos = end
+        if not parts:
+            return empty_frames(0)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 
 def biotac_spi_bus(result: SimResult, serial_prefix: str = "BTSIM") -> Any:

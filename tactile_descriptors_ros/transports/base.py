@@ -11,7 +11,9 @@ context manager.  Three kinds exist:
 * :class:`SpiTransport`: an SPI master (Cheetah, simulated):
   ``transfer(cs, data) -> bytes`` and ``transfer_batch(segments)``;
 * :class:`MessageTransport`: a message bus (CAN, simulated):
-  ``recv(timeout_s) -> can.Message | None`` and ``send(msg)``.
+  ``recv(timeout_s) -> can.Message | None``, ``send(msg)`` and
+  ``recv_batch(max_frames, timeout_s)`` (every queued frame as one numpy
+  frame array, :mod:`~..codecs.can_frames`).
 
 Device failures raise :class:`~..errors.TransportError`; a missing library or
 device raises :class:`~..errors.TransportUnavailableError`.
@@ -29,6 +31,7 @@ from ..errors import TransportError
 
 if TYPE_CHECKING:  # pragma: no cover
     import can
+    import numpy as np
 
 __all__ = ["Transport", "ByteTransport", "SpiSegment", "SpiTransport", "MessageTransport"]
 
@@ -143,3 +146,23 @@ class MessageTransport(Transport):
     @abstractmethod
     def send(self, msg: can.Message) -> None:
         """Send one message."""
+
+    def recv_batch(self, max_frames: int = 65536, timeout_s: float | None = None) -> np.ndarray:
+        """Every message available now (at most ``max_frames``) as one frame array.
+
+        Waits up to ``timeout_s`` for the first message, then drains what is
+        already queued without waiting.  Returns a
+        :data:`~..codecs.can_frames.CAN_FRAME_DTYPE` array (empty on timeout).
+        This default receives message by message; backends that can hand
+        over frames in bulk (the simulator) override it.
+        """
+        from ..codecs.can_frames import frames_from_messages
+
+        msgs = []
+        msg = self.recv(timeout_s)
+        while msg is not None:
+            msgs.append(msg)
+            if len(msgs) >= max_frames:
+                break
+            msg = self.recv(0.0)
+        return frames_from_messages(msgs)

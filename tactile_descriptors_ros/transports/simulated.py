@@ -10,6 +10,8 @@ it from hardware.  A source may provide any of:
 * ``transfer(cs, data) -> bytes``: an SPI device (e.g. :class:`~..codecs.biotac_spi.BiotacSpiResponder`
   instances behind a chip-select map, see :class:`SpiBus`);
 * ``recv(timeout_s) -> can.Message | None`` and ``send(msg)``: a CAN bus;
+  optionally ``recv_batch(max_frames, timeout_s)`` returning a CAN frame
+  array (:mod:`~..codecs.can_frames`) for bulk reads;
 * ``open()`` / ``close()``: called with the transport's.
 
 Sources should emit real wire bytes made with this package's encoders.
@@ -120,6 +122,18 @@ class SimulatedTransport(ByteTransport, SpiTransport, MessageTransport):
     def recv(self, timeout_s: float | None = None):  # type: ignore[override]
         self._require_open()
         return self._call("recv")(timeout_s)
+
+    def recv_batch(self, max_frames: int = 65536, timeout_s: float | None = None):  # type: ignore[override]
+        """Every due frame as one frame array: straight from a source with ``recv_batch`` (no python-can
+        objects), else message by message from its ``recv``."""
+        self._require_open()
+        fn = getattr(self.source, "recv_batch", None)
+        if fn is None:
+            return super().recv_batch(max_frames, timeout_s)
+        frames = fn(max_frames, timeout_s)
+        if len(frames) > max_frames:
+            raise TransportError(f"simulated source returned {len(frames)} frames for max_frames={max_frames}")
+        return frames
 
     def send(self, msg) -> None:  # type: ignore[override]
         self._require_open()

@@ -192,3 +192,70 @@ def test_scene_for_another_robot_is_refused():
     assert load_scene_for(_scene(HAND), "shadow_hand").name == "wire"
     with pytest.raises(SceneError, match="not 'nao'"):
         load_scene_for(_scene(HAND), "nao")
+
+
+def _reference_rows(scene):
+    """Per-row reference of the old source: one SkinSample per row, encoded by the per-sample encoders."""
+    from tactile_descriptors_ros.sim.sources import SkinRows
+
+    rows = SkinRows(simulate(scene))
+    return rows, [rows.sample(i) for i in range(len(rows))]
+
+
+def test_skin_can_batch_source_sends_the_per_sample_encoders_frames():
+    from tactile_descriptors_ros.codecs.can_frames import messages_from_frames
+    from tactile_descriptors_ros.codecs.skin_can import encode_can_message
+
+    scene = _scene(NAO, dropped_frames={"probability": 0.01}, corrupt_frames={"probability": 0.01})
+    rows, ref = _reference_rows(scene)
+    tr = SimulatedTransport(SkinCanSource(scene))
+    tr.open()
+    parts = []
+    while len(f := tr.recv_batch(777, 0.0)):
+        assert len(f) <= 777
+        parts.append(f)
+    frames = np.concatenate(parts)
+    assert len(frames) == len(ref) and rows.corrupt.any()
+    for s, bad, got in zip(ref, rows.corrupt, messages_from_frames(frames)):
+        want = encode_can_message(s)
+        if bad:
+            want.data = want.data[:-1]
+            want.dlc = len(want.data)
+        assert want.equals(got, timestamp_delta=0.0)
+    # the batch decoder over the frame arrays equals the per-message decoder over the messages
+    a, b = SkinCanDecoder(known_cell_ids=[15, 16, 17, 20]), SkinCanDecoder(known_cell_ids=[15, 16, 17, 20])
+    batch = [s for p in parts for s in a.decode_frames(p).to_samples()]
+    assert batch == b.decode_many(messages_from_frames(frames)) and a.stats == b.stats
+    assert a.stats.unknown_cells > 0 and a.stats.bad_length > 0
+
+
+def test_skin_serial_batch_source_sends_the_per_sample_encoders_bytes():
+    from tactile_descriptors_ros.codecs.skin_serial import encode_skin_frame
+
+    scene = _scene(NAO, corrupt_frames={"probability": 0.01})
+    rows, ref = _reference_rows(scene)
+    want = bytearray()
+    for s, bad in zip(ref, rows.corrupt):
+        f = bytearray(encode_skin_frame(s))
+        if bad:
+            f[-5] ^= 0x5A
+        want += f
+    tr = SimulatedTransport(SkinSerialSource(scene))
+    tr.open()
+    got = bytearray()
+    while chunk := tr.read(1000):
+        assert len(chunk) <= 1000
+        got += chunk
+    assert bytes(got) == bytes(want) and rows.corrupt.any()
+
+
+def test_paced_can_batches_hand_out_only_due_frames():
+    now = [0.0]
+    src = SkinCanSource(_scene(NAO), speed=1.0, clock=lambda: now[0])
+    src.open()
+    first = src.recv_batch(1 << 20, 0.0)
+    assert len(first) and (first["timestamp"] <= 0.0 + 1e-12).all()
+    now[0] += 0.1
+    more = src.recv_batch(1 << 20, 0.0)
+    assert len(more) and more["timestamp"].max() <= 0.1 + 1e-9 and more["timestamp"].min() > 0.0
+    assert not len(src.recv_batch(1 << 20, 0.0))
