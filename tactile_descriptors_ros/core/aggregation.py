@@ -25,15 +25,19 @@ A body part with no cell in contact yields zeros, ``contact = False`` and the
 
 from __future__ import annotations
 
+import functools
+import threading
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import SignalError
 from .descriptors import Quality
-from .fast import cell_quantities, cell_quantities_reference
-from .robot import BodyPart, CellType, RobotDescription
+from .fast import cell_quantities, cell_quantities_reference, exact_integer_ok
+from .robot import BodyPart, Cell, CellType, RobotDescription
 
 __all__ = [
     "CellSignals",
@@ -49,6 +53,10 @@ __all__ = [
 ]
 
 _QUANTITIES = ("A", "M", "C")
+_GAP = int(Quality.GAP)
+_INVALID = int(Quality.INVALID)
+_NO_CONTACT = int(Quality.NO_CONTACT)
+_SATURATED = int(Quality.SATURATED)
 
 
 @dataclass
@@ -402,6 +410,250 @@ def _finite_mean(a: np.ndarray, axis: int | None = None) -> np.ndarray:
     return np.sum(a / n, axis=axis)
 
 
+# ------------------------------------------------------------ batched path
+class _RobotPlan(NamedTuple):
+    """What :func:`describe_window` needs of a robot, computed once per robot object."""
+
+    index: dict[int, tuple[BodyPart, Cell]]
+    # per cell type, in the order of its first body part: (cell type, [(position, body part)])
+    types: tuple[tuple[CellType, tuple[tuple[int, BodyPart], ...]], ...]
+
+
+_PLANS: dict[int, tuple[weakref.ref, _RobotPlan]] = {}
+_PLANS_LOCK = threading.Lock()
+
+
+def _plan(robot: RobotDescription) -> _RobotPlan:
+    """The robot's cell index and body parts by cell type (cached; descriptions are immutable)."""
+    hit = _PLANS.get(id(robot))
+    if hit is not None and hit[0]() is robot:
+        return hit[1]
+    by_type: dict[str, list[tuple[int, BodyPart]]] = {}
+    for pos, part in enumerate(robot.body_parts):
+        by_type.setdefault(part.cell_type, []).append((pos, part))
+    plan = _RobotPlan(robot.cell_index(),
+                      tuple((robot.cell_types[name], tuple(parts)) for name, parts in by_type.items()))
+    with _PLANS_LOCK:
+        for key in [k for k, (ref, _) in _PLANS.items() if ref() is None]:
+            del _PLANS[key]
+        _PLANS[id(robot)] = (weakref.ref(robot), plan)
+    return plan
+
+
+@functools.lru_cache(maxsize=256)
+def _layout(cell_type: CellType, channels: str) -> tuple[str, ...]:
+    return body_part_layout(cell_type, channels)
+
+
+def _force_means(forces: list) -> np.ndarray:
+    """:func:`_mean_forces` of a list of force arrays, one pass when they are all finite and equally long."""
+    if not forces:
+        return np.zeros(0)
+    n = np.shape(forces[0])
+    if len(n) == 1 and n[0] and all(np.shape(f) == n for f in forces):
+        f2 = np.stack(forces).astype(np.float64, copy=False)
+        finite = np.isfinite(f2).all(axis=1)
+        if finite.all():
+            return np.add.reduce(f2, axis=1) / n[0]  # the mean of each row, as ndarray.mean takes it
+        out = np.add.reduce(np.where(finite[:, None], f2, 0.0), axis=1) / n[0]
+        out[~finite] = _mean_forces([f2[k] for k in np.flatnonzero(~finite)])
+        return out
+    return _mean_forces(forces)
+
+
+def _segment_sums(y: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Row sums of each segment ``y[starts[p]:starts[p] + counts[p]]``, added row after row.
+
+    The order of the additions is that of ``numpy.sum(segment, axis=0)``
+    on a segment with two or more columns (first row, then each next row),
+    so the result is identical to it.
+    """
+    out = y[starts]
+    c_max = int(counts.max())
+    if c_max > 1 and bool((counts == c_max).all()) and bool((starts == np.arange(starts.size) * c_max).all()):
+        y3 = y.reshape(starts.size, c_max, y.shape[1])
+        for j in range(1, c_max):
+            out += y3[:, j]
+        return out
+    for j in range(1, c_max):
+        sel = np.flatnonzero(counts > j)
+        out[sel] += y[starts[sel] + j]
+    return out
+
+
+def _reduce_parts(feats: CellFeatures, starts: np.ndarray, counts: np.ndarray, cell_type: CellType,
+                  channels: str) -> np.ndarray:
+    """:func:`reduce_body_part` of several body parts at once, identical values.
+
+    ``feats`` holds the cells in contact of every body part, each body
+    part's cells contiguous (``starts``, ``counts``).  Returns one row of
+    values per body part.
+    """
+    n_rows = feats.act_s.shape[0]
+    blocks = [feats.act_s, feats.act_v, feats.mob_s, feats.mob_v, feats.com_s, feats.com_v,
+              feats.lin.reshape(n_rows, -1), feats.nonlin.reshape(n_rows, -1)]
+    widths = [b.shape[1] for b in blocks]
+    edges = np.concatenate(([0], np.cumsum(widths)))
+    y = np.concatenate([np.asarray(b, dtype=np.float64) for b in blocks], axis=1)
+    y /= np.repeat(counts.astype(np.float64), counts)[:, None]  # a / n per cell, as _finite_mean
+    m = _segment_sums(y, starts, counts)
+    # numpy sums a single column pairwise, not row after row: take those sums as reduce_body_part does
+    big = np.flatnonzero(counts >= 8)
+    for b, w in enumerate(widths):
+        if w == 1 and big.size:
+            col = int(edges[b])
+            for p in big:
+                m[p, col] = np.sum(y[starts[p]:starts[p] + counts[p], col:col + 1], axis=0)[0]
+    q = [m[:, edges[k]:edges[k + 1]] for k in range(8)]
+    n_s, n_v = widths[0], widths[1]
+    s_axes = _channel_slices(cell_type.vibration.axes)
+    v_axes = _channel_slices(cell_type.deformation.axes)
+    pairs = cell_type.correlation_pairs()
+    cols: list[np.ndarray] = []
+    for s_m, v_m in ((q[0], q[1]), (q[2], q[3]), (q[4], q[5])):
+        if channels == "averaged":
+            cols += [_row_means(s_m[:, sl]) for sl in s_axes]
+            cols += [_row_means(v_m[:, sl]) for sl in v_axes]
+        else:
+            cols += [s_m, v_m]
+    for c in (q[6], q[7]):
+        c3 = c.reshape(-1, n_s, n_v)
+        if channels == "averaged":
+            cols += [_row_means(c3[:, s_axes[i], v_axes[j]]) for i, j in pairs]
+        else:
+            cols += [c3[:, s_axes[i], v_axes[j]].reshape(c3.shape[0], -1) for i, j in pairs]
+    return np.concatenate([x.reshape(x.shape[0], -1) for x in cols], axis=1)
+
+
+def _row_means(a: np.ndarray) -> np.ndarray:
+    """:func:`_finite_mean` of each row's block (all axes but the first), as a column."""
+    n = int(np.prod(a.shape[1:]))
+    if n == 0:
+        return np.zeros((a.shape[0], 1))
+    return np.sum((a / n).reshape(a.shape[0], n), axis=1)[:, None]
+
+
+def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...], cells: Mapping[int, CellSignals],
+                   threshold_n: float, channels: str) -> list[BodyPartDescriptor]:
+    """The descriptors of every body part of one cell type: one kernel call for all their cells.
+
+    Gate, saturation check and per-cell quantities run once on the cells in
+    contact of all these body parts stacked; the averages per body part are
+    then taken together (:func:`_reduce_parts`).  Values and flags are
+    identical to :func:`_body_part_descriptor` per body part: cells of
+    different window shapes or dtypes, float data and integer data too large
+    for exact moments take that path.
+    """
+    labels = _layout(cell_type, channels)
+    flags: list[int] = []
+    usable: list[list[int]] = []
+    sigs: list[CellSignals] = []
+    for _, part in parts:
+        quality = 0
+        ids = []
+        n_present = 0
+        bad = False
+        for c in part.cells:
+            sig = cells.get(c.id)
+            if sig is None:
+                continue
+            n_present += 1
+            if sig.gap:
+                quality |= _GAP
+            if sig.invalid_samples:
+                bad = True
+            if sig.valid:
+                ids.append(c.id)
+                sigs.append(sig)
+        if n_present < len(part.cells):
+            quality |= _GAP
+        if bad or len(ids) < n_present:
+            quality |= _INVALID
+        flags.append(quality)
+        usable.append(ids)
+    means = _force_means([s.force_n for s in sigs])
+    gate = means >= threshold_n
+    touching_sigs: list[CellSignals] = []
+    touching_ids: list[int] = []
+    counts = np.zeros(len(parts), dtype=np.intp)
+    k = 0
+    for p, ids in enumerate(usable):
+        for cid in ids:
+            if gate[k]:
+                touching_sigs.append(sigs[k])
+                touching_ids.append(cid)
+                counts[p] += 1
+            k += 1
+    fallback = [(pos, part) for pos, part in parts]
+    if touching_sigs:
+        _check_channels(touching_sigs, cell_type, touching_ids)
+        first = touching_sigs[0]
+        s0, v0 = np.asarray(first.vibration), np.asarray(first.deformation)
+        if all(np.shape(s.vibration) == s0.shape and np.shape(s.deformation) == v0.shape
+               and np.asarray(s.vibration).dtype == s0.dtype and np.asarray(s.deformation).dtype == v0.dtype
+               for s in touching_sigs) and s0.dtype.kind in "iu" and v0.dtype.kind in "iu":
+            fallback = []
+    if fallback and touching_sigs:
+        return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
+    out: list[BodyPartDescriptor] = []
+    if not touching_sigs:
+        for (_, part), quality in zip(parts, flags):
+            out.append(BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
+                                          len(part.cells), 0.0, quality | _NO_CONTACT))
+        return out
+    vib = np.stack([s.vibration for s in touching_sigs])
+    dfm = np.stack([s.deformation for s in touching_sigs])
+    peaks, saturated = _peaks_and_saturation(vib, dfm, cell_type)
+    n_max = max(vib.shape[2], dfm.shape[2])
+    if not (exact_integer_ok(n_max, *peaks) and float(n_max) ** 3 < 2.0**52):
+        # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
+        return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
+    feats = cell_features(vib, _stack_times([s.vibration_t_ns for s in touching_sigs]),
+                          dfm, _stack_times([s.deformation_t_ns for s in touching_sigs]),
+                          cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)
+    on = np.flatnonzero(counts)
+    starts_all = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    values = _reduce_parts(feats, starts_all[on], counts[on], cell_type, channels)
+    cell_q = feats.quality | np.where(saturated, np.uint32(_SATURATED), np.uint32(0))
+    part_q = np.bitwise_or.reduceat(cell_q, starts_all[on])
+    touching_means = means[gate]
+    row = 0
+    for p, ((_, part), quality) in enumerate(zip(parts, flags)):
+        n = int(counts[p])
+        if n == 0:
+            out.append(BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
+                                          len(part.cells), 0.0, quality | _NO_CONTACT))
+            continue
+        s0 = int(starts_all[p])
+        out.append(BodyPartDescriptor(part.name, part.cell_type, values[row].copy(), labels, True, n,
+                                      len(part.cells), float(touching_means[s0:s0 + n].mean()),
+                                      quality | int(part_q[row])))
+        row += 1
+    return out
+
+
+def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType
+                          ) -> tuple[tuple[float, float], np.ndarray]:
+    """Largest magnitudes of the stacked integer cells, and per cell whether it is
+    saturated as :func:`_saturation` judges it (over 1 % of a modality's samples at its ADC limits)."""
+    saturated = np.zeros(vib.shape[0], dtype=bool)
+    peaks = []
+    for a, mod in ((vib, cell_type.vibration), (dfm, cell_type.deformation)):
+        if a.size == 0:
+            peaks.append(0.0)
+            continue
+        a_min = a.min(axis=(1, 2))
+        a_max = a.max(axis=(1, 2))
+        peaks.append(float(max(abs(int(a_min.min())), abs(int(a_max.max())))))
+        lo, hi = mod.adc_range
+        near = np.flatnonzero((a_min <= lo) | (a_max >= hi))
+        if near.size:
+            sub = a[near]
+            at_limit = np.count_nonzero((sub <= lo) | (sub >= hi), axis=(1, 2))
+            saturated[near] |= at_limit > 0.01 * a.shape[1] * a.shape[2]
+    return (peaks[0], peaks[1]), saturated
+
+
 def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ...]
                     ) -> tuple[np.ndarray, tuple[str, ...]]:
     """Pooled descriptor: per cell type, the mean over its body parts in contact.
@@ -454,14 +706,16 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     layout = layout or robot.descriptor.layout
     channels = channels or robot.descriptor.channels
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
-    index = robot.cell_index()
-    unknown = sorted(set(cells) - set(index))
+    plan = _plan(robot)
+    unknown = sorted(c for c in cells if c not in plan.index)
     if unknown:
         raise SignalError(f"cells {unknown} are not in robot description {robot.name!r}")
-    parts = tuple(
-        _body_part_descriptor(p, robot.cell_types[p.cell_type], cells, threshold, channels)
-        for p in robot.body_parts
-    )
+    # One batch per cell type (gate, saturation, kernel), then the averages per body part.
+    by_pos: dict[int, BodyPartDescriptor] = {}
+    for cell_type, parts_of_type in plan.types:
+        descs = _describe_type(cell_type, parts_of_type, cells, threshold, channels)
+        by_pos.update(zip((pos for pos, _ in parts_of_type), descs))
+    parts = tuple(by_pos[pos] for pos in range(len(robot.body_parts)))
     if layout == "concat":
         values = np.concatenate([bp.values for bp in parts])
         labels = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
