@@ -85,17 +85,6 @@ class _Stream:
 
 
 @dataclass
-class _Clock:
-    """Sequence unwrapping and sample clock of one cell and modality."""
-
-    last_raw: int | None = None
-    value: int = 0
-    last: int | None = None  # highest unwrapped sequence number seen
-    first: int | None = None
-    anchor: int | None = None
-
-
-@dataclass
 class _Cell:
     cell_id: int
     body_part: str
@@ -117,7 +106,6 @@ class _Cell:
     messages: int = 0
     last_monotonic: float | None = None
     rate: RateMeter = field(default_factory=RateMeter)
-    seq: dict = field(default_factory=dict)  # modality -> _Clock
 
 
 #: Force samples kept per cell for ~/tare and the contact check.
@@ -179,14 +167,23 @@ class SkinDriver(DriverBase):
 
         scene = load_scene_for(self.sim_scene, self.full_robot.name)
         source_cls = SkinCanSource if self.sim_wire == "can" else SkinSerialSource
-        return source_cls(scene, speed=self.sim_speed)
+        return source_cls(scene, speed=self.sim_speed, chunk_s=2.0)
 
     def _configured(self) -> TransitionCallbackReturn:
         self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
         self.decoder = SkinCanDecoder(known_cell_ids=self.known) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known)
         self.cells = {cid: _Cell(cid, part, self.frame_ids[cid]) for cid, part in self.served.items()}
-        self._served_ids = np.array(sorted(self.cells), dtype=np.int64)
+        self._cell_list = list(self.cells.values())
+        self._cell_index = np.full(0x10000, -1, dtype=np.int64)
+        for i, cell in enumerate(self._cell_list):
+            self._cell_index[cell.cell_id] = i
+        k = 4 * len(self._cell_list)
+        self._clk = {"have": np.zeros(k, bool), "last_raw": np.zeros(k, np.int64), "value": np.zeros(k, np.int64),
+                     "last": np.zeros(k, np.int64), "anchored": np.zeros(k, bool), "anchor": np.zeros(k, np.int64),
+                     "first": np.zeros(k, np.int64)}
+        self._period_ns = 1e9 / np.array([self.accel_rate_hz, self.force_rate_hz, self.force_rate_hz,
+                                          NOMINAL_RATE_HZ[Modality.TEMPERATURE]])
         from tactile_descriptors_msgs.msg import SkinCellFrame
 
         for part in self.robot.body_parts:
@@ -214,97 +211,152 @@ class SkinDriver(DriverBase):
         if not len(batch):
             return
         with self._lock:
-            cell_ids = batch.cell_id
-            served = np.isin(cell_ids, self._served_ids)
+            ci = self._cell_index[batch.cell_id]
+            served = ci >= 0
             if not served.all():  # configured cells of body parts this node does not serve
-                ids, counts = np.unique(cell_ids[~served], return_counts=True)
+                ids, counts = np.unique(batch.cell_id[~served], return_counts=True)
                 for c, k in zip(ids.tolist(), counts.tolist()):
                     self.other_part_frames[c] += k
-                batch = batch.take(served)
+                batch, ci = batch.take(served), ci[served]
                 if not len(batch):
                     return
-            code = (batch.cell_id << 4) | batch.modality
-            order = np.argsort(code, kind="stable")  # per cell and modality, in arrival order
-            sc = code[order]
-            starts = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
-            ends = np.r_[starts[1:], sc.size]
-            now_ns = self.get_clock().now().nanoseconds
-            mono = time.monotonic()
-            touched = {}
-            for c, a, b in zip(sc[starts].tolist(), starts.tolist(), ends.tolist()):
-                cell = self.cells[c >> 4]
-                idx = order[a:b]
-                self._add(cell, c & 0xF, batch.sequence[idx], batch.values[idx], batch.stamp_ns[idx], now_ns)
-                cell.last_monotonic = mono
-                touched[cell.cell_id] = cell
-            for cell in touched.values():
-                self._maybe_publish(cell)
+            self._add_batch(ci, batch)
 
-    def _times(self, cell: _Cell, mod: int, seq: np.ndarray, stamp_ns: np.ndarray, now_ns: int) -> np.ndarray:
-        """Sample times of one cell's samples of one modality (arrival order): bus time (``device``) or a
-        sample clock (``clock``); counts lost frames from the sequence numbers."""
-        rate = {1: self.accel_rate_hz, 2: self.force_rate_hz, 3: self.force_rate_hz}.get(
-            mod, NOMINAL_RATE_HZ[Modality(mod)])
-        clk = cell.seq.get(mod)
-        if clk is None:
-            clk = cell.seq[mod] = _Clock()
-        raw = seq.astype(np.int64) & 0xFF
-        d = np.diff(raw, prepend=raw[0] if clk.last_raw is None else clk.last_raw) % 256
-        d = np.where(d >= 128, d - 256, d)
-        useq = (raw[0] if clk.last_raw is None else clk.value) + np.cumsum(d)
-        clk.last_raw, clk.value = int(raw[-1]), int(useq[-1])
+    def _add_batch(self, ci: np.ndarray, batch: SkinSampleBatch) -> None:
+        """Add a batch of served samples: sequence unwrapping, lost frames and sample times for every
+        (cell, modality) at once with array operations, then the samples to each cell's buffers."""
+        key = ci * 4 + (batch.modality - 1)
+        order = np.argsort(key, kind="stable")  # per cell and modality, in arrival order
+        ks = key[order]
+        n = ks.size
+        starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+        ends = np.r_[starts[1:], n]
+        lens = ends - starts
+        gk = ks[starts]
+        clk = self._clk
+        have = clk["have"][gk]
+        # unwrap the 8-bit sequence numbers (as biotac_driver.Unwrapper does, per cell and modality)
+        raw = batch.sequence[order] & 0xFF
+        d = np.empty(n, np.int64)
+        d[1:] = raw[1:] - raw[:-1]
+        d[starts] = raw[starts] - np.where(have, clk["last_raw"][gk], raw[starts])
+        d %= 256
+        d[d >= 128] -= 256
+        cs = np.cumsum(d)
+        base = np.where(have, clk["value"][gk], raw[starts]) - (cs[starts] - d[starts])
+        useq = cs + np.repeat(base, lens)
         # frames lost: jumps beyond the highest number seen so far
-        prev = np.maximum.accumulate(np.r_[useq[0] - 1 if clk.last is None else clk.last, useq[:-1]])
-        lost = int(np.maximum(useq - prev - 1, 0).sum())
-        cell.lost += lost
-        cell.lost_since_msg += lost
-        clk.last = int(max(prev[-1], useq[-1]))
-        t = np.empty(useq.size, np.int64)
-        need_clock = np.ones(useq.size, bool)
+        prev = np.empty(n, np.int64)
+        prev[1:] = useq[:-1]
+        prev[starts] = np.where(have, clk["last"][gk], useq[starts] - 1)
+        offset = np.repeat(np.arange(gk.size, dtype=np.int64) << 42, lens)
+        highest = np.maximum.accumulate(prev + offset) - offset
+        lost = np.maximum(useq - highest - 1, 0)
+        clk["have"][gk] = True
+        clk["last_raw"][gk] = raw[ends - 1]
+        clk["value"][gk] = useq[ends - 1]
+        clk["last"][gk] = np.maximum(highest[ends - 1], useq[ends - 1])
+        # sample times
+        t = np.empty(n, np.int64)
+        need = np.ones(n, bool)
         if self.stamp_source == "device":
-            has = stamp_ns != NO_STAMP
-            t[has] = stamp_ns[has]
-            need_clock = ~has
-            if need_clock.any():
-                self.faults["no_device_time"] += int(need_clock.sum())
-        if need_clock.any():
-            u = useq[need_clock]
-            if clk.anchor is None:
-                clk.anchor, clk.first = now_ns, int(u[0])
-            period_ns = 1e9 / rate
-            tc = clk.anchor + np.rint((u - clk.first) * period_ns).astype(np.int64)
-            if self.resync_s > 0:
-                limit = self.resync_s * 1e9
-                while True:
-                    far = np.flatnonzero(np.abs(tc - now_ns) > limit)
-                    if not far.size:
-                        break
-                    j = int(far[0])
-                    self.faults["clock_resync"] += 1
-                    clk.anchor, clk.first = now_ns, int(u[j])
-                    tc[j:] = now_ns + np.rint((u[j:] - u[j]) * period_ns).astype(np.int64)
-            t[need_clock] = tc
-        return t
+            stamp = batch.stamp_ns[order]
+            need = stamp == NO_STAMP
+            t[~need] = stamp[~need]
+            if need.any():
+                self.faults["no_device_time"] += int(need.sum())
+        if need.any():
+            group = np.repeat(np.arange(gk.size), lens)
+            if self.stamp_source == "device":
+                need = self._extrapolate_device_times(t, need, useq, gk, group, starts, ends)
+            if need.any():
+                t[need] = self._clock_times(gk, group[need], useq[need])
+            if self.stamp_source == "device":  # missing bus times later on extrapolate from the last known one
+                stamped = np.flatnonzero(~need)
+                if stamped.size:
+                    last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
+                    ok = (last >= starts) & (last >= 0)
+                    self._clk["anchored"][gk[ok]] = True
+                    self._clk["anchor"][gk[ok]] = t[last[ok]]
+                    self._clk["first"][gk[ok]] = useq[last[ok]]
+        # into the cells' buffers
+        vals = batch.values[order]
+        cell_of = gk // 4
+        mono = time.monotonic()
+        lost_per_group = np.add.reduceat(lost, starts)
+        touched: dict[int, _Cell] = {}
+        for g, (c, m, a, b, nl) in enumerate(zip(cell_of.tolist(), (gk % 4 + 1).tolist(), starts.tolist(),
+                                                 ends.tolist(), lost_per_group.tolist())):
+            cell = self._cell_list[c]
+            tt, vv = t[a:b], vals[a:b]
+            cell.lost += nl
+            cell.lost_since_msg += nl
+            cell.samples += b - a
+            cell.rate.add(b - a)
+            cell.last_monotonic = mono
+            if cell.first_t_ns is None:
+                cell.first_t_ns = int(tt[0])
+            if m == Modality.ACCEL:
+                cell.accel.add(tt, vv)
+                last = int(tt.max())
+                cell.last_accel_t_ns = last if cell.last_accel_t_ns is None else max(last, cell.last_accel_t_ns)
+            elif m == Modality.FORCE:
+                cell.force.add(tt, vv)
+                cell.recent_force_t = np.concatenate([cell.recent_force_t, tt])[-RECENT_FORCE:]
+                cell.recent_force_v = np.concatenate([cell.recent_force_v, vv])[-RECENT_FORCE:]
+            elif m == Modality.PROXIMITY:
+                cell.proximity.add(tt, vv[:, :1])
+            else:
+                cell.temperature_c = float(vv[-1, 0]) * 0.01
+            touched[c] = cell
+        for cell in touched.values():
+            self._maybe_publish(cell)
 
-    def _add(self, cell: _Cell, mod: int, seq: np.ndarray, values: np.ndarray, stamp_ns: np.ndarray,
-             now_ns: int) -> None:
-        t = self._times(cell, mod, seq, stamp_ns, now_ns)
-        cell.samples += t.size
-        cell.rate.add(t.size)
-        if cell.first_t_ns is None:
-            cell.first_t_ns = int(t[0])
-        if mod == Modality.ACCEL:
-            cell.accel.add(t, values)
-            last = int(t[-1])
-            cell.last_accel_t_ns = last if cell.last_accel_t_ns is None else max(last, cell.last_accel_t_ns)
-        elif mod == Modality.FORCE:
-            cell.force.add(t, values)
-            cell.recent_force_t = np.concatenate([cell.recent_force_t, t])[-RECENT_FORCE:]
-            cell.recent_force_v = np.concatenate([cell.recent_force_v, values])[-RECENT_FORCE:]
-        elif mod == Modality.PROXIMITY:
-            cell.proximity.add(t, values[:, :1])
-        else:
-            cell.temperature_c = float(values[-1, 0]) * 0.01
+    def _extrapolate_device_times(self, t: np.ndarray, need: np.ndarray, useq: np.ndarray, gk: np.ndarray,
+                                  group: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """``device`` stamps: a sample without a bus time (python-can's timestamp 0.0) gets the time of the
+        nearest stamped sample of its cell and modality in this batch plus the sequence distance times the
+        nominal period.  Fills ``t`` in place; returns the samples still without a time."""
+        n = t.size
+        pos = np.arange(n)
+        stamped = np.where(~need, pos, -1)
+        offset = np.repeat(starts, ends - starts)
+        before = np.maximum.accumulate(stamped)  # nearest stamped sample at or before, any group
+        after = np.minimum.accumulate(np.where(~need, pos, n)[::-1])[::-1]  # nearest at or after
+        ref = np.where(before >= offset, before, np.where(after < np.repeat(ends, ends - starts), after, -1))
+        fill = need & (ref >= 0)
+        if fill.any():
+            r = ref[fill]
+            period = self._period_ns[gk[group[fill]] % 4]
+            t[fill] = t[r] + np.rint((useq[fill] - useq[r]) * period).astype(np.int64)
+        return need & ~fill
+
+    def _clock_times(self, gk: np.ndarray, group: np.ndarray, useq: np.ndarray) -> np.ndarray:
+        """Sample-clock times (``clock`` stamps, or ``device`` samples without a bus time): per cell and
+        modality the node clock at its first sample plus sequence number times the nominal period,
+        re-anchored when it drifts from the node clock by more than ``resync_s``."""
+        clk = self._clk
+        now = self.get_clock().now().nanoseconds
+        keys = gk[group]
+        first_of = np.r_[True, group[1:] != group[:-1]]
+        new = first_of & ~clk["anchored"][keys]
+        clk["anchor"][keys[new]] = now
+        clk["first"][keys[new]] = useq[new]
+        clk["anchored"][keys[new]] = True
+        period = self._period_ns[keys % 4]
+        t = clk["anchor"][keys] + np.rint((useq - clk["first"][keys]) * period).astype(np.int64)
+        if self.resync_s > 0:
+            limit = self.resync_s * 1e9
+            far = np.abs(t - now) > limit
+            for k in np.unique(keys[far]).tolist():  # rare: walk that cell and modality sample by sample
+                for i in np.flatnonzero(keys == k).tolist():
+                    ti = int(clk["anchor"][k]) + int(round((int(useq[i]) - int(clk["first"][k])) * period[i]))
+                    if abs(ti - now) > limit:
+                        self.faults["clock_resync"] += 1
+                        clk["anchor"][k], clk["first"][k] = now, useq[i]
+                        ti = now
+                    t[i] = ti
+        return t
 
     def _maybe_publish(self, cell: _Cell) -> None:
         """Publish every complete ``batch_s`` of a cell's accelerometer samples, one message each."""
