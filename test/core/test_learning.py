@@ -55,6 +55,57 @@ def test_pa_rejects_bad_input():
         pa.partial_fit(np.array([1.0, np.nan, 0.0]), "a")
 
 
+def test_max_loss_update_learns_from_a_small_margin_and_prediction_update_does_not():
+    x = np.array([1.0, 0.0])  # with bias: [1, 0, 1], ||x||^2 = 2
+    models = {u: PassiveAggressive(2, update=u) for u in ("prediction", "max_loss")}
+    for pa in models.values():
+        pa.add_class("a")
+        pa.add_class("b")
+        pa.weights[0] = [0.1, 0.0, 0.0]  # "a" wins on x by a margin of 0.1 < 1
+    assert models["prediction"].partial_fit(x, "a") == 0.0
+    np.testing.assert_allclose(models["prediction"].weights[0], [0.1, 0, 0])
+    loss = models["max_loss"].partial_fit(x, "a")
+    assert loss == pytest.approx(0.9)
+    theta = 0.9 / (2 * 2.0)
+    np.testing.assert_allclose(models["max_loss"].weights[0], [0.1 + theta, 0, theta])
+    np.testing.assert_allclose(models["max_loss"].weights[1], [-theta, 0, -theta])
+    assert models["max_loss"].mistakes == 0  # learning without a mistake
+    with pytest.raises(SignalError):
+        PassiveAggressive(2, update="max-loss")
+
+
+@pytest.mark.parametrize("update", ["prediction", "max_loss"])
+def test_averaged_weights_are_the_mean_of_every_snapshot(update):
+    rng = np.random.default_rng(3)
+    pa = PassiveAggressive(4, eta=0.5, update=update, average=True)
+    snapshots = []
+    for t in range(60):
+        k = int(rng.integers(0, 3 if t < 30 else 4))  # a class appears half way
+        pa.partial_fit(rng.normal(size=4) + k, f"c{k}")
+        w = np.zeros((4, 5))
+        w[: len(pa.classes)] = pa.weights
+        snapshots.append(w)
+    expected = np.mean(snapshots, axis=0)[: len(pa.classes)]
+    np.testing.assert_allclose(pa.decision_weights, expected, atol=1e-12)
+    x = rng.normal(size=4)
+    np.testing.assert_allclose(pa.scores(x), expected @ np.append(x, 1.0), atol=1e-12)
+    back = PassiveAggressive.from_state(json.loads(json.dumps(pa.state())))
+    assert (back.update, back.average) == (update, True)
+    np.testing.assert_allclose(back.decision_weights, pa.decision_weights)
+
+
+def test_model_state_without_the_new_options_loads_as_the_papers_pa():
+    pa = PassiveAggressive(2)
+    pa.partial_fit(np.array([1.0, 0.0]), "a")
+    pa.partial_fit(np.array([0.0, 1.0]), "b")
+    state = pa.state()
+    for key in ("update", "average", "weighted_sum"):
+        del state[key]
+    back = PassiveAggressive.from_state(state)
+    assert (back.update, back.average) == ("prediction", False)
+    np.testing.assert_allclose(back.weights, pa.weights)
+
+
 def test_running_standardizer_equals_batch_statistics():
     rng = np.random.default_rng(1)
     x = rng.normal(5, 3, size=(500, 4))
