@@ -192,7 +192,8 @@ class PaCurve:
 
 def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, X_test: np.ndarray,
              y_test: np.ndarray, labels: Sequence[str], *, n_max: int = 30, orders: int = 5, seed: int = 0,
-             scaling: str = "log_standardize", eta: float = 1.0) -> PaCurve:
+             scaling: str = "log_standardize", eta: float = 1.0, update: str = "prediction",
+             average: bool = False) -> PaCurve:
     """Test accuracy of online PA-I after 1..n_max training trials per class.
 
     Each round presents one new training trial of every class (classes in a
@@ -200,7 +201,9 @@ def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, 
     (prediction-based update): the running feature statistics are updated
     with the sample (:meth:`OnlineClassifier.observe`) and the model learns
     it.  After every round the test set is scored.  The curve is averaged
-    over ``orders`` random presentation orders.
+    over ``orders`` random presentation orders.  ``update`` and ``average``
+    choose the PA variant (:class:`~..core.learning.PassiveAggressive`;
+    the defaults are the paper's eq. 30-32).
     """
     if scaling not in SCALINGS:
         raise ConfigError(f"unknown scaling {scaling!r}; choose from {SCALINGS}", key="scaling")
@@ -217,7 +220,7 @@ def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, 
     final_pred = None
     for o in range(orders):
         clf = OnlineClassifier(labels, eta=eta, log_activity=scaling == "log_standardize",
-                               standardize=scaling != "none")
+                               standardize=scaling != "none", update=update, average=average)
         trial_order = {c: rng.permutation(per_class[c])[:n] for c in classes}
         for k in range(n):
             for c in rng.permutation(classes):

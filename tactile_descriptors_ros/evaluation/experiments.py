@@ -19,7 +19,7 @@ from sklearn.metrics import confusion_matrix
 from ..datasets.biotac_slide import MATERIAL_NAMES, BiotacRecording
 from ..errors import ConfigError
 from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
-from .features import compute_bank, mode_groups, select_features
+from .features import DEFAULT_MODE, compute_bank, mode_groups, select_features
 from .windows import common_length_frames, draw_windows, window_frames
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "evaluate", "trial_folds", "trial_cv", "descriptor_seconds"]
@@ -43,7 +43,8 @@ class EvalConfig:
         Test window (defaults to ``window``): the exploration-time protocol
         trains on one length and tests on others.
     mode : str
-        Descriptor mode (:data:`~.features.DESCRIPTOR_MODES`, or ``averaged``).
+        Descriptor mode (:data:`~.features.DESCRIPTOR_MODES`, or ``averaged``);
+        default :data:`~.features.DEFAULT_MODE`.
     classifiers : tuple of str
     seed : int
         Window positions and CV shuffles.
@@ -52,13 +53,21 @@ class EvalConfig:
     scaling : str
         ``none``, ``standardize`` or ``log_standardize``.
     gate : bool
-        Contact gate on (eq. 16).
+        Contact gate on (eq. 16).  Off by default here: every recorded trial
+        is a slide in contact, and the gate, fed by PDC that the recording
+        setup tared and clipped at 0, misfires on soft materials (35 of 120
+        windows of material 16 read < 0.02 N); a gated window becomes zeros
+        and costs accuracy (docs/results.md, ablation "with contact gate").
     drop : tuple of str
         Quantities left out (ablation).
     cv_folds, cv_repeats : int
         SVM C selection (5 x 10 in the paper).
     pa_max, pa_orders : int
         PA curve length (training trials per class) and presentation orders.
+    pa_update, pa_average
+        PA variant (:class:`~..core.learning.PassiveAggressive`): default the
+        max-loss update with averaged weights; ``"prediction"`` and ``False``
+        are the paper's eq. 30-32.
     jobs : int
     cache_dir : str or None
     progress : bool
@@ -66,18 +75,20 @@ class EvalConfig:
 
     window: str = "2"
     test_window: str | None = None
-    mode: str = "paper"
+    mode: str = DEFAULT_MODE
     classifiers: tuple[str, ...] = ("svm",)
     seed: int = 0
     train_per_trial: int = 4
     test_per_trial: int = 2
     scaling: str = "log_standardize"
-    gate: bool = True
+    gate: bool = False
     drop: tuple[str, ...] = ()
     cv_folds: int = 5
     cv_repeats: int = 10
     pa_max: int = 30
     pa_orders: int = 5
+    pa_update: str = "max_loss"
+    pa_average: bool = True
     jobs: int = 2
     cache_dir: str | None = "build/cache"
     progress: bool = False
@@ -112,10 +123,12 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
     classifiers = _check_classifiers(cfg.classifiers)
     if not train or not test:
         raise ConfigError("train and test sets must both hold recordings")
-    overlap = {(r.material, r.trial) for r in train} & {(r.material, r.trial) for r in test}
+    # The same file in both splits is a leak; the same (material, trial) numbers in two different
+    # folders are two different recordings (a separate test set may number its trials from 1 again).
+    overlap = {str(Path(r.path).resolve()) for r in train} & {str(Path(r.path).resolve()) for r in test}
     if overlap:
-        raise ConfigError(f"train and test share {len(overlap)} recordings (e.g. material/trial "
-                          f"{sorted(overlap)[0]}): use disjoint trial ranges")
+        raise ConfigError(f"train and test share {len(overlap)} recordings (e.g. {sorted(overlap)[0]}): "
+                          "use disjoint trial ranges")
     common = common_length_frames(list(train) + list(test))
     rate = float(np.median([r.frame_rate_hz for r in list(train) + list(test)]))
     rate = 100.0 if abs(rate - 100.0) < 1.0 else rate
@@ -123,10 +136,11 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
     n_test = window_frames(cfg.test_window or cfg.window, rate, common)
     w_train = draw_windows(train, n_train, common, cfg.train_per_trial, cfg.seed)
     w_test = draw_windows(test, n_test, common, cfg.test_per_trial, cfg.seed + 1)
-    everyone = list(train) + list(test)
-    b_train = compute_bank(everyone, w_train, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
+    # Each split's windows are looked up in that split's recordings only: (material, trial) names a
+    # recording uniquely inside one folder, not across two.
+    b_train = compute_bank(train, w_train, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
                            desc="train descriptors")
-    b_test = compute_bank(everyone, w_test, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
+    b_test = compute_bank(test, w_test, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
                           desc="test descriptors")
     X_tr, labels = select_features(b_train, cfg.mode, gate=cfg.gate, drop=cfg.drop)
     X_te, _ = select_features(b_test, cfg.mode, gate=cfg.gate, drop=cfg.drop)
@@ -173,7 +187,8 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
         }
     if "pa" in classifiers:
         curve = pa_curve(X_tr, y_tr, b_train.trials, X_te, y_te, labels, n_max=cfg.pa_max,
-                         orders=cfg.pa_orders, seed=cfg.seed, scaling=cfg.scaling)
+                         orders=cfg.pa_orders, seed=cfg.seed, scaling=cfg.scaling, update=cfg.pa_update,
+                         average=cfg.pa_average)
         out["classifiers"]["pa"] = {
             "accuracy": float(curve.accuracy[-1]),
             "confusion": curve.final_confusion.tolist(),

@@ -164,3 +164,49 @@ def test_cli_rejects_overlapping_trials(biotac_data_dir, tmp_path, capsys):
                "--train-trials", "1-5", "--test-trials", "5-6", "--cache", str(tmp_path)])
     assert rc == 2
     assert "share" in capsys.readouterr().err
+
+
+def test_default_trials_same_folder_is_the_dev_split_other_folder_is_everything(tmp_path):
+    from tactile_descriptors_ros.tools.cmd_evaluate import default_trials
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    assert default_trials(str(a), str(a) + "/", None, None) == (list(range(1, 21)), list(range(21, 31)))
+    assert default_trials(str(a), str(b), None, None) == (None, None)
+    assert default_trials(str(a), str(b), "1-3", "all") == ([1, 2, 3], None)
+
+
+@pytest.mark.realdata
+def test_cli_scores_a_separate_folder_whose_trial_numbers_collide(biotac_data_dir, tmp_path, capsys):
+    """A second set of recordings numbered from 1 again is scored on its own files, with the default mode."""
+    unseen = tmp_path / "unseen"
+    for m in (1, 2, 3):
+        d = unseen / "raw_data" / f"mat{m}"
+        d.mkdir(parents=True)
+        for new, old in ((1, 21), (2, 22)):
+            (d / f"mat{m}_{new}_bio.csv").symlink_to(biotac_data_dir / "raw_data" / f"mat{m}" / f"mat{m}_{old}_bio.csv")
+    args = ["evaluate", "--train", str(biotac_data_dir), "--test", str(unseen), "--materials", "1-3",
+            "--train-trials", "1-5", "--window", "0.5", "--cv-repeats", "1", "--train-windows", "1",
+            "--test-windows", "1", "--jobs", "1", "--cache", str(tmp_path / "cache"), "--json"]
+    assert main(args + ["--classifier", "pa"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["test_trials"] == [1, 2] and out["train_trials"] == [1, 2, 3, 4, 5]
+    assert out["n_features"] == 261 and out["config"]["mode"] == "combined"
+    assert out["config"]["gate"] is False
+    assert (out["config"]["pa_update"], out["config"]["pa_average"]) == ("max_loss", True)
+    assert out["n_test"] == 3 * 2 and 0.0 <= out["accuracy"] <= 1.0
+    # the test split's windows come from the test folder's files: the same windows described from the
+    # original files (trials 21, 22 renamed 1, 2) give the same descriptors
+    from tactile_descriptors_ros.evaluation.features import compute_bank
+    from tactile_descriptors_ros.evaluation.windows import Window, load_split
+
+    renamed = load_split(unseen, None, [1, 2, 3])
+    original = load_split(biotac_data_dir, [21, 22], [1, 2, 3])
+    w_new = [Window(1, 2, 17, 50)]
+    w_old = [Window(1, 22, 17, 50)]
+    got = compute_bank(renamed, w_new, jobs=1).groups["per_channel"]
+    want = compute_bank(original, w_old, jobs=1).groups["per_channel"]
+    np.testing.assert_array_equal(got, want)
+    with pytest.raises(ConfigError, match="twice"):
+        compute_bank(renamed + load_split(biotac_data_dir, [1, 2], [1]), w_new, jobs=1)
