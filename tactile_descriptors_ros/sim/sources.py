@@ -55,6 +55,7 @@ __all__ = [
     "biotac_spi_bus",
     "load_scene_for",
     "SKIN_STREAM_MODALITY",
+    "wire_throughput",
 ]
 
 #: Skin streams and their codec modality numbers (imported lazily with the codec).
@@ -536,3 +537,94 @@ def biotac_spi_bus(result: SimResult, serial_prefix: str = "BTSIM") -> Any:
 def merge_by_time(*streams: list[tuple[int, Any]]) -> list[tuple[int, Any]]:
     """Merge time-ordered ``(t_ns, item)`` lists."""
     return list(heapq.merge(*streams, key=lambda x: x[0]))
+
+
+def wire_throughput(scene: Scene, wire: str = "can", reference_frames: int = 20000,
+                    chunk_s: float = 2.0) -> dict[str, Any]:
+    """Measure the skin wire path: simulate, encode, decode a scene's skin cells, batch and per frame.
+
+    Plays the whole scene through the batch path (:class:`SkinCanSource` /
+    :class:`SkinSerialSource` -> ``SimulatedTransport`` -> the decoder's
+    batch method) and the first ``reference_frames`` frames through the
+    per-frame path (one ``can.Message`` or frame at a time through
+    :meth:`~tactile_descriptors_ros.codecs.skin_can.SkinCanDecoder.decode` /
+    ``feed``), checking that both give the same samples.
+
+    Returns
+    -------
+    dict
+        ``frames``, ``simulated_s``, ``batch_wall_s``, ``batch_frames_per_s``,
+        ``realtime_factor`` (simulated seconds per wall second, batch path),
+        ``decode_wall_s`` (decoder share), ``reference_frames``,
+        ``reference_frames_per_s`` (per-frame encode + decode), ``decoder_stats``.
+
+    Raises
+    ------
+    SceneError
+        Unknown wire.
+    AssertionError
+        Never expected: the batch and per-frame paths disagree.
+    """
+    from ..codecs.skin_can import SkinCanDecoder
+    from ..codecs.skin_serial import SkinSerialDecoder
+    from ..transports.simulated import SimulatedTransport
+
+    if wire not in ("can", "serial"):
+        raise SceneError(f"wire must be can or serial, got {wire!r}", key="wire")
+    known = list(scene.robot.cell_index())
+    src_cls = SkinCanSource if wire == "can" else SkinSerialSource
+    new_dec = (lambda: SkinCanDecoder(known_cell_ids=known)) if wire == "can" else \
+        (lambda: SkinSerialDecoder(known_cell_ids=known))
+    tr = SimulatedTransport(src_cls(scene, chunk_s=chunk_s))
+    tr.open()
+    dec = new_dec()
+    frames = 0
+    decode_s = 0.0
+    first_samples = None
+    t0 = time.perf_counter()
+    while True:
+        if wire == "can":
+            batch = tr.recv_batch(65536, 0.0)
+            if not len(batch):
+                break
+            frames += len(batch)
+            a = time.perf_counter()
+            out = dec.decode_frames(batch)
+        else:
+            data = tr.read(1 << 20, 0.0)
+            if not data:
+                break
+            a = time.perf_counter()
+            out = dec.feed_batch(data)
+            frames += len(out)
+        decode_s += time.perf_counter() - a
+        if first_samples is None:
+            first_samples = out
+    wall = time.perf_counter() - t0
+    tr.close()
+    # per-frame reference on the first frames
+    ref_src = src_cls(scene, chunk_s=chunk_s)
+    ref_src.open()
+    ref = new_dec()
+    got = []
+    t1 = time.perf_counter()
+    for k, (_, item) in enumerate(ref_src):
+        if k >= reference_frames:
+            break
+        if wire == "can":
+            s = ref.decode(item)
+            if s is not None:
+                got.append(s)
+        else:
+            got.extend(ref.feed(item))
+    ref_wall = time.perf_counter() - t1
+    n_ref = min(reference_frames, frames)
+    if first_samples is not None:
+        m = min(len(got), len(first_samples)) - 1  # the serial decoder may hold back the last frame
+        assert first_samples.to_samples()[:m] == got[:m], "batch and per-frame decoders disagree"
+    return {"wire": wire, "frames": frames, "simulated_s": round(scene.duration_s, 3),
+            "batch_wall_s": round(wall, 3), "batch_frames_per_s": round(frames / wall) if wall else None,
+            "realtime_factor": round(scene.duration_s / wall, 2) if wall else None,
+            "decode_wall_s": round(decode_s, 3), "reference_frames": n_ref,
+            "reference_frames_per_s": round(n_ref / ref_wall) if ref_wall else None,
+            "decoder_stats": dec.stats.as_dict()}

@@ -23,10 +23,12 @@ paper's ``averaged`` eq. 17 mode is one flag away): with one BioTac per body
 part, keeping the 19 electrodes apart separates the demo's materials much
 better (measured in ``docs/nodes.md``).
 
-NAO's skin over CAN is about 175 000 frames per simulated second, more than
-Python decodes in real time: ``--speed 0.25`` plays the scene at a quarter
-of real time (the drivers stamp with the simulator's clock, so windows and
-descriptors are the same) and ``--wire serial`` uses the skin serial framing.
+NAO's skin over CAN is about 175 000 frames per simulated second; the
+simulated bus hands them to the driver in batches, which decodes them with
+array operations faster than real time (``docs/wire_throughput.md``).  On a
+busy machine ``--speed 0.5`` plays the scene at half of real time (the
+drivers stamp with the simulator's clock, so windows and descriptors are
+the same); ``--wire serial`` uses the skin serial framing.
 """
 
 from __future__ import annotations

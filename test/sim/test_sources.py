@@ -259,3 +259,19 @@ def test_paced_can_batches_hand_out_only_due_frames():
     more = src.recv_batch(1 << 20, 0.0)
     assert len(more) and more["timestamp"].max() <= 0.1 + 1e-9 and more["timestamp"].min() > 0.0
     assert not len(src.recv_batch(1 << 20, 0.0))
+
+
+@pytest.mark.parametrize("wire", ["can", "serial"])
+def test_wire_throughput_reports_every_frame_and_agrees_with_the_per_frame_path(wire):
+    from tactile_descriptors_ros.sim.sources import SkinRows, wire_throughput
+
+    scene = _scene(NAO, dropped_frames={"probability": 0.01}, corrupt_frames={"probability": 0.01})
+    rows = SkinRows(simulate(scene))
+    out = wire_throughput(scene, wire, reference_frames=500)
+    sent = len(rows)
+    if wire == "can":
+        assert out["frames"] == sent
+        assert out["decoder_stats"]["samples"] == sent - int(rows.corrupt.sum()) - out["decoder_stats"]["unknown_cells"]
+    else:  # delivered samples: corrupt frames fail their CRC
+        assert out["frames"] == sent - int(rows.corrupt.sum())
+    assert out["reference_frames"] == 500 and out["batch_frames_per_s"] > 0 and out["simulated_s"] > 0
