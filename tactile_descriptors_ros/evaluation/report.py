@@ -57,16 +57,16 @@ class ReportPlan:
 
 
 FULL_PLAN = ReportPlan(
-    headline_modes=("paper", "multiband"),
+    headline_modes=("paper", "combined"),
     headline_windows=("2", "whole"),
-    sweep_modes=("paper", "multiband"),
+    sweep_modes=("paper", "combined"),
     sweep_windows=("0.25", "0.5", "1", "2", "4", "whole"),
     exploration_test=("1", "2", "4", "whole"),
-    ablation_modes=("paper", "multiband"), ablation_window="2",
+    ablation_modes=("paper", "combined"), ablation_window="2",
     headline_repeats=10, sweep_repeats=2, cv_folds=3, train_per_trial=4, test_per_trial=2, pa_orders=5)
 
 QUICK_PLAN = ReportPlan(
-    headline_modes=("paper", "multiband"), headline_windows=("1", "whole"),
+    headline_modes=("paper", "combined"), headline_windows=("1", "whole"),
     sweep_modes=("paper",), sweep_windows=("0.5", "whole"), exploration_test=("0.5", "whole"),
     ablation_modes=("paper",), ablation_window="1",
     headline_repeats=1, sweep_repeats=1, cv_folds=2, train_per_trial=1, test_per_trial=1, pa_orders=1)
@@ -134,17 +134,23 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                                                         classifiers=("svm", "pa")), "split"))
     abl = replace(base, window=plan.ablation_window, classifiers=("svm", "pa"))
     ablations = [("full descriptor", {})] + [(f"without {q}", {"drop": (q,)}) for q in ("A", "M", "C", "L", "N")] + [
-        ("without contact gate", {"gate": False}), ("scaling: none", {"scaling": "none"}),
+        ("with the contact gate (F_t on tared PDC)", {"gate": True}), ("scaling: none", {"scaling": "none"}),
         ("scaling: standardise only", {"scaling": "standardize"}),
-        ("one training window per trial", {"train_per_trial": 1})]
-    ablations_multiband = [("without the PAC bands (per_channel)", {"mode": "per_channel"}),
-                           ("+ electrode/PDC/TDC/TAC levels (multiband_levels)", {"mode": "multiband_levels"})]
+        ("one training window per trial", {"train_per_trial": 1}),
+        ("PA: the paper's update (prediction-based, not averaged)", {"pa_update": "prediction", "pa_average": False}),
+        ("PA: max-loss update, not averaged", {"pa_average": False}),
+        ("PA: prediction-based update, averaged", {"pa_update": "prediction"})]
+    # combined = per_channel + bands + levels + baseline: leave groups out
+    ablations_groups = [("without the baseline statistics (multiband_levels)", {"mode": "multiband_levels"}),
+                        ("without baseline and levels (multiband)", {"mode": "multiband"}),
+                        ("per-channel descriptor only (per_channel)", {"mode": "per_channel"})]
     for m in plan.ablation_modes:
         for name, kw in ablations:
-            todo.append(("ablation", (m, name), replace(abl, mode=m, **kw), "split"))
-    if "multiband" in plan.ablation_modes:
-        for name, kw in ablations_multiband:
-            todo.append(("ablation", ("multiband", name), replace(abl, **kw), "split"))
+            only_pa = {"classifiers": ("pa",)} if name.startswith("PA:") else {}  # the SVM is unchanged
+            todo.append(("ablation", (m, name), replace(abl, mode=m, **kw, **only_pa), "split"))
+    if "combined" in plan.ablation_modes:
+        for name, kw in ablations_groups:
+            todo.append(("ablation", ("combined", name), replace(abl, **kw), "split"))
     todo.append(("ablation", ("baseline", "related-work baseline features"), replace(abl, mode="baseline"),
                  "split"))
     for m in plan.ablation_modes:
@@ -228,7 +234,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
 
     best_key = (plan.headline_modes[-2] if len(plan.headline_modes) > 2 else plan.headline_modes[-1],
                 plan.headline_windows[0])
-    best_key = ("multiband", plan.headline_windows[0]) if ("multiband", plan.headline_windows[0]) in \
+    best_key = ("combined", plan.headline_windows[0]) if ("combined", plan.headline_windows[0]) in \
         results["headline"] else best_key
     res = results["headline"][best_key]
     cm = np.array(res["classifiers"]["svm"]["confusion"])
@@ -288,14 +294,19 @@ def _markdown(results: dict, plan: ReportPlan, tr: list[int], te: list[int], com
       f"SVM: linear, C chosen over {C_GRID_TEXT} by 5-fold CV (folds keep a trial's windows together) repeated "
       f"{plan.headline_repeats} times for the headline table and {plan.sweep_repeats} times for sweeps and "
       "ablations, refit on all training windows; scaling log1p(Activity) + standardisation fitted on the "
-      "training set. PA-I: the core's OnlineClassifier (running scaling), one pass, curve averaged over "
+      "training set. PA-I: the core's OnlineClassifier (running scaling), one pass over the training windows "
+      "in trial order, max-loss update with averaged weights unless the ablation says otherwise (the paper's "
+      "prediction-based update is an ablation row), curve averaged over "
       f"{plan.pa_orders} presentation orders. GMM: spherical, k = {n_mat}, k-means init with 20 restarts, "
-      "100 EM iterations, NMI (arithmetic) on the test windows.")
+      "100 EM iterations, NMI (arithmetic) on the test windows. The contact gate is off unless an ablation "
+      "row says otherwise: every recorded trial is a slide in contact, and the gate, fed by PDC that the "
+      "recording setup tared and clipped at 0, misfires on soft materials.")
     a("")
     a("Descriptor modes: `paper` = eq. 17, electrodes averaged (8 values); `per_channel` = the same quantities "
       "per electrode (98); `multiband` = per_channel + Hjorth A/M/C of PAC in 6 bands (116); "
       "`multiband_levels` = multiband + mean electrode/PDC/TDC/TAC levels (138); `baseline` = related-work "
-      "statistics (log variance, skewness, kurtosis, log band powers of PAC and electrodes; 123).")
+      "statistics (log variance, skewness, kurtosis, log band powers of PAC and electrodes; 123); "
+      "`combined` = multiband_levels + baseline (261, the default of `tactile evaluate`).")
     a("")
     a("## Headline (development split)")
     a("")
@@ -343,13 +354,13 @@ def _markdown(results: dict, plan: ReportPlan, tr: list[int], te: list[int], com
     a(f"## Ablations ({plan.ablation_window} s windows, development split)")
     a("")
     a("Concatenated vs pooled body parts is moot here: the data has one finger, so both layouts give the "
-      "same vector.")
+      "same vector. PA rows change only the online learner.")
     a("")
     a("| mode | variant | values | SVM acc % | PA-I acc % |")
     a("|---|---|---|---|---|")
     for (m, name), r in results["ablation"].items():
-        a(f"| {m} | {name} | {r['n_features']} | {_pct(r['classifiers']['svm']['accuracy'])} | "
-          f"{_pct(r['classifiers']['pa']['accuracy'])} |")
+        svm = _pct(r["classifiers"]["svm"]["accuracy"]) if "svm" in r["classifiers"] else "(unchanged)"
+        a(f"| {m} | {name} | {r['n_features']} | {svm} | {_pct(r['classifiers']['pa']['accuracy'])} |")
     a("")
     a(f"## Cross-validation over trials ({plan.ablation_window} s windows)")
     a("")
