@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from rclpy.node import Node
 
-from ..core.learning import OnlineClassifier
+from ..core.learning import PA_UPDATES, OnlineClassifier
 from ..errors import ModelError, SignalError
 from .common import Diagnostics, Status, declare, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
@@ -65,6 +65,10 @@ class ClassifierNode(Node):
         self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1)", minimum=1e-12)
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
         self.standardize = declare(self, "standardize", True, "running standardisation of features")
+        self.pa_update = declare(self, "pa_update", "max_loss",
+                                 "PA-I update: max_loss, or prediction (the paper's eq. 30-32)", choices=PA_UPDATES)
+        self.pa_average = declare(self, "pa_average", True,
+                                  "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,
                                "descriptors kept for late labels (and early labels held)", minimum=1)
         self.save_after_update = declare(self, "save_after_update", True, "save the model after every update")
@@ -114,7 +118,8 @@ class ClassifierNode(Node):
             return
         if self.model is None:
             self.model = OnlineClassifier(sample.labels, eta=self.eta, log_activity=self.log_activity,
-                                          standardize=self.standardize)
+                                          standardize=self.standardize, update=self.pa_update,
+                                          average=self.pa_average)
         if sample.labels != self.model.labels:
             self.counts["layout_mismatch"] += 1
             self.layout_error = (f"descriptor layout ({len(sample.labels)} values, {sample.robot} "
@@ -222,7 +227,8 @@ class ClassifierNode(Node):
         try:
             if labels is not None:
                 self.model = OnlineClassifier(labels, eta=self.eta, log_activity=self.log_activity,
-                                              standardize=self.standardize)
+                                              standardize=self.standardize, update=self.pa_update,
+                                              average=self.pa_average)
                 self.model.save(self.model_path)
             elif self.model_path.exists():
                 self.model_path.unlink()
