@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import SignalError
 from .descriptors import Quality
-from .fast import cell_quantities, cell_quantities_reference, exact_integer_ok
+from .fast import cell_bounds, cell_quantities, cell_quantities_reference, exact_integer_ok
 from .robot import BodyPart, Cell, CellType, RobotDescription
 
 __all__ = [
@@ -584,23 +584,15 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
                 touching_ids.append(cid)
                 counts[p] += 1
             k += 1
-    fallback = [(pos, part) for pos, part in parts]
-    if touching_sigs:
-        _check_channels(touching_sigs, cell_type, touching_ids)
-        first = touching_sigs[0]
-        s0, v0 = np.asarray(first.vibration), np.asarray(first.deformation)
-        if all(np.shape(s.vibration) == s0.shape and np.shape(s.deformation) == v0.shape
-               and np.asarray(s.vibration).dtype == s0.dtype and np.asarray(s.deformation).dtype == v0.dtype
-               for s in touching_sigs) and s0.dtype.kind in "iu" and v0.dtype.kind in "iu":
-            fallback = []
-    if fallback and touching_sigs:
-        return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
-    out: list[BodyPartDescriptor] = []
     if not touching_sigs:
-        for (_, part), quality in zip(parts, flags):
-            out.append(BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
-                                          len(part.cells), 0.0, quality | _NO_CONTACT))
-        return out
+        return [BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
+                                   len(part.cells), 0.0, quality | _NO_CONTACT)
+                for (_, part), quality in zip(parts, flags)]
+    if not _uniform_integers(touching_sigs):
+        _check_channels(touching_sigs, cell_type, touching_ids)
+        return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
+    _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
+    out: list[BodyPartDescriptor] = []
     vib = np.stack([s.vibration for s in touching_sigs])
     dfm = np.stack([s.deformation for s in touching_sigs])
     peaks, saturated = _peaks_and_saturation(vib, dfm, cell_type)
@@ -608,8 +600,8 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     if not (exact_integer_ok(n_max, *peaks) and float(n_max) ** 3 < 2.0**52):
         # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
-    feats = cell_features(vib, _stack_times([s.vibration_t_ns for s in touching_sigs]),
-                          dfm, _stack_times([s.deformation_t_ns for s in touching_sigs]),
+    feats = cell_features(vib, _shared_or_stacked([s.vibration_t_ns for s in touching_sigs]),
+                          dfm, _shared_or_stacked([s.deformation_t_ns for s in touching_sigs]),
                           cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)
     on = np.flatnonzero(counts)
     starts_all = np.concatenate(([0], np.cumsum(counts)[:-1]))
@@ -632,6 +624,30 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     return out
 
 
+def _uniform_integers(sigs: list[CellSignals]) -> bool:
+    """All cells' vibration and deformation are integer ndarrays of the first cell's shapes and dtypes."""
+    s0, v0 = sigs[0].vibration, sigs[0].deformation
+    if not (isinstance(s0, np.ndarray) and isinstance(v0, np.ndarray)) or s0.ndim != 2 or v0.ndim != 2 \
+            or s0.dtype.kind not in "iu" or v0.dtype.kind not in "iu":
+        return False
+    shape_s, shape_v, dt_s, dt_v = s0.shape, v0.shape, s0.dtype, v0.dtype
+    for sig in sigs:
+        s, v = sig.vibration, sig.deformation
+        if not (isinstance(s, np.ndarray) and isinstance(v, np.ndarray)) or s.shape != shape_s \
+                or v.shape != shape_v or s.dtype != dt_s or v.dtype != dt_v:
+            return False
+    return True
+
+
+def _shared_or_stacked(times: list) -> np.ndarray:
+    """The cells' common time stamps as one row when they are all equal, else stacked (n_cells, n)."""
+    t0 = np.asarray(times[0], dtype=np.int64)
+    for t in times[1:]:
+        if t is not times[0] and not np.array_equal(t, t0):
+            return _stack_times(times)
+    return t0
+
+
 def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType
                           ) -> tuple[tuple[float, float], np.ndarray]:
     """Largest magnitudes of the stacked integer cells, and per cell whether it is
@@ -642,8 +658,7 @@ def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType
         if a.size == 0:
             peaks.append(0.0)
             continue
-        a_min = a.min(axis=(1, 2))
-        a_max = a.max(axis=(1, 2))
+        a_min, a_max = cell_bounds(a)
         peaks.append(float(max(abs(int(a_min.min())), abs(int(a_max.max())))))
         lo, hi = mod.adc_range
         near = np.flatnonzero((a_min <= lo) | (a_max >= hi))

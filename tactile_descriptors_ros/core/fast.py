@@ -44,7 +44,9 @@ than the arithmetic done on it.  :func:`release_buffers` frees it.
 
 from __future__ import annotations
 
+import os
 import threading
+import time
 from typing import NamedTuple
 
 import numpy as np
@@ -64,6 +66,10 @@ __all__ = [
     "cell_quantities_reference",
     "exact_integer_ok",
     "release_buffers",
+    "accelerator",
+    "cell_bounds",
+    "set_accelerator",
+    "warm_up",
     "CHUNK_SAMPLES",
     "MAX_SEGMENTS",
 ]
@@ -303,6 +309,13 @@ def _hjorth_from_moments(prep: _Prepared, fs: float) -> Hjorth:
     r2 = _as_i64(_rowdot(xf[:, 2:], xf[:, :-2]))
     s1, q = _as_i64(prep.s1), _as_i64(prep.q)
     x0, x1, xm, xl = (_as_i64(xf[:, j]) for j in (0, 1, n - 2, n - 1))
+    return _hjorth_from_ints(n, s1, q, r1, r2, x0, x1, xm, xl, fs)
+
+
+def _hjorth_from_ints(n: int, s1: np.ndarray, q: np.ndarray, r1: np.ndarray, r2: np.ndarray, x0: np.ndarray,
+                      x1: np.ndarray, xm: np.ndarray, xl: np.ndarray, fs: float) -> Hjorth:
+    """Hjorth parameters from exact int64 row moments (sum, sum of squares, lag-1 and
+    lag-2 products, samples 0, 1, n-2, n-1); shared by the numpy and compiled kernels."""
     # n^2 var(x)
     num_x = n * q - s1 * s1
     # first difference d_i = x_{i+1} - x_i, i < n-1: (n-1)^2 var(d)
@@ -661,6 +674,138 @@ def _held_correlations(s: np.ndarray, t_s: np.ndarray, v: np.ndarray, t_v: np.nd
     return lin, nonlin, np.bitwise_or.reduce(quality.reshape(n_cells, -1), axis=1)
 
 
+# ------------------------------------------------------------- accelerator
+_ACCEL_LOCK = threading.Lock()
+_ACCEL: dict = {"resolved": False, "kernel": None, "forced": None, "load_s": None, "error": None}
+
+
+def _kernel():
+    """The compiled kernel module, or None (numpy only)."""
+    if _ACCEL["resolved"]:
+        return _ACCEL["kernel"]
+    with _ACCEL_LOCK:
+        if not _ACCEL["resolved"]:
+            kernel = None
+            if _ACCEL["forced"] != "numpy" and os.environ.get("TACTILE_NO_NUMBA", "") in ("", "0"):
+                t0 = time.perf_counter()
+                try:
+                    from . import _numba_kernel as kernel
+                except ImportError as exc:  # numba missing or broken: the numpy kernel serves
+                    _ACCEL["error"] = f"{type(exc).__name__}: {exc}"
+                    kernel = None
+                _ACCEL["load_s"] = time.perf_counter() - t0
+            _ACCEL["kernel"] = kernel
+            _ACCEL["resolved"] = True
+    return _ACCEL["kernel"]
+
+
+def accelerator() -> str:
+    """``"numba"`` when the compiled kernel serves integer data, else ``"numpy"``.
+
+    numba is optional: without it (or with ``TACTILE_NO_NUMBA=1`` in the
+    environment, read at first use) the numpy kernel computes everything.
+    """
+    return "numba" if _kernel() is not None else "numpy"
+
+
+def set_accelerator(name: str | None) -> str:
+    """Force ``"numpy"`` or ``"numba"``, or ``None`` for the default; return the previous choice.
+
+    Raises
+    ------
+    ImportError
+        ``"numba"`` when numba cannot be imported.
+    SignalError
+        Any other name.
+    """
+    if name not in (None, "numpy", "numba"):
+        raise SignalError(f"accelerator must be 'numpy', 'numba' or None, got {name!r}")
+    previous = accelerator()
+    with _ACCEL_LOCK:
+        _ACCEL["forced"] = name
+        _ACCEL["resolved"] = False
+        if name == "numba":
+            from . import _numba_kernel as kernel
+
+            _ACCEL["kernel"], _ACCEL["resolved"] = kernel, True
+    return previous
+
+
+def warm_up() -> dict:
+    """Load (or compile) the accelerator's code now; return what it took.
+
+    The first call of each compiled function in a process loads it from the
+    on-disk cache, or compiles it (a few seconds) when the cache is empty or
+    stale.  Returns ``{"accelerator", "import_s", "first_call_s", "cache_dir"}``.
+    """
+    t0 = time.perf_counter()
+    kernel = _kernel()
+    import_s = time.perf_counter() - t0
+    info = {"accelerator": accelerator(), "import_s": import_s, "first_call_s": 0.0, "cache_dir": None,
+            "error": _ACCEL["error"]}
+    if kernel is None:
+        return info
+    t1 = time.perf_counter()
+    for dtype in (np.int32, np.int64):
+        rng = np.random.default_rng(0)
+        s = rng.integers(0, 50, (2, 2, 40)).astype(dtype)
+        v = rng.integers(0, 50, (2, 3, 10)).astype(dtype)
+        t_s = np.arange(40, dtype=np.int64) * 1_000_000
+        t_v = np.arange(10, dtype=np.int64) * 4_000_000
+        cell_quantities(s, t_s, v, t_v, 1000.0, 250.0)
+        cell_bounds(s)
+    info["first_call_s"] = time.perf_counter() - t1
+    info["cache_dir"] = kernel.CACHE_DIR
+    return info
+
+
+def cell_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest and largest value of each cell of integer data (n_cells, channels, samples)."""
+    kernel = _kernel()
+    xc = _compiled_int(x) if kernel is not None and x.ndim == 3 and x.shape[1] * x.shape[2] else None
+    if xc is None:
+        return x.min(axis=(1, 2)), x.max(axis=(1, 2))
+    lo = np.empty(x.shape[0], dtype=np.int64)
+    hi = np.empty(x.shape[0], dtype=np.int64)
+    kernel.cell_bounds(xc.reshape(x.shape[0], -1), lo, hi)
+    return lo, hi
+
+
+def _compiled_int(x: np.ndarray) -> np.ndarray | None:
+    """``x`` as C-contiguous int32 or int64 for the compiled kernel (None for unsigned 64-bit)."""
+    if x.dtype == np.int32 or x.dtype == np.int64:
+        return np.ascontiguousarray(x)
+    if x.dtype.itemsize < 4 or x.dtype == np.uint8:
+        return x.astype(np.int32)
+    if x.dtype == np.uint32:
+        return x.astype(np.int64)
+    return None
+
+
+def _quantities_compiled(kernel, s: np.ndarray, ts: np.ndarray, v: np.ndarray, tv: np.ndarray, fs_s: float,
+                         fs_v: float) -> tuple[np.ndarray, ...] | None:
+    """:func:`cell_quantities` by the compiled kernel, or None where the numpy kernel must decide.
+
+    Integer data within :func:`exact_integer_ok` bounds (the numpy kernel's
+    exact paths) only: every sum is then the same integer in both kernels,
+    and the compiled code takes the quantities from them with the numpy
+    kernel's floating-point operations in the same order, so the results
+    are identical (the tests compare both kernels bit for bit).  Float data,
+    huge integers, degenerate windows and unsorted stamps go to numpy.
+    """
+    if not (_is_int(s) and _is_int(v)) or min(s.shape) == 0 or min(v.shape) == 0 \
+            or s.shape[2] < 3 or v.shape[2] < 3:
+        return None
+    s_c, v_c = _compiled_int(s), _compiled_int(v)
+    if s_c is None or v_c is None:
+        return None
+    ts2 = np.ascontiguousarray(ts[None, :] if ts.ndim == 1 else ts)
+    tv2 = np.ascontiguousarray(tv[None, :] if tv.ndim == 1 else tv)
+    status, *out = kernel.quantities(s_c, ts2, v_c, tv2, fs_s, fs_v, _U_FLAT,
+                                     max(4 * s.shape[2], 1 << 16))
+    return tuple(out) if status == kernel.OK else None
+
+
 # ------------------------------------------------------------- whole batch
 def _check_batch(s: np.ndarray, ts: np.ndarray, v: np.ndarray, tv: np.ndarray) -> None:
     if s.ndim != 3 or v.ndim != 3 or s.shape[0] != v.shape[0]:
@@ -707,6 +852,11 @@ def cell_quantities(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np
     fs_s, fs_v = _check_rate(rate_s_hz), _check_rate(rate_v_hz)
     n_cells, n_s, n_fast = s.shape
     n_v = v.shape[1]
+    kernel = _kernel()
+    if kernel is not None and n_cells:
+        res = _quantities_compiled(kernel, s, ts, v, tv, fs_s, fs_v)
+        if res is not None:
+            return res
     out_shapes = [(n_cells, n_s)] * 3 + [(n_cells, n_v)] * 3 + [(n_cells, n_s, n_v)] * 2
     out = [np.zeros(shape) for shape in out_shapes] + [np.zeros(n_cells, dtype=np.uint32)]
     if n_cells == 0:

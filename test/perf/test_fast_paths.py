@@ -7,9 +7,15 @@ expanded series.  Property tests cover ties (small integer ranges), flat
 channels, ramps, NaN, short windows, missing V, V starting after S, cells
 with their own time bases, irregular stamps, wide value ranges (sort
 fallback), and the float32 / blocking thresholds of the rank kernel.
+
+Tests of ``cell_quantities`` run with both kernels (``accel``): the numpy
+kernel and the compiled one (numba, when installed), which must also agree
+with each other bit for bit.
 """
 
 from __future__ import annotations
+
+import contextlib
 
 import numpy as np
 import pytest
@@ -24,6 +30,23 @@ from tactile_descriptors_ros.core.descriptors import Quality, hjorth
 from tactile_descriptors_ros.errors import SignalError
 
 FIELDS = ("act_s", "mob_s", "com_s", "act_v", "mob_v", "com_v", "lin", "nonlin")
+
+try:
+    import numba  # noqa: F401
+
+    ACCELS = ["numpy", "numba"]
+except ImportError:  # the compiled kernel is optional
+    ACCELS = ["numpy"]
+
+
+@contextlib.contextmanager
+def using(accel: str):
+    """Run with the numpy kernel only, or with the compiled kernel where it applies."""
+    fast.set_accelerator(accel)
+    try:
+        yield
+    finally:
+        fast.set_accelerator(None)
 
 
 def _assert_same(fast_out, ref_out, rtol=1e-9, atol=1e-9):
@@ -102,20 +125,24 @@ def batches(draw):
     return s, ts, v, tv
 
 
+@pytest.mark.parametrize("accel", ACCELS)
 @settings(max_examples=150, deadline=None)
 @given(batches(), st.sampled_from([100.0, 1000.0]), st.sampled_from([25.0, 250.0]))
-def test_cell_quantities_equal_reference(batch, fs_s, fs_v):
+def test_cell_quantities_equal_reference(accel, batch, fs_s, fs_v):
     s, ts, v, tv = batch
-    _assert_same(fast.cell_quantities(s, ts, v, tv, fs_s, fs_v),
-                 fast.cell_quantities_reference(s, ts, v, tv, fs_s, fs_v))
+    with using(accel):
+        got = fast.cell_quantities(s, ts, v, tv, fs_s, fs_v)
+    _assert_same(got, fast.cell_quantities_reference(s, ts, v, tv, fs_s, fs_v))
 
 
+@pytest.mark.parametrize("accel", ACCELS)
 @settings(max_examples=40, deadline=None)
 @given(batches(), st.integers(1, 3))
-def test_chunking_does_not_change_results(batch, chunk):
+def test_chunking_does_not_change_results(accel, batch, chunk):
     s, ts, v, tv = batch
-    whole = fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0)
-    chunked = fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0, chunk_samples=chunk)
+    with using(accel):
+        whole = fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0)
+        chunked = fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0, chunk_samples=chunk)
     _assert_same(chunked, whole, rtol=1e-12, atol=1e-15)
 
 
@@ -241,18 +268,22 @@ def test_run_sums_equal_reduceat(rows, n, data):
     np.testing.assert_allclose(fast._run_sums(x.astype(np.float64), runs, "test"), want)
 
 
-def test_cell_features_uses_fast_path_with_same_results():
+@pytest.mark.parametrize("accel", ACCELS)
+def test_cell_features_uses_fast_path_with_same_results(accel):
     rng = np.random.default_rng(3)
     s = rng.integers(-512, 512, (7, 3, 400)).astype(np.int16)
     v = rng.integers(0, 4096, (7, 3, 101)).astype(np.uint16)
     ts = np.arange(400, dtype=np.int64) * 1_000_000
     tv = np.arange(-1, 100, dtype=np.int64) * 4_000_000
-    feats = cell_features(s, ts, v, tv, 1000.0, 250.0)
+    with using(accel):
+        feats = cell_features(s, ts, v, tv, 1000.0, 250.0)
     ref = fast.cell_quantities_reference(s, ts, v, tv, 1000.0, 250.0)
     _assert_same([getattr(feats, f) for f in FIELDS] + [feats.quality], ref)
 
 
-def test_degenerate_windows_are_flagged_like_the_reference():
+@pytest.mark.parametrize("accel", ACCELS)
+def test_degenerate_windows_are_flagged_like_the_reference(accel):
+    fast.set_accelerator(accel)
     s = np.array([[[1, 2]]])
     v = np.array([[[3]]])
     got = fast.cell_quantities(s, np.array([0, 1]), v, np.array([0]), 10.0, 10.0)
@@ -260,15 +291,22 @@ def test_degenerate_windows_are_flagged_like_the_reference():
     got = fast.cell_quantities(np.zeros((1, 1, 5), dtype=int), np.arange(5), np.zeros((1, 1, 0), dtype=int),
                                np.zeros(0, dtype=np.int64), 10.0, 10.0)
     assert got[8][0] & Quality.SHORT and not got[6].any()
+    fast.set_accelerator(None)
 
 
-def test_bad_input_is_a_clear_error():
+@pytest.mark.parametrize("accel", ACCELS)
+def test_bad_input_is_a_clear_error(accel):
+    fast.set_accelerator(accel)
     with pytest.raises(SignalError, match="same n_cells"):
         fast.cell_quantities(np.zeros((2, 1, 5)), np.arange(5), np.zeros((1, 1, 5)), np.arange(5), 1.0, 1.0)
     with pytest.raises(SignalError, match="time stamps"):
         fast.cell_quantities(np.zeros((1, 1, 5)), np.arange(4), np.zeros((1, 1, 5)), np.arange(5), 1.0, 1.0)
     with pytest.raises(SignalError, match="rate"):
         fast.cell_quantities(np.zeros((1, 1, 5)), np.arange(5), np.zeros((1, 1, 5)), np.arange(5), 0.0, 1.0)
+    with pytest.raises(SignalError, match="sorted"):  # integer data: the compiled kernel hands over to numpy
+        fast.cell_quantities(np.ones((1, 1, 5), dtype=np.int32), np.array([0, 2, 1, 3, 4]),
+                             np.ones((1, 1, 5), dtype=np.int32), np.arange(5), 1.0, 1.0)
+    fast.set_accelerator(None)
 
 
 def test_release_buffers_frees_the_workspace():

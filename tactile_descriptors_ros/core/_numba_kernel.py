@@ -1,0 +1,454 @@
+"""Compiled loops behind :mod:`.fast` for integer sensor data (numba; optional).
+
+One loop per signal row does what the numpy kernel does in about ten passes
+over memory: the exact integer moments of the Hjorth parameters (row sum,
+sum of squares, lag-1 and lag-2 products, end samples), the counting ranks
+(histogram of the row's values, prefix sum, rank lookup), the run sums of
+the samples and of their ranks over the zero-order-hold runs of V, and the
+cross sums with every held V channel.  Every sum is an exact int64, so the
+results are the same integers the numpy kernel gets (in float64 within
+:func:`~.fast.exact_integer_ok` bounds); :mod:`.fast` turns them into the
+quantities with the same code for both paths.  The numpy kernel stays the
+fallback and the reference.
+
+This module imports numba; :mod:`.fast` imports it lazily, only when the
+accelerator is first used (``TACTILE_NO_NUMBA=1`` disables it).  Compiled
+code is cached on disk (``cache=True``): next to this module when that is
+writable, else in ``$NUMBA_CACHE_DIR`` or a directory under the system's
+temporary directory.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numba
+import numpy as np
+
+__all__ = ["quantities", "cell_bounds", "CACHE_DIR", "OK", "NOT_EXACT", "DEGENERATE", "UNSORTED", "TOO_WIDE"]
+
+
+def _cache_dir() -> str:
+    """Where compiled code is cached (set before the first compilation)."""
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return os.environ["NUMBA_CACHE_DIR"]
+    here = Path(__file__).resolve().parent
+    pycache = here / "__pycache__"
+    if os.access(pycache if pycache.is_dir() else here, os.W_OK):
+        return str(pycache)
+    fallback = Path(tempfile.gettempdir()) / f"tactile_numba_cache_{os.getuid() if hasattr(os, 'getuid') else 0}"
+    fallback.mkdir(parents=True, exist_ok=True)
+    numba.config.CACHE_DIR = str(fallback)
+    return str(fallback)
+
+
+#: Directory of the on-disk cache of compiled code.
+CACHE_DIR: str = _cache_dir()
+
+#: Status codes of :func:`quantities` (anything but OK: let the numpy kernel decide).
+OK, NOT_EXACT, DEGENERATE, UNSORTED, TOO_WIDE = 0, 1, 2, 3, 4
+
+_F64_EXACT = float(2**53)
+_I64_SAFE = float(2**62)
+
+_jit = numba.njit(cache=True, nogil=True, boundscheck=False)
+# Sums of exact integers (every partial sum below 2**53, which is checked
+# before they are used) are the same in any order: reassociation (fastmath)
+# lets LLVM vectorise them without changing a bit.
+_jit_exact = numba.njit(cache=True, nogil=True, boundscheck=False, fastmath=True)
+
+
+@_jit
+def cell_bounds(x, lo, hi):  # pragma: no cover - compiled
+    """Minimum and maximum of each row of ``x`` (rows, n >= 1) into ``lo``, ``hi``."""
+    for r in range(x.shape[0]):
+        a = x[r, 0]
+        b = x[r, 0]
+        for i in range(x.shape[1]):
+            a = min(a, x[r, i])
+            b = max(b, x[r, i])
+        lo[r] = a
+        hi[r] = b
+
+
+@_jit_exact
+def _moments_row(x, out):  # pragma: no cover - compiled
+    """Sum, sum of squares, lag-1 and lag-2 products, x[0], x[1], x[n-2], x[n-1], min, max (n >= 3)."""
+    n = x.shape[0]
+    s1 = 0.0
+    q = 0.0
+    lo = x[0]
+    hi = x[0]
+    for i in range(n):
+        a = float(x[i])
+        s1 += a
+        q += a * a
+        lo = min(lo, x[i])
+        hi = max(hi, x[i])
+    r1 = 0.0
+    for i in range(1, n):
+        r1 += float(x[i]) * float(x[i - 1])
+    r2 = 0.0
+    for i in range(2, n):
+        r2 += float(x[i]) * float(x[i - 2])
+    out[0] = s1
+    out[1] = q
+    out[2] = r1
+    out[3] = r2
+    out[4] = x[0]
+    out[5] = x[1]
+    out[6] = x[n - 2]
+    out[7] = x[n - 1]
+    out[8] = lo
+    out[9] = hi
+
+
+@_jit_exact
+def _dot(a, b):  # pragma: no cover - compiled
+    acc = 0.0
+    for k in range(a.shape[0]):
+        acc += a[k] * b[k]
+    return acc
+
+
+@_jit_exact
+def _sums(a):  # pragma: no cover - compiled
+    s1 = 0.0
+    q = 0.0
+    for k in range(a.shape[0]):
+        x = float(a[k])
+        s1 += x
+        q += x * x
+    return s1, q
+
+
+@_jit
+def _exact_ok(n, peak):  # pragma: no cover - compiled
+    """:func:`~.fast.exact_integer_ok` (the same float operations)."""
+    p = 4.0 * max(peak, 1.0)
+    return n * p * p < _F64_EXACT and float(n) * n * p * p < _I64_SAFE
+
+
+@_jit
+def _sorted(t):  # pragma: no cover - compiled
+    for i in range(1, t.shape[0]):
+        if t[i] < t[i - 1]:
+            return False
+    return True
+
+
+@_jit
+def _hold_runs(t_slow, t_fast, starts, slow_index, weights):  # pragma: no cover - compiled
+    """:func:`~.fast.hold_runs` by one merge of the sorted stamps; returns (first, n_runs)."""
+    n_fast = t_fast.shape[0]
+    n_slow = t_slow.shape[0]
+    j = -1
+    first = n_fast
+    n_runs = 0
+    prev = -1
+    for p in range(n_fast):
+        while j + 1 < n_slow and t_slow[j + 1] <= t_fast[p]:
+            j += 1
+        if j < 0:
+            continue
+        if first == n_fast:
+            first = p
+        if j != prev:
+            starts[n_runs] = p - first
+            slow_index[n_runs] = j
+            weights[n_runs] = 0
+            n_runs += 1
+            prev = j
+        weights[n_runs - 1] += 1
+    return first, n_runs
+
+
+@_jit
+def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cover - compiled
+    """Run sums of samples and of their ranks for runs of 1 to 4 samples, unrolled."""
+    if length == 1:
+        for k in range(n_runs):
+            a0 = row[k]
+            run_x[k] = a0
+            run_r[k] = table[a0 - lo]
+    elif length == 2:
+        for k in range(n_runs):
+            a0 = row[2 * k]
+            a1 = row[2 * k + 1]
+            run_x[k] = np.int64(a0) + a1
+            run_r[k] = table[a0 - lo] + table[a1 - lo]
+    elif length == 3:
+        for k in range(n_runs):
+            a0 = row[3 * k]
+            a1 = row[3 * k + 1]
+            a2 = row[3 * k + 2]
+            run_x[k] = np.int64(a0) + a1 + a2
+            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo]
+    else:
+        for k in range(n_runs):
+            a0 = row[4 * k]
+            a1 = row[4 * k + 1]
+            a2 = row[4 * k + 2]
+            a3 = row[4 * k + 3]
+            run_x[k] = np.int64(a0) + a1 + a2 + a3
+            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo] + table[a3 - lo]
+
+
+@_jit
+def _hjorth_row(n, fs, mom):  # pragma: no cover - compiled
+    """Hjorth parameters (eq. 1-3) from exact row moments, with the operations of
+    :func:`~.fast._hjorth_from_ints` in the same order; returns (A, M, C, flat)."""
+    s1 = np.int64(mom[0])
+    q = np.int64(mom[1])
+    r1 = np.int64(mom[2])
+    r2 = np.int64(mom[3])
+    x0 = np.int64(mom[4])
+    x1 = np.int64(mom[5])
+    xm = np.int64(mom[6])
+    xl = np.int64(mom[7])
+    num_x = n * q - s1 * s1
+    sd = xl - x0
+    sd2 = 2 * q - x0 * x0 - xl * xl - 2 * r1
+    num_d = (n - 1) * sd2 - sd * sd
+    sdd = (xl - xm) - (x1 - x0)
+    sdd2 = ((q - x0 * x0 - x1 * x1) + 4 * (q - x0 * x0 - xl * xl) + (q - xm * xm - xl * xl)
+            - 4 * (r1 - x0 * x1) - 4 * (r1 - xm * xl) + 2 * r2)
+    num_dd = (n - 2) * sdd2 - sdd * sdd
+    var_x = float(num_x) / float(n * n)
+    var_d = float(num_d) / float((n - 1) * (n - 1))
+    var_dd = float(num_dd) / float((n - 2) * (n - 2))
+    flat = num_x == 0
+    flat_d = num_d == 0
+    mob_x = 0.0 if flat else np.sqrt(var_d / var_x)
+    mob_d = 0.0 if flat_d else np.sqrt(var_dd / var_d)
+    com = 0.0 if (flat or flat_d) else mob_d / mob_x
+    return var_x, mob_x * fs, com, flat or flat_d
+
+
+@_jit
+def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cover - compiled
+    """Every per-cell quantity of eq. 1-5 for integer cells, exactly; see :func:`~.fast.cell_quantities`.
+
+    Parameters
+    ----------
+    s : (n_cells, n_s, n_fast) int32 or int64 array
+    ts : (1 or n_cells, n_fast) int64 array
+        Fast stamps, shared by all cells (one row) or per cell.
+    v : (n_cells, n_v, n_slow) int32 or int64 array
+    tv : (1 or n_cells, n_slow) int64 array
+    fs_s, fs_v : float
+    flat_flag : uint32
+        The quality flag of a flat channel or pair.
+    max_span : int
+        Largest value span of a row ranked by counting.
+
+    Returns
+    -------
+    status : int
+        :data:`OK`, or why the numpy kernel must decide (:data:`NOT_EXACT`:
+        sums would pass 2**53; :data:`DEGENERATE`: fewer than 3 samples or
+        pairs; :data:`UNSORTED` stamps; :data:`TOO_WIDE` value span).
+    act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality : arrays
+        As :func:`~.fast.cell_quantities` (valid when status is OK).
+
+    Notes
+    -----
+    Per row, one loop each for the moments, the value histogram and the run
+    sums; ranks are ``2 r - (n + 1)`` from the histogram's prefix sums (ties
+    get average ranks), held V is ranked with the run lengths as weights.
+    Every sum is an exact integer (checked before use), and the quantities
+    are computed from them with the numpy kernel's floating-point operations
+    in the same order, so both kernels return the same bits.
+    """
+    n_cells, n_s, n_fast = s.shape
+    n_v, n_slow = v.shape[1], v.shape[2]
+    act_s = np.zeros((n_cells, n_s))
+    mob_s = np.zeros((n_cells, n_s))
+    com_s = np.zeros((n_cells, n_s))
+    act_v = np.zeros((n_cells, n_v))
+    mob_v = np.zeros((n_cells, n_v))
+    com_v = np.zeros((n_cells, n_v))
+    lin = np.zeros((n_cells, n_s, n_v))
+    nonlin = np.zeros((n_cells, n_s, n_v))
+    quality = np.zeros(n_cells, dtype=np.uint32)
+    if n_cells == 0 or n_s == 0 or n_v == 0 or n_fast < 3 or n_slow < 3:
+        return DEGENERATE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+    if float(n_fast) ** 3 >= _F64_EXACT / 2:
+        return NOT_EXACT, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+    for r in range(ts.shape[0]):
+        if not _sorted(ts[r]):
+            return UNSORTED, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+    for r in range(tv.shape[0]):
+        if not _sorted(tv[r]):
+            return UNSORTED, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+    # ---- pass 1: moments of every row, exactness from the peaks
+    mom_s = np.empty((n_cells, n_s, 10))
+    mom_v = np.empty((n_cells, n_v, 10))
+    peak_s = 0.0
+    peak_v = 0.0
+    for c in range(n_cells):
+        for i in range(n_s):
+            _moments_row(s[c, i], mom_s[c, i])
+            peak_s = max(peak_s, abs(mom_s[c, i, 8]), abs(mom_s[c, i, 9]))
+        for j in range(n_v):
+            _moments_row(v[c, j], mom_v[c, j])
+            peak_v = max(peak_v, abs(mom_v[c, j, 8]), abs(mom_v[c, j, 9]))
+    if not (_exact_ok(n_fast, max(peak_s, peak_v)) and _exact_ok(n_slow, peak_v)):
+        return NOT_EXACT, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+    # ---- pass 2: per cell, hold runs, ranks, run sums, cross sums, quantities
+    starts = np.empty(n_fast, dtype=np.int64)
+    slow_index = np.empty(n_fast, dtype=np.int64)
+    weights = np.empty(n_fast, dtype=np.int64)
+    counts = np.zeros(4096, dtype=np.int64)
+    table = np.zeros(4096, dtype=np.int64)
+    vk = np.empty((n_v, n_fast), dtype=np.int64)
+    vf = np.empty((n_v, n_fast))
+    rv = np.empty((n_v, n_fast))
+    wf = np.empty(n_fast)
+    wrv = np.empty(n_fast)
+    run_x = np.empty(n_fast)
+    run_r = np.empty(n_fast)
+    sums_v = np.empty((n_v, 3))
+    first = 0
+    n_runs = 0
+    n = 0
+    length = 0
+    regular = False
+    for c in range(n_cells):
+        if c == 0 or ts.shape[0] > 1 or tv.shape[0] > 1:
+            first, n_runs = _hold_runs(tv[min(c, tv.shape[0] - 1)], ts[min(c, ts.shape[0] - 1)],
+                                       starts, slow_index, weights)
+            n = n_fast - first
+            if n < 3:
+                return DEGENERATE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+            length = weights[0]
+            regular = length <= 4
+            for k in range(n_runs):
+                wf[k] = weights[k]
+                if weights[k] != length:
+                    regular = False
+        qc = np.uint32(0)
+        # Hjorth parameters of every channel
+        for i in range(n_s):
+            a, m, cx, flat = _hjorth_row(n_fast, fs_s, mom_s[c, i])
+            act_s[c, i] = a
+            mob_s[c, i] = m
+            com_s[c, i] = cx
+            if flat:
+                qc |= flat_flag
+        for j in range(n_v):
+            a, m, cx, flat = _hjorth_row(n_slow, fs_v, mom_v[c, j])
+            act_v[c, j] = a
+            mob_v[c, j] = m
+            com_v[c, j] = cx
+            if flat:
+                qc |= flat_flag
+        # V rows: the held samples, ranked with run-length weights
+        for j in range(n_v):
+            lo = np.int64(v[c, j, slow_index[0]])
+            hi = lo
+            for k in range(n_runs):
+                a = np.int64(v[c, j, slow_index[k]])
+                vk[j, k] = a
+                vf[j, k] = a
+                lo = min(lo, a)
+                hi = max(hi, a)
+            span = hi - lo + 1
+            if span > max_span:
+                return TOO_WIDE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+            if span > counts.shape[0]:
+                counts = np.zeros(span, dtype=np.int64)
+                table = np.zeros(span, dtype=np.int64)
+            counts[:span] = 0
+            for k in range(n_runs):
+                counts[vk[j, k] - lo] += weights[k]
+            cum = 0
+            for b in range(span):
+                cnt = counts[b]
+                cum += cnt
+                table[b] = 2 * cum - cnt - n
+            for k in range(n_runs):
+                rv[j, k] = table[vk[j, k] - lo]
+            for k in range(n_runs):
+                wrv[k] = wf[k] * vf[j, k]
+            sums_v[j, 0] = _dot(wf[:n_runs], vf[j, :n_runs])
+            sums_v[j, 1] = _dot(wrv[:n_runs], vf[j, :n_runs])
+            for k in range(n_runs):
+                wrv[k] = wf[k] * rv[j, k]
+            sums_v[j, 2] = _dot(wrv[:n_runs], rv[j, :n_runs])
+        # S rows: counting ranks, run sums of samples and of ranks, cross sums
+        for i in range(n_s):
+            row = s[c, i, first:]
+            if first == 0:
+                lo = np.int64(mom_s[c, i, 8])
+                hi = np.int64(mom_s[c, i, 9])
+            else:
+                lo = np.int64(row[0])
+                hi = lo
+                for p in range(n):
+                    lo = min(lo, np.int64(row[p]))
+                    hi = max(hi, np.int64(row[p]))
+            span = hi - lo + 1
+            if span > max_span:
+                return TOO_WIDE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+            if span > counts.shape[0]:
+                counts = np.zeros(span, dtype=np.int64)
+                table = np.zeros(span, dtype=np.int64)
+            counts[:span] = 0
+            for p in range(n):
+                counts[row[p] - lo] += 1
+            cum = 0
+            rss = 0.0
+            for b in range(span):
+                cnt = counts[b]
+                cum += cnt
+                t = 2 * cum - cnt - n
+                table[b] = t
+                rss += float(cnt * t * t)
+            if regular:
+                _short_runs(row, lo, table, length, n_runs, run_x, run_r)
+            else:
+                for k in range(n_runs):
+                    p0 = starts[k]
+                    acc = 0
+                    accr = 0
+                    for p in range(p0, p0 + weights[k]):
+                        a = row[p]
+                        acc += a
+                        accr += table[a - lo]
+                    run_x[k] = acc
+                    run_r[k] = accr
+            if first == 0:
+                s1 = np.int64(mom_s[c, i, 0])
+                q = np.int64(mom_s[c, i, 1])
+            else:
+                fs1, fq = _sums(row)
+                s1 = np.int64(fs1)
+                q = np.int64(fq)
+            den_s = float(n * q - s1 * s1)
+            for j in range(n_v):
+                # Pearson (eq. 4), as fast._held_correlations' exact branch
+                v1 = np.int64(sums_v[j, 0])
+                v2 = np.int64(sums_v[j, 1])
+                den_v = float(n * v2 - v1 * v1)
+                num = n * np.int64(_dot(run_x[:n_runs], vf[j, :n_runs])) - s1 * v1
+                den = np.sqrt(den_s) * np.sqrt(den_v)
+                r = float(num) / den if den > 0 else 0.0
+                flat_pair = den_s == 0 or den_v == 0
+                if flat_pair:
+                    r = 0.0
+                lin[c, i, j] = min(max(r, -1.0), 1.0)
+                # Spearman (eq. 5): Pearson of the centred ranks
+                rvv = sums_v[j, 2]
+                rden = np.sqrt(rss) * np.sqrt(rvv)
+                rho = _dot(run_r[:n_runs], rv[j, :n_runs]) / rden if rden > 0 else 0.0
+                rflat = rss == 0 or rvv == 0
+                if rflat:
+                    rho = 0.0
+                nonlin[c, i, j] = min(max(rho, -1.0), 1.0)
+                if flat_pair or rflat:
+                    qc |= flat_flag
+        quality[c] = qc
+    return OK, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
