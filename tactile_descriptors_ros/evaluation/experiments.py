@@ -78,7 +78,7 @@ class EvalConfig:
     mode: str = DEFAULT_MODE
     classifiers: tuple[str, ...] = ("svm",)
     seed: int = 0
-    train_per_trial: int = 4
+    train_per_trial: int = 8
     test_per_trial: int = 2
     scaling: str = "log_standardize"
     gate: bool = False

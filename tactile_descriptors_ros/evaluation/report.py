@@ -63,7 +63,7 @@ FULL_PLAN = ReportPlan(
     sweep_windows=("0.25", "0.5", "1", "2", "4", "whole"),
     exploration_test=("1", "2", "4", "whole"),
     ablation_modes=("paper", "combined"), ablation_window="2",
-    headline_repeats=10, sweep_repeats=2, cv_folds=3, train_per_trial=4, test_per_trial=2, pa_orders=5)
+    headline_repeats=10, sweep_repeats=2, cv_folds=3, train_per_trial=8, test_per_trial=2, pa_orders=5)
 
 QUICK_PLAN = ReportPlan(
     headline_modes=("paper", "combined"), headline_windows=("1", "whole"),

@@ -74,7 +74,7 @@ def register(subparsers) -> None:
     p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=True,
                    help="predict with averaged PA weights (default on; --no-pa-average is the paper's PA-I)")
     p.add_argument("--drop", default="", help="quantities to leave out, e.g. L,N (ablation)")
-    p.add_argument("--train-windows", type=int, default=4, help="random windows per training trial")
+    p.add_argument("--train-windows", type=int, default=8, help="random windows per training trial (default 8)")
     p.add_argument("--test-windows", type=int, default=2, help="random windows per test trial")
     p.add_argument("--cv-repeats", type=int, default=10, help="repeats of the 5-fold CV choosing C")
     p.add_argument("--seed", type=int, default=0)
