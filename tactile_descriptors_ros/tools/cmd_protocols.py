@@ -1,0 +1,67 @@
+"""``tactile protocols``: the paper's protocols on simulated robots, beside the paper's numbers.
+
+Example::
+
+    tactile protocols --out docs            # docs/simulated.md, .json, figures/simulated_pa_curves.png
+    tactile protocols --quick --json        # a small plan, one JSON object on stdout
+
+Every number it writes is **simulated**: see docs/simulated.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers) -> None:
+    """Add the ``protocols`` subcommand."""
+    p = subparsers.add_parser(
+        "protocols", help="run the paper's protocols on simulated robots and write docs/simulated.md",
+        description="Simulates the paper's protocols (Shadow Hand finger subsets and combined motions, NAO right "
+        "hand -> left hand, large objects at three weights), scores SVM, online PA-I curves and GMM-EM/NMI, "
+        "and writes <out>/simulated.md, <out>/simulated.json and <out>/figures/simulated_pa_curves.png "
+        "beside the paper's own numbers. Simulated, not real data.")
+    p.add_argument("--out", default="docs", help="output folder (default docs; '' = write nothing)")
+    p.add_argument("--quick", action="store_true", help="a small plan (few materials, short tests; a smoke run)")
+    p.add_argument("--protocol", action="append", default=None, metavar="NAME",
+                   help="run only this protocol (repeatable); default: all of the plan")
+    p.add_argument("--json", action="store_true", help="print one JSON object (summary) on stdout")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the plan, write the report, print a summary."""
+    import dataclasses
+
+    from ..evaluation.simulated import FULL_PLAN, QUICK_PLAN, results_table, run_protocols, write_report
+
+    plan = QUICK_PLAN if args.quick else FULL_PLAN
+    if args.protocol:
+        plan = dataclasses.replace(plan, protocols=tuple(args.protocol))
+    results = run_protocols(plan, progress=True)
+    written = write_report(results, args.out) if args.out else {}
+    modes = list(plan.modes)
+    if args.json:
+        summary = {
+            "simulated": True, "plan": plan.name, "runtime_s": results["runtime_s"], "written": written,
+            "protocols": {
+                k: {tn: {m: {"svm": r["svm"]["accuracy"],
+                             **({"pa_plain": r["pa"]["plain"]["final"], "pa_max_loss_avg": r["pa"]["max_loss_avg"]["final"],
+                                 "nmi": r["gmm"]["nmi_test"]} if "pa" in r else {})}
+                         for m, r in t["modes"].items()}
+                    for tn, t in p["tests"].items()}
+                for k, p in results["protocols"].items()},
+        }
+        print(json.dumps(summary))
+        return 0
+    print("SIMULATED, not real data")
+    for row in results_table(results):
+        vals = "  ".join(f"{m}={row[m]}" for m in modes)
+        print(f"{row['protocol']:<22} {row['test']:<18} {row['measure']:<26} paper={row['paper_number'].split(' (')[0]:<8} {vals}")
+    if written:
+        print(f"wrote {written['markdown']}, {written['json']} and {written['figure']} "
+              f"in {results['runtime_s']:.0f} s")
+    return 0
