@@ -309,27 +309,72 @@ def skin_msg_to_frame(msg) -> SkinFrame:
     )
 
 
+def _view(values, dtype) -> np.ndarray:
+    """A read-only numpy view of an rclpy array field (``array.array`` or ndarray), no copy."""
+    if isinstance(values, np.ndarray):
+        return values if values.dtype == dtype else values.astype(dtype)
+    if isinstance(values, array.array):
+        if values.itemsize != np.dtype(dtype).itemsize:
+            return np.asarray(values, dtype=dtype)
+        return np.frombuffer(values, dtype=dtype) if len(values) else np.zeros(0, dtype)
+    return np.asarray(values, dtype=dtype)
+
+
 def skin_msg_to_chunk(msg) -> CellChunk:
     """``SkinCellFrame`` -> :class:`CellChunk` (vibration accelerometer, deformation force).
 
     Force (contact gate, eq. 27): the mean of the three tared force sensors
     times ``force_n_per_count``, NaN where any of them is ``INVALID_COUNT``.
+
+    This is the window node's per-message hot path (one call per cell per
+    batch: 2,320 calls/s for the NAO at 50 ms batches, 11,600 at 10 ms), so it
+    reads the array fields as numpy views (``np.frombuffer`` on the
+    ``array.array`` rclpy hands out) and builds only the arrays the chunk
+    keeps, without the intermediate :class:`SkinFrame`; it checks the same
+    lengths as :func:`skin_msg_to_frame` and raises the same errors.
+
+    Raises
+    ------
+    SignalError
+        For accelerometer axes of different lengths, a force array that is
+        not three sensors, offsets that do not match their samples, proximity
+        of the wrong length or a tare that is not three values.
     """
-    f = skin_msg_to_frame(msg)
-    t0 = f.stamp_ns
-    acc = f.accel.astype(np.int32)
-    forces = f.force.astype(np.int32)
-    f_ok = np.all(f.force != INVALID_COUNT, axis=0)
-    tare = np.asarray(msg.force_tare_counts, dtype=np.float64).reshape(3, 1)
-    mean_n = ((forces - tare).mean(axis=0)) * float(msg.force_n_per_count)
+    ax, ay, az = _view(msg.accel_x, np.int16), _view(msg.accel_y, np.int16), _view(msg.accel_z, np.int16)
+    n = ax.size
+    if not n == ay.size == az.size:
+        raise SignalError(f"accelerometer axes differ in length: {ax.size}, {ay.size}, {az.size}")
+    off_a = _view(msg.accel_offset_ns, np.int64)
+    if off_a.size != n:
+        raise SignalError(f"accel must be (3, {off_a.size}), got (3, {n})")
+    force = _view(msg.force, np.uint16)
+    if force.size % 3:
+        raise SignalError(f"{force.size} force samples is not a multiple of 3 sensors")
+    m = force.size // 3
+    off_f = _view(msg.force_offset_ns, np.int64)
+    if off_f.size != m:
+        raise SignalError(f"force must be (3, {off_f.size}), got (3, {m})")
+    if len(msg.proximity) not in (0, m):
+        raise SignalError(f"{len(msg.proximity)} proximity samples for {m} force samples")
+    tare = _view(msg.force_tare_counts, np.float64)
+    if tare.size != 3:
+        raise SignalError(f"force_tare_counts must hold 3 values, got {tare.size}")
+    t0 = stamp_to_ns(msg.header.stamp)
+    acc = np.empty((3, n), dtype=np.int32)
+    acc[0], acc[1], acc[2] = ax, ay, az
+    f3 = force.reshape(m, 3).T  # (3, m) view: the message interleaves the three sensors per sample
+    forces = f3.astype(np.int32)
+    f_ok = (f3 != INVALID_COUNT).all(axis=0)
+    mean_n = (forces - tare[:, None]).mean(axis=0) * float(msg.force_n_per_count)
+    t_f = off_f + t0
     return CellChunk(
         vibration=acc,
-        vibration_t_ns=t0 + f.accel_offset_ns,
+        vibration_t_ns=off_a + t0,
         deformation=forces,
-        deformation_t_ns=t0 + f.force_offset_ns,
+        deformation_t_ns=t_f,
         force_n=np.where(f_ok, mean_n, np.nan),
-        force_t_ns=t0 + f.force_offset_ns,
-        vibration_valid=np.all(f.accel != INVALID_ACCEL, axis=0),
+        force_t_ns=t_f,
+        vibration_valid=(ax != INVALID_ACCEL) & (ay != INVALID_ACCEL) & (az != INVALID_ACCEL),
         deformation_valid=f_ok,
     )
 

@@ -1,0 +1,140 @@
+"""The window node's per-message hot path: fast skin conversion and frames taken in batches."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helpers import spin_until
+
+pytestmark = pytest.mark.ros
+
+
+def _reference_chunk(msg):
+    """The straightforward conversion (via SkinFrame), the fast path's reference."""
+    from tactile_descriptors_ros.nodes.conversions import INVALID_ACCEL, INVALID_COUNT, skin_msg_to_frame
+
+    f = skin_msg_to_frame(msg)
+    forces = f.force.astype(np.int32)
+    f_ok = np.all(f.force != INVALID_COUNT, axis=0)
+    tare = np.asarray(msg.force_tare_counts, dtype=np.float64).reshape(3, 1)
+    mean_n = (forces - tare).mean(axis=0) * float(msg.force_n_per_count)
+    return {"vibration": f.accel.astype(np.int32), "vibration_t_ns": f.stamp_ns + f.accel_offset_ns,
+            "deformation": forces, "deformation_t_ns": f.stamp_ns + f.force_offset_ns,
+            "force_n": np.where(f_ok, mean_n, np.nan), "force_t_ns": f.stamp_ns + f.force_offset_ns,
+            "vibration_valid": np.all(f.accel != INVALID_ACCEL, axis=0), "deformation_valid": f_ok}
+
+
+def _skin_msg(rng, n_a, n_f, *, proximity=True, cdr=True):
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinCellFrame
+    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_frame_to_msg
+
+    acc = rng.integers(-512, 512, (3, n_a)).astype(np.int16)
+    force = rng.integers(0, 4096, (3, n_f)).astype(np.uint16)
+    if n_a:
+        acc[rng.integers(0, 3), rng.integers(0, n_a)] = -32768
+    if n_f:
+        force[rng.integers(0, 3), rng.integers(0, n_f)] = 65535
+    frame = SkinFrame(int(rng.integers(0, 2**62)), acc, np.sort(rng.integers(0, 10**8, n_a)).astype(np.int64),
+                      force, np.sort(rng.integers(0, 10**8, n_f)).astype(np.int64),
+                      rng.integers(0, 100, n_f if proximity else 0).astype(np.uint16))
+    msg = skin_frame_to_msg(frame, cell_id=3, body_part="left_hand", force_n_per_count=float(rng.uniform(0.001, 0.01)),
+                            force_tare_counts=rng.uniform(0, 500, 3).tolist())
+    # what the window node receives: rclpy's own array types after CDR
+    return deserialize_message(serialize_message(msg), SkinCellFrame) if cdr else msg
+
+
+@pytest.mark.parametrize("cdr", [True, False])
+def test_fast_skin_conversion_equals_the_reference(cdr):
+    from tactile_descriptors_ros.nodes.conversions import skin_msg_to_chunk
+
+    rng = np.random.default_rng(4)
+    for n_a, n_f in [(50, 12), (10, 3), (1, 1), (0, 0), (7, 0), (200, 50)]:
+        msg = _skin_msg(rng, n_a, n_f, proximity=bool(n_f % 2), cdr=cdr)
+        got, want = skin_msg_to_chunk(msg), _reference_chunk(msg)
+        for key, value in want.items():
+            arr = getattr(got, key)
+            assert arr.dtype == value.dtype and arr.shape == value.shape, key
+            np.testing.assert_array_equal(arr, value, err_msg=key)  # exact, NaN where invalid
+        if n_f:
+            assert np.isnan(got.force_n).sum() == (~got.deformation_valid).sum() >= 1
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("accel_y", [1, 2], "axes differ"),
+    ("accel_offset_ns", [0], "accel must be"),
+    ("force", [1, 2, 3, 4], "multiple of 3"),
+    ("force_offset_ns", [0, 1, 2], "force must be"),
+    ("proximity", [1, 2, 3, 4, 5], "proximity"),
+])
+def test_fast_skin_conversion_rejects_inconsistent_lengths(field, value, match):
+    import array
+
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.nodes.conversions import skin_msg_to_chunk
+
+    msg = _skin_msg(np.random.default_rng(1), 5, 2)
+    code = {"accel_y": "h", "accel_offset_ns": "q", "force": "H", "force_offset_ns": "q", "proximity": "H"}[field]
+    setattr(msg, field, array.array(code, value))
+    with pytest.raises(SignalError, match=match):
+        skin_msg_to_chunk(msg)
+
+
+def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):
+    """A node behind its input takes every waiting frame in one callback; the windows are those of one-by-one."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, SkinCellFrame
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_frame_to_msg
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    part = load_robot("nao").body_part("left_hand")
+    common = [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),
+              Parameter("window.mode", value="fixed"), Parameter("window.length_s", value=0.5),
+              Parameter("window.hop_s", value=0.25), Parameter("window.lateness_s", value=0.0),
+              Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
+    batched = WindowNode("wn_batched", context=ros_context, parameter_overrides=common,
+                         cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_batched"])
+    single = WindowNode("wn_single", context=ros_context,
+                        parameter_overrides=[*common, Parameter("frames.drain_max", value=0)],
+                        cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_single"])
+    io = rclpy.create_node("io", context=ros_context)
+    qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
+    pub = io.create_publisher(SkinCellFrame, "tactile/left_hand/frames", qos)
+    out = {"desc_batched": [], "desc_single": []}
+    for topic, got in out.items():
+        io.create_subscription(Descriptor, topic, got.append, 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (batched, single, io):
+        ex.add_node(n)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= 2, 10)
+
+    rng = np.random.default_rng(0)
+    rounds, t0 = 24, 5_000_000_000  # 1.2 s of 50 ms batches: windows end at 0.5, 0.75, 1.0 s
+    off_a = np.arange(50, dtype=np.int64) * 1_000_000
+    off_f = np.arange(12, dtype=np.int64) * 4_000_000
+    for k in range(rounds):
+        for cell in part.cells:
+            acc = np.clip(rng.normal(0, 12, (3, 50)) + [[0], [0], [256]], -512, 511).astype(np.int16)
+            force = rng.integers(300, 700, (3, 12)).astype(np.uint16)
+            frame = SkinFrame(t0 + k * 50_000_000, acc, off_a, force, off_f, np.zeros(0, np.uint16), sequence=k)
+            pub.publish(skin_frame_to_msg(frame, cell_id=cell.id, body_part="left_hand", force_n_per_count=0.0024))
+    n_msgs = rounds * len(part.cells)
+    assert spin_until(ex, lambda: batched.frames_taken == n_msgs and single.frames_taken == n_msgs
+                      and len(out["desc_batched"]) == len(out["desc_single"]) == 3, 20)
+    assert batched.largest_batch > 1 and batched.batches < n_msgs  # it caught up in batches
+    assert single.largest_batch == 1 and single.batches == n_msgs
+    assert batched.faults == single.faults and batched.windower.faults == single.windower.faults
+    for a, b in zip(out["desc_batched"], out["desc_single"]):
+        assert (a.window_start, a.window_end) == (b.window_start, b.window_end)
+        assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
+    for n in (batched, single, io):
+        n.destroy_node()
