@@ -138,3 +138,27 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
         assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
     for n in (batched, single, io):
         n.destroy_node()
+
+
+def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
+    """The latency defaults in config/nao.yaml's nodes: section reach the window node under their declared names."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.launching.graph import build_graph
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    for split in (False, True):
+        spec = next(s for s in build_graph("nao", split_window_nodes=split) if s.executable == "window_node")
+        params = spec.parameters
+        assert params["window.lateness_s"] == 0.05 and params["frames.drain_max"] == 1000
+        assert params["qos.frames.depth"] == 256
+    node = WindowNode(spec.name, context=ros_context,
+                      parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+    try:
+        for key, value in params.items():
+            assert node.has_parameter(key), key
+            assert node.get_parameter(key).value == value, key
+        assert node.drain_max == 1000 and node.windower.lateness_ns == 50_000_000
+        assert [p.name for p in node.robot.body_parts] == params["body_parts"]
+    finally:
+        node.destroy_node()
