@@ -83,6 +83,7 @@ __all__ = [
     "PAPER_PA_T",
     "CHECK_SPEEDS_M_S",
     "CHECK_RATES_HZ",
+    "CHECK_FORCE_RATES_HZ",
     "HELD_OUT_SEED_OFFSET",
 ]
 
@@ -220,11 +221,17 @@ def _material_names(spec: Any) -> list[str]:
 #: the paper's speed grid 0.5-4 cm/s, the large objects' 1-3 cm/s, BioTac PAC and skin accelerometer.
 CHECK_SPEEDS_M_S: tuple[float, ...] = tuple(round(0.005 * k, 3) for k in range(1, 9))
 CHECK_RATES_HZ: tuple[float, ...] = (2200.0, 1000.0)
+#: Skin force-sensor rates (Hz) at which the force texture modulation is rendered.
+CHECK_FORCE_RATES_HZ: tuple[float, ...] = (250.0,)
 
 
 @functools.lru_cache(maxsize=4096)
 def renderable(name: str, material_seed: int = 0) -> bool:
-    """Whether the simulator can render ``name`` at every speed and rate of :data:`CHECK_SPEEDS_M_S`.
+    """Whether the simulator can render ``name`` at every speed of :data:`CHECK_SPEEDS_M_S`.
+
+    Checked: the vibration model at :data:`CHECK_RATES_HZ` and the skin's
+    force-texture model at :data:`CHECK_FORCE_RATES_HZ` (the two AR models
+    the engine rescales with speed).
 
     Some parametric materials have a pole so close to the unit circle that
     the speed rescaling of their AR model (``textures.rescale_ar``) becomes
@@ -234,11 +241,16 @@ def renderable(name: str, material_seed: int = 0) -> bool:
     """
     from ..sim.textures import get_material
 
-    mat = get_material(name, seed=material_seed)
+    from ..sim.textures import rescale_ar
+
     try:
-        for rate in CHECK_RATES_HZ:
-            for v in CHECK_SPEEDS_M_S:
+        mat = get_material(name, seed=material_seed)
+        dm = mat.deformation
+        for v in CHECK_SPEEDS_M_S:
+            for rate in CHECK_RATES_HZ:
                 mat.vibration.at(rate, v, mat.reference_speed_m_s)
+            for rate in CHECK_FORCE_RATES_HZ:  # the skin's force-texture modulation (engine, electrode_deformation)
+                rescale_ar(np.array(dm.pdc_ar), dm.pdc_sigma2, (v / mat.reference_speed_m_s) * dm.fs_hz / rate)
     except SceneError:
         return False
     return True
@@ -755,7 +767,12 @@ def _set_summary(s: DescriptorSet) -> dict[str, Any]:
 
 
 def run_protocols(plan: Plan = FULL_PLAN, *, progress: bool = False) -> dict[str, Any]:
-    """Run every protocol of ``plan``; the training simulations are shared between protocols."""
+    """Run every protocol of ``plan``; the training simulations are shared between protocols.
+
+    A protocol the simulator cannot render (``SceneError``/``ConfigError``)
+    is recorded with its ``error`` and listed in the report; the others
+    still run.
+    """
     t0 = time.perf_counter()
     cache: dict[tuple, DescriptorSet] = {}
     fits: dict[tuple, Any] = {}
@@ -769,7 +786,10 @@ def run_protocols(plan: Plan = FULL_PLAN, *, progress: bool = False) -> dict[str
     for k in keys:
         if bar is not None:
             bar.set_postfix_str(k)
-        results[k] = run_protocol(k, plan, progress=progress, cache=cache, fits=fits)
+        try:
+            results[k] = run_protocol(k, plan, progress=progress, cache=cache, fits=fits)
+        except (SceneError, ConfigError) as exc:  # reported in the results and the report, never dropped
+            results[k] = {"key": k, "title": PROTOCOLS[k].title, "error": f"{type(exc).__name__}: {exc}"}
         if bar is not None:
             bar.update(1)
     if bar is not None:
@@ -803,6 +823,11 @@ def results_table(results: Mapping[str, Any]) -> list[dict[str, Any]]:
     modes = list(results["plan"]["modes"])
     rows: list[dict[str, Any]] = []
     for key, p in results["protocols"].items():
+        if "error" in p:
+            rows.append({"protocol": key, "title": p["title"], "section": PROTOCOLS[key].paper_section, "test": "--",
+                         "size": "--", "measure": "FAILED", "paper_number": "--", **{m: "--" for m in modes},
+                         "notes": p["error"]})
+            continue
         paper = p.get("paper", {})
         for k_test, (tname, t) in enumerate(p["tests"].items()):
             main = k_test == 0
@@ -849,7 +874,7 @@ def _plot_curves(results: Mapping[str, Any], path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = [(k, tn, t) for k, p in results["protocols"].items() for tn, t in p["tests"].items()
+    panels = [(k, tn, t) for k, p in results["protocols"].items() for tn, t in p.get("tests", {}).items()
               if any("pa" in r for r in t["modes"].values())]
     if not panels:
         return
@@ -902,7 +927,7 @@ def _plan_text(results: Mapping[str, Any]) -> list[str]:
         f"* SVM: C by 5-fold CV repeated {plan['cv_repeats']} times over the paper's grid; PA-I curves averaged "
         f"over {plan['pa_orders']} presentation orders; GMM-EM fitted on the training set, NMI on the test set.",
     ]
-    skipped = sorted({n for p in results["protocols"].values()
+    skipped = sorted({n for p in results["protocols"].values() if "error" not in p
                       for s in [p["train"]] + [t["set"] for t in p["tests"].values()]
                       for n in s["override"].get("skipped_unrenderable", [])})
     if skipped:
@@ -970,7 +995,7 @@ def write_report(results: Mapping[str, Any], out_dir) -> dict[str, str]:
            "| protocol | test | condition | n | " + " | ".join(_MODE_TITLES.get(m, m) for m in modes) + " |",
            "|" + "---|" * (4 + len(modes))]
     for key, p in results["protocols"].items():
-        for tname, t in p["tests"].items():
+        for tname, t in p.get("tests", {}).items():
             first = t["modes"][modes[0]]["svm"].get("by_group", {})
             for g, v in first.items():
                 cells = [_pct(t["modes"][m]["svm"]["by_group"][g]["accuracy"]) for m in modes]
@@ -979,6 +1004,8 @@ def write_report(results: Mapping[str, Any], out_dir) -> dict[str, str]:
            "## Cost", "", "| protocol | scene | explorations | simulate s | descriptors s | ms / window (all modes) |",
            "|---|---|---|---|---|---|"]
     for key, p in results["protocols"].items():
+        if "error" in p:
+            continue
         for s in [p["train"]] + [t["set"] for t in p["tests"].values()]:
             md.append(f"| {key} | {s['scene']} | {s['explorations']} | {s['simulate_s']:.1f} | {s['describe_s']:.1f} "
                       f"| {s['describe_ms_per_window']:.1f} |")

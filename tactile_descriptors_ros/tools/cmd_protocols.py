@@ -53,15 +53,17 @@ def run(args: argparse.Namespace) -> int:
                                  "nmi": r["gmm"]["nmi_test"]} if "pa" in r else {})}
                          for m, r in t["modes"].items()}
                     for tn, t in p["tests"].items()}
-                for k, p in results["protocols"].items()},
+                for k, p in results["protocols"].items() if "error" not in p},
+            "errors": {k: p["error"] for k, p in results["protocols"].items() if "error" in p},
         }
         print(json.dumps(summary))
-        return 0
+        return 1 if summary["errors"] else 0
     print("SIMULATED, not real data")
     for row in results_table(results):
         vals = "  ".join(f"{m}={row[m]}" for m in modes)
         print(f"{row['protocol']:<22} {row['test']:<18} {row['measure']:<26} paper={row['paper_number'].split(' (')[0]:<8} {vals}")
+    failed = [k for k, p in results["protocols"].items() if "error" in p]
     if written:
         print(f"wrote {written['markdown']}, {written['json']} and {written['figure']} "
               f"in {results['runtime_s']:.0f} s")
-    return 0
+    return 1 if failed else 0
