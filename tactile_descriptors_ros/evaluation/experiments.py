@@ -28,6 +28,7 @@ __all__ = ["EvalConfig", "CLASSIFIERS", "evaluate", "trial_folds", "trial_cv", "
 CLASSIFIERS: tuple[str, ...] = ("svm", "pa", "gmm")
 
 _BANK_PARTS = {"paper": ("core",), "per_channel": ("core",), "bands": ("bands",), "levels": ("levels",),
+               "subwindows": ("subwindows",),
                "baseline": ("baseline",)}
 
 
@@ -138,10 +139,11 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
     w_test = draw_windows(test, n_test, common, cfg.test_per_trial, cfg.seed + 1)
     # Each split's windows are looked up in that split's recordings only: (material, trial) names a
     # recording uniquely inside one folder, not across two.
+    sub = "subwindows" in mode_groups(cfg.mode)
     b_train = compute_bank(train, w_train, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
-                           desc="train descriptors")
+                           desc="train descriptors", subwindows=sub)
     b_test = compute_bank(test, w_test, cache_dir=cfg.cache_dir, jobs=cfg.jobs, progress=cfg.progress,
-                          desc="test descriptors")
+                          desc="test descriptors", subwindows=sub)
     X_tr, labels = select_features(b_train, cfg.mode, gate=cfg.gate, drop=cfg.drop)
     X_te, _ = select_features(b_test, cfg.mode, gate=cfg.gate, drop=cfg.drop)
     y_tr, y_te = b_train.y, b_test.y

@@ -25,6 +25,16 @@ Groups (all per window):
 ``levels``
     Mean level of each electrode, PDC, TDC and TAC over the window (22
     values): static deformation, force and thermal state.
+``subwindows``
+    *Successive windows inside the window*: the window is cut into
+    :data:`N_SUBWINDOWS` equal consecutive pieces, each piece gets the
+    ``per_channel`` and ``bands`` values (Activity as ``log1p``), and the
+    group is their mean and standard deviation over the pieces (2 x 116
+    values, labelled ``mean_<label>`` and ``sd_<label>``).  The standard
+    deviation says how steady the texture is over the slide (stick-slip,
+    uneven weave), which one descriptor of the whole window averages away.
+    Derived from the banks of the pieces (cached like any bank), added by
+    :func:`compute_bank` with ``subwindows=True``.
 ``baseline``
     The related work's hand-made features (e.g. Fishel & Loeb 2012, Jamali &
     Sammut 2011 -- statistics and spectra): log variance, skewness and
@@ -34,9 +44,12 @@ Groups (all per window):
 Named modes (:data:`DESCRIPTOR_MODES`): ``paper`` (= the core's ``averaged``
 mode), ``per_channel`` (the core's ``per_channel`` mode), ``multiband``
 (``per_channel`` + ``bands``), ``multiband_levels`` (+ ``levels``),
-``baseline``, and ``combined`` (``per_channel`` + ``bands`` + ``levels`` +
-``baseline``, 261 values: the most accurate on the real recordings at short
-windows, and :data:`DEFAULT_MODE`).  ``averaged`` is accepted as an alias of
+``baseline``, ``combined`` (``per_channel`` + ``bands`` + ``levels`` +
+``baseline``, 261 values: :data:`DEFAULT_MODE`) and ``combined_subwindows``
+(``combined`` + ``subwindows``, 493 values).  On cross-validation over
+blocks of trials (2 s windows) ``combined`` scored 97.3 % and
+``combined_subwindows`` 97.7 %, a gain inside the noise of 400 test windows
+per fold for twice the descriptor time, so the default stays ``combined``.  ``averaged`` is accepted as an alias of
 ``paper``.
 
 The contact gate (eq. 16) is applied when a mode is selected: a window whose
@@ -78,6 +91,8 @@ __all__ = [
     "window_bank",
     "compute_bank",
     "select_features",
+    "N_SUBWINDOWS",
+    "subwindow_starts",
     "drop_quantities",
     "mode_groups",
 ]
@@ -91,8 +106,15 @@ PAC_BANDS_HZ: tuple[tuple[float, float], ...] = (
 #: Electrode frequency bands of the baseline (Hz; electrodes at 100 Hz).
 ELECTRODE_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.0, 2.0), (2.0, 10.0), (10.0, 50.0))
 
-#: Feature groups in bank order.
+#: Feature groups in bank order (computed per window and cached).
 GROUPS: tuple[str, ...] = ("paper", "per_channel", "bands", "levels", "baseline")
+
+#: Groups derived from the banks of other windows (the pieces of a window).
+DERIVED_GROUPS: tuple[str, ...] = ("subwindows",)
+
+#: Pieces of the ``subwindows`` group and the groups described per piece.
+N_SUBWINDOWS: int = 4
+_SUBWINDOW_SOURCE: tuple[str, ...] = ("per_channel", "bands")
 
 #: Named descriptor modes: which groups they concatenate.
 DESCRIPTOR_MODES: dict[str, tuple[str, ...]] = {
@@ -102,6 +124,7 @@ DESCRIPTOR_MODES: dict[str, tuple[str, ...]] = {
     "multiband_levels": ("per_channel", "bands", "levels"),
     "baseline": ("baseline",),
     "combined": ("per_channel", "bands", "levels", "baseline"),
+    "combined_subwindows": ("per_channel", "bands", "levels", "baseline", "subwindows"),
 }
 
 #: The mode ``tactile evaluate`` uses unless told otherwise (the paper's own
@@ -350,10 +373,41 @@ def _work(args: tuple) -> list[tuple]:
     return [window_bank(rec, s, n_frames, cell_type, threshold) for s in starts]
 
 
+def subwindow_starts(window: Window, n_pieces: int = N_SUBWINDOWS) -> list[Window]:
+    """The ``n_pieces`` equal consecutive pieces of a window (a remainder of frames at the end is unused).
+
+    Raises
+    ------
+    ConfigError
+        When a piece would be shorter than 3 frames.
+    """
+    size = window.n_frames // n_pieces
+    if size < 3:
+        raise ConfigError(f"a {window.n_frames}-frame window is too short for {n_pieces} pieces of >= 3 frames",
+                          key="window")
+    return [Window(window.material, window.trial, window.start + k * size, size) for k in range(n_pieces)]
+
+
+def _add_subwindows(bank: FeatureBank, recordings: Sequence[BiotacRecording], **kwargs) -> None:
+    """Compute the ``subwindows`` group of ``bank`` from the banks of its windows' pieces."""
+    pieces = [p for w in bank.windows for p in subwindow_starts(w)]
+    sub = compute_bank(recordings, pieces, **kwargs)
+    values = np.concatenate([sub.groups[g] for g in _SUBWINDOW_SOURCE], axis=1)
+    labels = [lab.split("/", 1)[1] for g in _SUBWINDOW_SOURCE for lab in sub.labels[g]]
+    act = np.array([lab.startswith("A_") for lab in labels])
+    values[:, act] = np.log1p(np.maximum(values[:, act], 0.0))
+    values = values.reshape(len(bank.windows), N_SUBWINDOWS, -1)
+    bank.groups["subwindows"] = np.concatenate([values.mean(axis=1), values.std(axis=1)], axis=1)
+    bank.labels["subwindows"] = tuple([f"subwindows/mean_{lab}" for lab in labels]
+                                      + [f"subwindows/sd_{lab}" for lab in labels])
+    per_piece = sub.seconds["core"] + sub.seconds["bands"]
+    bank.seconds["subwindows"] = per_piece.reshape(len(bank.windows), N_SUBWINDOWS).sum(axis=1)
+
+
 def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window], *,
                  cell_type: CellType | None = None, force_threshold_n: float | None = None,
                  cache_dir: str | Path | None = None, jobs: int = 1, progress: bool = False,
-                 desc: str = "descriptors") -> FeatureBank:
+                 desc: str = "descriptors", subwindows: bool = False) -> FeatureBank:
     """Feature bank of ``windows`` (which must all have the same length).
 
     Parameters
@@ -372,6 +426,9 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
         Worker processes for windows not in the cache.
     progress : bool
         Show a tqdm bar on stderr.
+    subwindows : bool, default False
+        Also compute the derived ``subwindows`` group (from the banks of the
+        windows' :data:`N_SUBWINDOWS` pieces).
     """
     if not windows:
         raise ConfigError("no windows to describe")
@@ -436,24 +493,35 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
     for g in GROUPS:
         if groups[g].shape[1] != len(labels[g]):
             raise ConfigError(f"feature group {g}: {groups[g].shape[1]} values but {len(labels[g])} labels")
-    return FeatureBank(
+    bank = FeatureBank(
         windows=list(windows), groups=groups, labels=labels,
         in_contact=np.array([r[2] for r in rows], dtype=bool),
         mean_force_n=np.array([r[3] for r in rows]),
         seconds={s: np.array([r[4][s] for r in rows]) for s in ("core", "bands", "levels", "baseline")},
     )
+    if subwindows:
+        _add_subwindows(bank, recordings, cell_type=cell_type, force_threshold_n=threshold, cache_dir=cache_dir,
+                        jobs=jobs, progress=progress, desc=f"{desc}, pieces")
+    return bank
 
 
 # --------------------------------------------------------------------------- selection
 
 
 def drop_quantities(labels: Sequence[str], drop: Iterable[str]) -> np.ndarray:
-    """Mask keeping labels whose quantity (text after ``/`` up to ``_``) is not in ``drop``."""
+    """Mask keeping labels whose quantity (text after ``/`` up to ``_``, past a ``mean_``/``sd_``) is not in ``drop``."""
     drop = set(drop)
     bad = drop - set(QUANTITIES)
     if bad:
         raise ConfigError(f"unknown quantities {sorted(bad)}; choose from {QUANTITIES}")
-    return np.array([lab.rsplit("/", 1)[-1].split("_", 1)[0] not in drop for lab in labels], dtype=bool)
+
+    def quantity(lab: str) -> str:
+        q = lab.rsplit("/", 1)[-1]
+        if q.startswith(("mean_", "sd_")):
+            q = q.split("_", 1)[1]
+        return q.split("_", 1)[0]
+
+    return np.array([quantity(lab) not in drop for lab in labels], dtype=bool)
 
 
 def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
@@ -476,6 +544,9 @@ def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
     labels : tuple of str
     """
     groups = mode_groups(mode)
+    missing = [g for g in groups if g not in bank.groups]
+    if missing:
+        raise ConfigError(f"mode {mode!r} needs the {missing} group(s): compute the bank with subwindows=True")
     X = np.concatenate([bank.groups[g] for g in groups], axis=1)
     labels = tuple(lab for g in groups for lab in bank.labels[g])
     keep = drop_quantities(labels, drop)

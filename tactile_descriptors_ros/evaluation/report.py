@@ -143,7 +143,9 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     # combined = per_channel + bands + levels + baseline: leave groups out
     ablations_groups = [("without the baseline statistics (multiband_levels)", {"mode": "multiband_levels"}),
                         ("without baseline and levels (multiband)", {"mode": "multiband"}),
-                        ("per-channel descriptor only (per_channel)", {"mode": "per_channel"})]
+                        ("per-channel descriptor only (per_channel)", {"mode": "per_channel"}),
+                        ("+ successive pieces: mean and sd over 4 x 0.5 s (combined_subwindows)",
+                         {"mode": "combined_subwindows"})]
     for m in plan.ablation_modes:
         for name, kw in ablations:
             only_pa = {"classifiers": ("pa",)} if name.startswith("PA:") else {}  # the SVM is unchanged
@@ -306,7 +308,9 @@ def _markdown(results: dict, plan: ReportPlan, tr: list[int], te: list[int], com
       "per electrode (98); `multiband` = per_channel + Hjorth A/M/C of PAC in 6 bands (116); "
       "`multiband_levels` = multiband + mean electrode/PDC/TDC/TAC levels (138); `baseline` = related-work "
       "statistics (log variance, skewness, kurtosis, log band powers of PAC and electrodes; 123); "
-      "`combined` = multiband_levels + baseline (261, the default of `tactile evaluate`).")
+      "`combined` = multiband_levels + baseline (261, the default of `tactile evaluate`); "
+      "`combined_subwindows` = combined + mean and standard deviation of the per_channel and band values "
+      "over the window's 4 successive pieces (493).")
     a("")
     a("## Headline (development split)")
     a("")

@@ -120,7 +120,7 @@ def test_crop_rule_no_duration_leak(small_recs, tmp_path):
     assert len(whole) == len(small_recs) and {(w.start, w.n_frames) for w in whole} == {(0, common)}
     with pytest.raises(ConfigError):
         window_frames(str(common / 100.0 + 1.0), 100.0, common)
-    bank = compute_bank(small_recs, whole, cache_dir=tmp_path)
+    bank = compute_bank(small_recs, whole, cache_dir=tmp_path, subwindows=True)
     for mode in DESCRIPTOR_MODES:
         X, labels = select_features(bank, mode)
         assert X.shape == (len(whole), len(labels)) and np.all(np.isfinite(X))
@@ -210,3 +210,32 @@ def test_cli_scores_a_separate_folder_whose_trial_numbers_collide(biotac_data_di
     np.testing.assert_array_equal(got, want)
     with pytest.raises(ConfigError, match="twice"):
         compute_bank(renamed + load_split(biotac_data_dir, [1, 2], [1]), w_new, jobs=1)
+
+
+@pytest.mark.realdata
+def test_subwindow_group_is_mean_and_sd_over_the_pieces(small_recs, tmp_path):
+    from tactile_descriptors_ros.evaluation.features import N_SUBWINDOWS, subwindow_starts
+    from tactile_descriptors_ros.evaluation.windows import Window
+
+    wins = [Window(2, 3, 10, 203), Window(1, 1, 0, 203)]
+    bank = compute_bank(small_recs, wins, cache_dir=tmp_path, subwindows=True)
+    labels = bank.labels["subwindows"]
+    assert len(labels) == 2 * (98 + 18) and labels[0] == "subwindows/mean_" + bank.labels["per_channel"][0].split("/")[1]
+    pieces = subwindow_starts(wins[0])
+    assert [(p.start, p.n_frames) for p in pieces] == [(10, 50), (60, 50), (110, 50), (160, 50)]  # 3 frames unused
+    each = compute_bank(small_recs, pieces)
+    vals = np.concatenate([each.groups["per_channel"], each.groups["bands"]], axis=1)
+    names = bank.labels["per_channel"] + bank.labels["bands"]
+    act = np.array([n.split("/")[1].startswith("A_") for n in names])
+    vals[:, act] = np.log1p(vals[:, act])
+    want = np.concatenate([vals.mean(axis=0), vals.std(axis=0)])
+    np.testing.assert_allclose(bank.groups["subwindows"][0], want, rtol=1e-12, atol=1e-12)
+    assert N_SUBWINDOWS == 4 and np.all(np.isfinite(bank.groups["subwindows"]))
+    # "without A" also drops the pieces' Activity statistics
+    keep = drop_quantities(labels, ["A"])
+    assert not any(lab.split("/")[1].split("_")[1] == "A" for lab, k in zip(labels, keep) if k)
+    assert keep.sum() < len(labels)
+    with pytest.raises(ConfigError, match="subwindows=True"):
+        select_features(compute_bank(small_recs, wins), "combined_subwindows")
+    with pytest.raises(ConfigError, match="too short"):
+        subwindow_starts(Window(1, 1, 0, 11))
