@@ -350,6 +350,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float = 0.05, lateness_
         "window_s": length_s, "hop_s": hop_s, "duration_s": duration_s,
         "messages": n_messages, "predictions": len(received),
         "e2e": e2e_summary, "wait": _summary(wait), "processing": _summary(proc),
+        "e2e_ms": [round(v, 2) for v in e2e],  # in arrival order: a slow start shows here
         "complete": _summary([(arr - end) / 1e6 for end, arr in complete.items()]),
         "publish_lag": _summary(lag),
         "publish_lag_last_ms": float(lag[-1]) if lag else None,

@@ -150,7 +150,7 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
     for split in (False, True):
         spec = next(s for s in build_graph("nao", split_window_nodes=split) if s.executable == "window_node")
         params = spec.parameters
-        assert params["window.lateness_s"] == 0.05 and params["frames.drain_max"] == 1000
+        assert params["window.lateness_s"] == 0.01 and params["frames.drain_max"] == 1000
         assert params["qos.frames.depth"] == 256
     node = WindowNode(spec.name, context=ros_context,
                       parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
@@ -158,7 +158,7 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
         for key, value in params.items():
             assert node.has_parameter(key), key
             assert node.get_parameter(key).value == value, key
-        assert node.drain_max == 1000 and node.windower.lateness_ns == 50_000_000
+        assert node.drain_max == 1000 and node.windower.lateness_ns == 10_000_000
         assert [p.name for p in node.robot.body_parts] == params["body_parts"]
     finally:
         node.destroy_node()
