@@ -26,6 +26,7 @@ A body part with no cell in contact yields zeros, ``contact = False`` and the
 from __future__ import annotations
 
 import functools
+import math
 import threading
 import weakref
 from collections.abc import Mapping
@@ -449,8 +450,12 @@ def _force_means(forces: list) -> np.ndarray:
     """:func:`_mean_forces` of a list of force arrays, one pass when they are all finite and equally long."""
     if not forces:
         return np.zeros(0)
-    n = np.shape(forces[0])
-    if len(n) == 1 and n[0] and all(np.shape(f) == n for f in forces):
+    try:
+        shapes = {f.shape for f in forces}
+    except AttributeError:
+        shapes = {np.shape(f) for f in forces}
+    n = next(iter(shapes))
+    if len(shapes) == 1 and len(n) == 1 and n[0]:
         f2 = np.stack(forces).astype(np.float64, copy=False)
         finite = np.isfinite(f2).all(axis=1)
         if finite.all():
@@ -462,22 +467,15 @@ def _force_means(forces: list) -> np.ndarray:
 
 
 def _segment_sums(y: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """Row sums of each segment ``y[starts[p]:starts[p] + counts[p]]``, added row after row.
+    """Row sums of each segment ``y[starts[p]:starts[p] + counts[p]]`` (contiguous, in order), added row after row.
 
     The order of the additions is that of ``numpy.sum(segment, axis=0)``
     on a segment with two or more columns (first row, then each next row),
-    so the result is identical to it.
+    so the result is identical to it; ``numpy.add.at`` adds the rows in
+    index order.
     """
-    out = y[starts]
-    c_max = int(counts.max())
-    if c_max > 1 and bool((counts == c_max).all()) and bool((starts == np.arange(starts.size) * c_max).all()):
-        y3 = y.reshape(starts.size, c_max, y.shape[1])
-        for j in range(1, c_max):
-            out += y3[:, j]
-        return out
-    for j in range(1, c_max):
-        sel = np.flatnonzero(counts > j)
-        out[sel] += y[starts[sel] + j]
+    out = np.zeros((starts.size, y.shape[1]))
+    np.add.at(out, np.repeat(np.arange(starts.size), counts), y[starts[0]:starts[-1] + counts[-1]])
     return out
 
 
@@ -527,10 +525,10 @@ def _reduce_parts(feats: CellFeatures, starts: np.ndarray, counts: np.ndarray, c
 
 def _row_means(a: np.ndarray) -> np.ndarray:
     """:func:`_finite_mean` of each row's block (all axes but the first), as a column."""
-    n = int(np.prod(a.shape[1:]))
+    n = math.prod(a.shape[1:])
     if n == 0:
         return np.zeros((a.shape[0], 1))
-    return np.sum((a / n).reshape(a.shape[0], n), axis=1)[:, None]
+    return np.add.reduce((a / n).reshape(a.shape[0], n), axis=1)[:, None]
 
 
 def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...], cells: Mapping[int, CellSignals],
@@ -593,16 +591,11 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
     _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
     out: list[BodyPartDescriptor] = []
-    vib = np.stack([s.vibration for s in touching_sigs])
-    dfm = np.stack([s.deformation for s in touching_sigs])
-    peaks, saturated = _peaks_and_saturation(vib, dfm, cell_type)
-    n_max = max(vib.shape[2], dfm.shape[2])
-    if not (exact_integer_ok(n_max, *peaks) and float(n_max) ** 3 < 2.0**52):
+    feats = _type_features(touching_sigs, cell_type)
+    if feats is None:
         # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
-    feats = cell_features(vib, _shared_or_stacked([s.vibration_t_ns for s in touching_sigs]),
-                          dfm, _shared_or_stacked([s.deformation_t_ns for s in touching_sigs]),
-                          cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)
+    feats, saturated = feats
     on = np.flatnonzero(counts)
     starts_all = np.concatenate(([0], np.cumsum(counts)[:-1]))
     values = _reduce_parts(feats, starts_all[on], counts[on], cell_type, channels)
@@ -618,10 +611,66 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
             continue
         s0 = int(starts_all[p])
         out.append(BodyPartDescriptor(part.name, part.cell_type, values[row].copy(), labels, True, n,
-                                      len(part.cells), float(touching_means[s0:s0 + n].mean()),
+                                      len(part.cells),
+                                      float(touching_means[s0]) if n == 1 else float(touching_means[s0:s0 + n].mean()),
                                       quality | int(part_q[row])))
         row += 1
     return out
+
+
+#: Cells are stacked and computed in chunks of about this many fast samples
+#: (reused buffers that stay in the cache between stacking and the kernel;
+#: bounds the memory of 10,000-cell skins).
+STACK_CHUNK_SAMPLES = 1 << 20
+
+
+class _Buffers(threading.local):
+    def __init__(self) -> None:
+        self.arrays: dict[tuple[str, str], np.ndarray] = {}
+
+    def get(self, slot: str, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+        size = int(np.prod(shape))
+        key = (slot, np.dtype(dtype).str)
+        buf = self.arrays.get(key)
+        if buf is None or buf.size < size:
+            buf = self.arrays[key] = np.empty(max(size, 1), dtype=dtype)
+        return buf[:size].reshape(shape)
+
+
+_BUFFERS = _Buffers()
+
+
+def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFeatures, np.ndarray] | None:
+    """Per-cell quantities and saturation of integer cells of one shape, in chunks of cells.
+
+    Returns None when the data are too large for exact integer moments (the
+    kernel's results would then depend on how cells are batched).  Chunks
+    are stacked into reused buffers; with exact moments every cell's
+    quantities are the same whatever the chunk, so chunking changes nothing.
+    """
+    s0, v0 = sigs[0].vibration, sigs[0].deformation
+    n_fast, n_slow = s0.shape[1], v0.shape[1]
+    n_max = max(n_fast, n_slow)
+    if float(n_max) ** 3 >= 2.0**52:
+        return None
+    step = max(1, STACK_CHUNK_SAMPLES // max(1, s0.size))
+    parts: list[CellFeatures] = []
+    saturated = np.zeros(len(sigs), dtype=bool)
+    for c0 in range(0, len(sigs), step):
+        chunk = sigs[c0:c0 + step]
+        vib = np.stack([s.vibration for s in chunk], out=_BUFFERS.get("vib", (len(chunk),) + s0.shape, s0.dtype))
+        dfm = np.stack([s.deformation for s in chunk], out=_BUFFERS.get("dfm", (len(chunk),) + v0.shape, v0.dtype))
+        peaks, sat = _peaks_and_saturation(vib, dfm, cell_type)
+        if not exact_integer_ok(n_max, *peaks):
+            return None
+        saturated[c0:c0 + len(chunk)] = sat
+        parts.append(cell_features(vib, _shared_or_stacked([s.vibration_t_ns for s in chunk]),
+                                   dfm, _shared_or_stacked([s.deformation_t_ns for s in chunk]),
+                                   cell_type.vibration.rate_hz, cell_type.deformation.rate_hz))
+    if len(parts) == 1:
+        return parts[0], saturated
+    return CellFeatures(*(np.concatenate([getattr(f, name) for f in parts])
+                          for name in CellFeatures.__dataclass_fields__)), saturated
 
 
 def _uniform_integers(sigs: list[CellSignals]) -> bool:
@@ -640,12 +689,15 @@ def _uniform_integers(sigs: list[CellSignals]) -> bool:
 
 
 def _shared_or_stacked(times: list) -> np.ndarray:
-    """The cells' common time stamps as one row when they are all equal, else stacked (n_cells, n)."""
-    t0 = np.asarray(times[0], dtype=np.int64)
-    for t in times[1:]:
-        if t is not times[0] and not np.array_equal(t, t0):
-            return _stack_times(times)
-    return t0
+    """The cells' time stamps: one row when every cell holds the same array, else stacked (n_cells, n).
+
+    (Equal stamps in different arrays are found by the kernel, which groups
+    cells sharing time bases.)
+    """
+    t0 = times[0]
+    if all(t is t0 for t in times):
+        return np.asarray(t0, dtype=np.int64)
+    return _stack_times(times)
 
 
 def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType

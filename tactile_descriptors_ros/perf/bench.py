@@ -17,6 +17,12 @@ What is timed (SPEC section 7, issue 8):
   channel with every V channel held onto S's time base; the same contact
   gate and averages.
 
+The package and the kernel are timed twice: with the accelerator in use
+(numba, when installed: :func:`~tactile_descriptors_ros.core.fast.accelerator`;
+its code is loaded or compiled before any timing, and that time is
+reported) and with the numpy kernel only.  ``BenchReport.targets`` says
+which of issue 8's targets are met.
+
 Before anything is timed, the package's descriptor is checked against the
 baseline's on the same window (:class:`BenchMismatch` otherwise).  Times are
 medians over repeats of wall-clock time (``perf_counter``) and of the
@@ -74,11 +80,22 @@ __all__ = [
     "run_bench",
     "format_report",
     "one_core",
+    "targets",
     "DEFAULT_LENGTHS_S",
+    "TARGETS",
 ]
 
 #: Window lengths of the scaling table (seconds).
 DEFAULT_LENGTHS_S = (0.5, 1.0, 2.0, 5.0, 10.0)
+
+#: Issue 8's targets on one core (CPU time per window): case key -> (limit in ms, minimum speedup).
+TARGETS = {
+    "shadow_hand": (1.0, None),
+    "nao": (5.0, 200.0),
+    "skin_10000": (500.0, None),  # 2 s windows, 0.5 s hop: a window every 500 ms keeps up
+}
+#: Sensor stamp to prediction at NAO full rate (``--latency``), ms.
+LATENCY_TARGET_MS = 20.0
 
 
 class BenchMismatch(TactileError):
@@ -300,6 +317,11 @@ class CaseResult:
     expanded: Timing | None = None
     max_abs_diff: float = 0.0
     target_ms: float | None = None
+    key: str = ""
+    accelerator: str = "numpy"
+    package_numpy: Timing | None = None
+    kernel_numpy: Timing | None = None
+    max_abs_diff_numpy: float | None = None
 
     @property
     def speedup_wall(self) -> float:
@@ -314,12 +336,19 @@ class CaseResult:
         """Baseline over the per-cell kernel alone (what the fast paths replace)."""
         return self.baseline.cpu_ms / self.kernel.cpu_ms
 
+    @property
+    def speedup_cpu_numpy(self) -> float | None:
+        """Baseline over the package with the numpy kernel only."""
+        return None if self.package_numpy is None else self.baseline.cpu_ms / self.package_numpy.cpu_ms
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["speedup_wall"] = self.speedup_wall
         d["speedup_cpu"] = self.speedup_cpu
         d["speedup_kernel_cpu"] = self.speedup_kernel_cpu
+        d["speedup_cpu_numpy"] = self.speedup_cpu_numpy
         d["package_windows_per_s"] = self.package.per_second
+        d["package_windows_per_s_cpu"] = 1000.0 / self.package.cpu_ms if self.package.cpu_ms > 0 else math.inf
         d["target_met"] = None if self.target_ms is None else self.package.cpu_ms <= self.target_ms
         return d
 
@@ -342,11 +371,14 @@ def _subset(robot: RobotDescription, cells: Mapping[int, CellSignals], n: int
 
 def bench_case(name: str, robot: RobotDescription, cells: Mapping[int, CellSignals], *, repeat: int = 5,
                baseline_repeat: int = 3, baseline_cells: int | None = None, with_expanded: bool = False,
-               target_ms: float | None = None, check: bool = True) -> CaseResult:
+               target_ms: float | None = None, check: bool = True, key: str = "",
+               with_numpy: bool = True) -> CaseResult:
     """Check agreement, then time the package, the kernel and the baseline on one window.
 
     ``baseline_cells``: time the baseline on that many cells and scale the
     time linearly to all cells (the baseline is a per-cell loop).
+    ``with_numpy``: also check and time the package and kernel with the
+    numpy kernel only (when an accelerator is in use).
     """
     n_cells = len(cells)
     if baseline_cells is not None and baseline_cells < n_cells:
@@ -354,12 +386,22 @@ def bench_case(name: str, robot: RobotDescription, cells: Mapping[int, CellSigna
         scale = n_cells / baseline_cells
     else:
         b_robot, b_cells, scale = robot, cells, 1.0
+    accel = fast.accelerator()
     diff = check_agreement(b_robot, b_cells) if check else float("nan")
     package = time_call(lambda: describe_window(robot, cells), repeat)
     s, ts, v, tv = _stack_batch(cells)
     ct = next(iter(robot.cell_types.values()))
     fs_s, fs_v = ct.vibration.rate_hz, ct.deformation.rate_hz
     kernel = time_call(lambda: fast.cell_quantities(s, ts, v, tv, fs_s, fs_v), repeat)
+    package_np = kernel_np = diff_np = None
+    if with_numpy and accel != "numpy":
+        fast.set_accelerator("numpy")
+        try:
+            diff_np = check_agreement(b_robot, b_cells) if check else float("nan")
+            package_np = time_call(lambda: describe_window(robot, cells), repeat)
+            kernel_np = time_call(lambda: fast.cell_quantities(s, ts, v, tv, fs_s, fs_v), repeat)
+        finally:
+            fast.set_accelerator(None)
     # a warm-up call only when the baseline runs on a small subset (it is slow)
     base = time_call(lambda: naive_describe(b_robot, b_cells), baseline_repeat, warmup=int(scale != 1.0))
     if scale != 1.0:
@@ -371,13 +413,14 @@ def bench_case(name: str, robot: RobotDescription, cells: Mapping[int, CellSigna
                              baseline_repeat, warmup=0)
     length_s = (int(ts[-1]) - int(ts[0])) / 1e9 + 1.0 / fs_s if ts.size else 0.0
     return CaseResult(name, n_cells, round(length_s, 3), int(s.size + v.size), package, kernel, base,
-                      baseline_cells if scale != 1.0 else None, expanded, diff, target_ms)
+                      baseline_cells if scale != 1.0 else None, expanded, diff, target_ms, key, accel,
+                      package_np, kernel_np, diff_np)
 
 
 # ---------------------------------------------------------------- windowing
 @dataclass
 class WindowingResult:
-    """Cost of :class:`~.windowing.Windower` ``add`` + ``poll`` per message."""
+    """Cost of :class:`~.windowing.Windower` input + ``poll`` per message: ``add`` vs ``add_many``."""
 
     n_cells: int
     message_ms: float
@@ -388,6 +431,11 @@ class WindowingResult:
     us_per_message_cpu: float
     messages_per_s_needed: float
     core_fraction: float
+    us_per_message_many: float = 0.0
+    us_per_message_many_cpu: float = 0.0
+    core_fraction_many: float = 0.0
+    many_batch: int = 0
+    same_windows: bool = True
 
 
 def bench_windowing(robot: RobotDescription | None = None, *, stream_s: float = 6.0, message_ms: float = 50.0,
@@ -396,9 +444,12 @@ def bench_windowing(robot: RobotDescription | None = None, *, stream_s: float = 
 
     Every cell sends one message per ``message_ms`` (accelerometer 1 kHz,
     force 250 Hz, as ``SkinCellFrame`` chunks converted by the window node;
-    the skin driver's default ``batch_s`` is 50 ms);
-    the time of ``add`` + ``poll`` (including cutting the windows, not
-    describing them) is divided by the number of messages.
+    the skin driver's default ``batch_s`` is 50 ms); the time of the input
+    calls + ``poll`` (including cutting the windows, not describing them) is
+    divided by the number of messages.  Twice: one ``add`` per message, and
+    one ``add_many`` per round of messages (every cell's message of one
+    ``message_ms`` tick), both polling once per round; the two must cut the
+    same windows.
     """
     robot = robot or load_robot("nao")
     rng = np.random.default_rng(seed)
@@ -406,26 +457,47 @@ def bench_windowing(robot: RobotDescription | None = None, *, stream_s: float = 
     n_msgs = int(round(stream_s * 1000 / message_ms))
     n_a = int(round(message_ms))  # 1 kHz
     accel = rng.integers(-40, 40, (3, n_a)).astype(np.int32)
-    chunks = []  # built before timing: the node's message conversion is not part of the windower
+    rounds = []  # built before timing: the node's message conversion is not part of the windower
     for m in range(n_msgs):
         t0 = int(m * message_ms * 1e6)
         t_a = t0 + np.arange(n_a, dtype=np.int64) * 1_000_000
         t_f = t0 + np.arange(0, n_a, 4, dtype=np.int64) * 1_000_000
         force = rng.integers(300, 600, (3, t_f.size)).astype(np.int32)
-        chunks.append(CellChunk(accel, t_a, force, t_f, force.mean(axis=0) * 0.002442, t_f))
-    windower = Windower(robot, mode="fixed", length_s=length_s, hop_s=hop_s)
-    windows = 0
-    c0, w0 = time.thread_time(), time.perf_counter()
-    for chunk in chunks:
-        for cid in ids:
-            windower.add(cid, chunk)
-        windows += len(windower.poll())
-    wall = time.perf_counter() - w0
-    cpu = time.thread_time() - c0
+        chunk = CellChunk(accel, t_a, force, t_f, force.mean(axis=0) * 0.002442, t_f)
+        rounds.append([(cid, chunk) for cid in ids])
+
+    def run(many: bool) -> tuple[float, float, list]:
+        windower = Windower(robot, mode="fixed", length_s=length_s, hop_s=hop_s)
+        windows: list = []
+        gc_was = gc.isenabled()
+        gc.disable()
+        try:
+            c0, w0 = time.thread_time(), time.perf_counter()
+            for batch in rounds:
+                if many:
+                    windower.add_many(batch)
+                else:
+                    for cid, chunk in batch:
+                        windower.add(cid, chunk)
+                windows += windower.poll()
+            wall = time.perf_counter() - w0
+            cpu = time.thread_time() - c0
+        finally:
+            if gc_was:
+                gc.enable()
+        return wall, cpu, windows
+
+    wall, cpu, w_one = run(False)
+    wall_m, cpu_m, w_many = run(True)
+    same = len(w_one) == len(w_many) and all(
+        a.start_ns == b.start_ns and a.cells.keys() == b.cells.keys()
+        and all(np.array_equal(a.cells[c].vibration, b.cells[c].vibration) for c in a.cells)
+        for a, b in zip(w_one, w_many))
     total = n_msgs * len(ids)
     per_s = len(ids) * 1000.0 / message_ms
-    return WindowingResult(len(ids), message_ms, total, stream_s, windows, wall / total * 1e6, cpu / total * 1e6,
-                           per_s, per_s * cpu / total)
+    return WindowingResult(len(ids), message_ms, total, stream_s, len(w_one), wall / total * 1e6,
+                           cpu / total * 1e6, per_s, per_s * cpu / total, wall_m / total * 1e6,
+                           cpu_m / total * 1e6, per_s * cpu_m / total, len(ids), same)
 
 
 # --------------------------------------------------------------------- run
@@ -439,9 +511,12 @@ class BenchReport:
     environment: dict
     notes: list[str] = field(default_factory=list)
     latency: dict | None = None
+    accelerator: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
+            "accelerator": self.accelerator,
+            "targets": targets(self),
             "cases": [c.to_dict() for c in self.cases],
             "scaling": [c.to_dict() for c in self.scaling],
             "windowing": asdict(self.windowing) if self.windowing else None,
@@ -449,6 +524,37 @@ class BenchReport:
             "environment": self.environment,
             "notes": self.notes,
         }
+
+
+def targets(report: BenchReport) -> dict:
+    """Issue 8's targets, each with the measured value and ``met`` (None: not measured).
+
+    Times are the package's median CPU time per window on one core (the
+    descriptor path the window node runs), after the agreement check.
+    """
+    by_key = {c.key: c for c in report.cases}
+    out: dict[str, dict] = {}
+    for key, (limit_ms, min_speedup) in TARGETS.items():
+        c = by_key.get(key)
+        entry: dict = {"target": f"<= {limit_ms:g} ms CPU per window" if key != "skin_10000" else
+                       f"< {limit_ms:g} ms CPU per 2 s window (real time at a 0.5 s hop)",
+                       "cpu_ms": None if c is None else c.package.cpu_ms,
+                       "wall_ms": None if c is None else c.package.wall_ms,
+                       "met": None if c is None else bool(c.package.cpu_ms <= limit_ms)}
+        if key == "skin_10000" and c is not None:
+            entry["met"] = bool(c.package.cpu_ms < limit_ms)
+        out[f"{key}_time"] = entry
+        if min_speedup is not None:
+            out[f"{key}_speedup"] = {"target": f">= {min_speedup:g}x the naive baseline (CPU)",
+                                    "speedup_cpu": None if c is None else c.speedup_cpu,
+                                    "met": None if c is None else bool(c.speedup_cpu >= min_speedup)}
+    lat = report.latency
+    median = (lat or {}).get("e2e", {}).get("median_ms") if lat else None
+    out["latency"] = {"target": f"sensor stamp -> prediction <= {LATENCY_TARGET_MS:g} ms at NAO full rate "
+                                "(median; tactile bench --latency)",
+                      "median_ms": median, "p95_ms": (lat or {}).get("e2e", {}).get("p95_ms") if lat else None,
+                      "met": None if median is None else bool(median <= LATENCY_TARGET_MS)}
+    return out
 
 
 def one_core():
@@ -462,6 +568,7 @@ def _environment() -> dict:
     return {
         "python": platform.python_version(),
         "numpy": np.__version__,
+        "accelerator": fast.accelerator(),
         "machine": platform.machine(),
         "cpus": os.cpu_count(),
         "load_average": [round(x, 2) for x in os.getloadavg()],
@@ -494,17 +601,21 @@ def run_bench(*, repeat: int = 5, sizes: Iterable[int] = (1000, 10000), lengths_
     say = progress or (lambda msg: None)
     notes: list[str] = []
     with one_core():
+        accel = fast.warm_up()  # load or compile the accelerator before any timing
+        if accel.get("error"):
+            notes.append(f"accelerator unavailable ({accel['error']}): numpy kernel only")
         cases = []
         say("Shadow Hand window")
         hand = load_robot("shadow_hand")
         cases.append(bench_case("shadow_hand (5 BioTacs, 2 s)", hand, biotac_window(hand), repeat=repeat,
-                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True, target_ms=1.0))
+                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True,
+                                target_ms=TARGETS["shadow_hand"][0], key="shadow_hand"))
         say("NAO window")
         nao = load_robot("nao")
         nao_base = min(116, baseline_cells)
         cases.append(bench_case("nao (116 skin cells, 2 s)", nao, skin_window(nao), repeat=repeat,
-                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True, target_ms=5.0,
-                                baseline_cells=nao_base))
+                                baseline_repeat=max(1, min(repeat, 3)), with_expanded=True,
+                                target_ms=TARGETS["nao"][0], baseline_cells=nao_base, key="nao"))
         if nao_base < 116:
             notes.append(f"NAO baseline extrapolated linearly from {nao_base} measured cells")
         for n in sizes:
@@ -512,26 +623,29 @@ def run_bench(*, repeat: int = 5, sizes: Iterable[int] = (1000, 10000), lengths_
             robot = skin_robot(n)
             cells = skin_window(robot, seed=n)
             b_cells = min(n, baseline_cells)
+            key = f"skin_{n}"
             cases.append(bench_case(f"skin ({n} cells, 2 s)", robot, cells, repeat=max(1, min(repeat, 3)),
                                     baseline_repeat=1, baseline_cells=b_cells,
-                                    target_ms=500.0 if n >= 10000 else None))
+                                    target_ms=TARGETS[key][0] if key in TARGETS else None, key=key))
             if b_cells < n:
                 notes.append(f"baseline for {n} cells extrapolated linearly from {b_cells} measured cells")
             del cells
         scaling = []
+        b_cells = min(16, baseline_cells)
         for length in lengths_s:
             say(f"NAO window of {length} s")
-            b_cells = min(16, baseline_cells)
             scaling.append(bench_case(f"nao {length:g} s", nao, skin_window(nao, length), repeat=repeat,
-                                      baseline_repeat=1, baseline_cells=b_cells))
+                                      baseline_repeat=1, baseline_cells=b_cells, key=f"nao_{length:g}s"))
         if scaling:
             notes.append(f"scaling baselines extrapolated from {b_cells} cells")
         wres = None
         if windowing:
             say("windowing")
             wres = bench_windowing(nao, stream_s=windowing_s)
+            if not wres.same_windows:
+                raise BenchMismatch("Windower.add_many cut other windows than repeated Windower.add")
     fast.release_buffers()
-    return BenchReport(cases, scaling, wres, _environment(), notes)
+    return BenchReport(cases, scaling, wres, _environment(), notes, accelerator=accel)
 
 
 def _fmt_ms(x: float) -> str:
@@ -541,48 +655,68 @@ def _fmt_ms(x: float) -> str:
 def format_report(report: BenchReport) -> str:
     """The report as a plain-text table."""
     env = report.environment
+    acc = report.accelerator or {}
     lines = [
         f"tactile bench: one core (BLAS/OpenMP threads = 1), numpy {env['numpy']}, {env['cpus']} CPUs, "
         f"load average {env['load_average']}",
+        f"accelerator: {acc.get('accelerator', env.get('accelerator'))} (import {acc.get('import_s', 0.0):.2f} s, "
+        f"first calls / compile {acc.get('first_call_s', 0.0):.2f} s, before timing; cache {acc.get('cache_dir')})",
         "ms per window, median of repeats; cpu = this thread's CPU time (robust to other load), "
-        "wall = elapsed; x = baseline / package (x kern: baseline / per-cell kernel alone)",
+        "wall = elapsed; np = numpy kernel only; x = baseline / package (CPU)",
         "",
-        f"{'case':32s} {'package':>9s} {'pkg cpu':>9s} {'kernel':>9s} {'win/s':>8s} {'baseline':>9s} "
-        f"{'base cpu':>9s} {'x wall':>7s} {'x cpu':>7s} {'x kern':>7s} {'target':>8s}",
+        f"{'case':32s} {'pkg wall':>9s} {'pkg cpu':>9s} {'np cpu':>9s} {'kernel':>9s} {'np kern':>9s} "
+        f"{'win/s':>8s} {'base cpu':>10s} {'x cpu':>7s} {'x np':>7s} {'target':>10s}",
     ]
     for c in report.cases + report.scaling:
         tgt = "" if c.target_ms is None else f"<={c.target_ms:g} " + ("ok" if c.package.cpu_ms <= c.target_ms else "NO")
         base_mark = "*" if c.baseline_extrapolated_from else " "
+        np_pkg = _fmt_ms(c.package_numpy.cpu_ms) if c.package_numpy else f"{'-':>9s}"
+        np_kern = _fmt_ms(c.kernel_numpy.cpu_ms) if c.kernel_numpy else f"{'-':>9s}"
+        x_np = f"{c.speedup_cpu_numpy:7.0f}" if c.speedup_cpu_numpy else f"{'-':>7s}"
+        per_s = 1000.0 / c.package.cpu_ms if c.package.cpu_ms > 0 else math.inf
         lines.append(
-            f"{c.name:32s} {_fmt_ms(c.package.wall_ms)} {_fmt_ms(c.package.cpu_ms)} {_fmt_ms(c.kernel.cpu_ms)} "
-            f"{c.package.per_second:8.1f} {_fmt_ms(c.baseline.wall_ms)}{base_mark}{_fmt_ms(c.baseline.cpu_ms)} "
-            f"{c.speedup_wall:7.0f} {c.speedup_cpu:7.0f} {c.speedup_kernel_cpu:7.0f} {tgt:>8s}")
+            f"{c.name:32s} {_fmt_ms(c.package.wall_ms)} {_fmt_ms(c.package.cpu_ms)} {np_pkg} "
+            f"{_fmt_ms(c.kernel.cpu_ms)} {np_kern} {per_s:8.1f} {_fmt_ms(c.baseline.cpu_ms)}{base_mark} "
+            f"{c.speedup_cpu:7.0f} {x_np} {tgt:>10s}")
     for c in report.cases:
         if c.expanded is not None:
             lines.append(f"  {c.name}: previous vectorised expanded-ZOH kernel {c.expanded.cpu_ms:.1f} ms cpu "
                          f"vs fast kernel {c.kernel.cpu_ms:.2f} ms cpu ({c.expanded.cpu_ms / c.kernel.cpu_ms:.0f}x)")
-    lines.append("  * baseline extrapolated linearly from a measured subset of cells")
+    lines.append("  * baseline extrapolated linearly from a measured subset of cells; win/s from CPU time")
     lines.append("  agreement with the baseline checked before timing: max |difference| "
-                 + ", ".join(f"{c.max_abs_diff:.1e}" for c in report.cases))
+                 + ", ".join(f"{c.max_abs_diff:.1e}" for c in report.cases)
+                 + ("" if all(c.max_abs_diff_numpy is None for c in report.cases) else
+                    " (numpy kernel: " + ", ".join(f"{c.max_abs_diff_numpy:.1e}" for c in report.cases
+                                                   if c.max_abs_diff_numpy is not None) + ")"))
     w = report.windowing
     if w:
-        lines += ["", f"windowing (Windower.add + poll, fixed 2 s / 0.5 s hop, {w.n_cells} cells, "
-                      f"one message per cell per {w.message_ms:g} ms): {w.us_per_message:.1f} us/message wall, "
-                      f"{w.us_per_message_cpu:.1f} us cpu; {w.messages_per_s_needed:.0f} messages/s at full rate "
-                      f"= {100 * w.core_fraction:.1f} % of one core"]
+        lines += ["", f"windowing (fixed 2 s / 0.5 s hop, {w.n_cells} cells, one message per cell per "
+                      f"{w.message_ms:g} ms = {w.messages_per_s_needed:.0f} messages/s, poll per round):",
+                  f"  Windower.add per message:            {w.us_per_message:7.1f} us wall, "
+                  f"{w.us_per_message_cpu:7.1f} us cpu = {100 * w.core_fraction:5.1f} % of one core",
+                  f"  Windower.add_many per round of {w.many_batch:3d}:   {w.us_per_message_many:7.1f} us wall, "
+                  f"{w.us_per_message_many_cpu:7.1f} us cpu per message = {100 * w.core_fraction_many:5.1f} % "
+                  f"of one core (same windows: {'yes' if w.same_windows else 'NO'})"]
     if report.latency:
         lat = report.latency
-        lines += ["", f"latency through window_node + classifier_node ({lat['nodes']}, {lat['cells']} cells, "
-                      f"one message per cell per {1000 * lat['batch_s']:g} ms, lateness {1000 * lat['lateness_s']:g} ms, "
-                      f"{lat['predictions']} predictions):"]
+        lines += ["", f"latency through window_node + classifier_node ({lat.get('nodes')}, {lat.get('cells')} cells, "
+                      f"one message per cell per {1000 * lat.get('batch_s', 0.0):g} ms, "
+                      f"lateness {1000 * lat.get('lateness_s', 0.0):g} ms, {lat.get('predictions')} predictions; "
+                      "docs/latency.md):"]
         for key, what in (("e2e", "window end stamp -> Prediction received"),
                           ("wait", "waiting for the closing batch (batch + lateness)"),
                           ("processing", "closing batch published -> Prediction received"),
                           ("publish_lag", "probe publishing behind acquisition")):
-            sm = lat[key]
+            sm = lat.get(key) or {}
             if sm.get("n"):
                 lines.append(f"  {what:50s} median {sm['median_ms']:8.1f}  p95 {sm['p95_ms']:8.1f}  "
                              f"max {sm['max_ms']:8.1f} ms")
+    lines += ["", "targets (issue 8, one core, CPU time per window):"]
+    for key, t in targets(report).items():
+        value = next((f"{t[k]:.2f}" + (" x" if k == "speedup_cpu" else " ms") for k in
+                      ("cpu_ms", "speedup_cpu", "median_ms") if t.get(k) is not None), "not measured")
+        met = {True: "met", False: "NOT met", None: "-"}[t["met"]]
+        lines.append(f"  {key:24s} {t['target']:62s} {value:>12s}  {met}")
     for note in report.notes:
         lines.append(f"note: {note}")
     return "\n".join(lines)

@@ -5,9 +5,12 @@ baseline's on the same window (it aborts otherwise), times on one core
 (BLAS/OpenMP pools limited to one thread): a Shadow Hand window (5 BioTacs,
 2 s), a NAO window (116 skin cells, 2 s), 1,000 and 10,000 skin cells (the
 baseline extrapolated from a measured subset), the scaling with window length
-(0.5 to 10 s), and the windowing cost per NAO message.  ``--latency`` also
-measures sensor stamp -> Prediction through the ROS node graph.  Reading the
-numbers: docs/performance.md.
+(0.5 to 10 s), and the windowing cost per NAO message (Windower.add vs
+add_many).  The package and kernel are timed with the accelerator in use
+(numba when installed; loaded or compiled before timing) and with the numpy
+kernel only; the report ends with issue 8's targets, met or not.
+``--latency`` also measures sensor stamp -> Prediction through the ROS node
+graph.  Reading the numbers: docs/performance.md.
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--baseline-cells", type=int, default=116,
                    help="cells on which the baseline of a large skin is measured (default 116)")
     p.add_argument("--no-windowing", action="store_true", help="skip the windowing measurement")
+    p.add_argument("--numpy-only", action="store_true",
+                   help="time the numpy kernel only (as without numba, or TACTILE_NO_NUMBA=1)")
     p.add_argument("--latency", action="store_true",
                    help="also measure sensor stamp -> Prediction latency through window_node + classifier_node")
     p.add_argument("--latency-s", type=float, default=8.0, help="seconds of NAO data for --latency (default 8)")
@@ -66,6 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from ..core import fast
     from ..perf.bench import BenchMismatch, format_report, run_bench
 
     if args.repeat < 1 or args.baseline_cells < 1:
@@ -78,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
         bar.set_postfix_str(msg)
         bar.update(1)
 
+    if args.numpy_only:
+        fast.set_accelerator("numpy")
     try:
         report = run_bench(repeat=args.repeat, sizes=args.sizes, lengths_s=args.lengths,
                            baseline_cells=args.baseline_cells, windowing=not args.no_windowing,

@@ -175,3 +175,17 @@ def test_single_channel_modality_in_a_large_body_part(channels):
     got = describe_window(robot, cells, layout="concat", channels=channels)
     assert got.body_parts[0].cells_in_contact == 12
     _assert_same(robot, cells, "concat", channels)
+
+
+@pytest.mark.parametrize("chunk_samples", [1, 7 * 3 * 200])
+def test_chunks_of_cells_change_nothing(monkeypatch, chunk_samples):
+    from tactile_descriptors_ros.perf.bench import skin_window
+
+    robot = load_robot("nao")
+    cells = skin_window(robot, 0.2, seed=5)
+    whole = describe_window(robot, cells, layout="concat")
+    monkeypatch.setattr(aggregation, "STACK_CHUNK_SAMPLES", chunk_samples)
+    chunked = describe_window(robot, cells, layout="concat")
+    assert np.array_equal(whole.values, chunked.values)
+    assert [bp.quality for bp in whole.body_parts] == [bp.quality for bp in chunked.body_parts]
+    _assert_same(robot, cells, "concat", "averaged")

@@ -26,6 +26,19 @@ def test_bench_command_json_smoke(capsys):
     assert any("extrapolated" in note for note in report["notes"])
     assert report["scaling"][0]["length_s"] == pytest.approx(0.5)
     assert report["windowing"] is None and report["environment"]["threads"] == 1
+    # which kernel served, its load/compile time (before timing), and the numpy-only figures beside it
+    accel = report["accelerator"]["accelerator"]
+    assert accel in ("numba", "numpy") and report["accelerator"]["first_call_s"] >= 0
+    for case in report["cases"]:
+        assert case["accelerator"] == accel and case["package_windows_per_s_cpu"] > 0
+        if accel == "numba":
+            assert case["package_numpy"]["cpu_ms"] > 0 and case["kernel_numpy"]["cpu_ms"] > 0
+            assert case["max_abs_diff_numpy"] < 1e-6
+    targets = report["targets"]
+    assert set(targets) == {"shadow_hand_time", "nao_time", "nao_speedup", "skin_10000_time", "latency"}
+    assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 1.0)
+    assert targets["nao_speedup"]["speedup_cpu"] == pytest.approx(report["cases"][1]["speedup_cpu"])
+    assert targets["skin_10000_time"]["met"] is None and targets["latency"]["met"] is None  # not measured
 
 
 def test_bench_aborts_when_the_baseline_disagrees(monkeypatch, capsys):
@@ -45,9 +58,11 @@ def test_naive_baseline_equals_describe_window_on_both_robots():
 
 
 def test_windowing_measurement_counts_messages():
-    res = bench.bench_windowing(stream_s=0.6, message_ms=50.0)
-    assert res.messages == 12 * 116 and res.messages_per_s_needed == pytest.approx(2320.0)
+    res = bench.bench_windowing(stream_s=2.6, message_ms=50.0)
+    assert res.messages == 52 * 116 and res.messages_per_s_needed == pytest.approx(2320.0)
     assert res.us_per_message > 0 and 0 < res.core_fraction
+    assert res.us_per_message_many > 0 and res.many_batch == 116
+    assert res.windows == 2 and res.same_windows  # add_many cut the windows add did
 
 
 def test_text_report_lists_every_case():
@@ -57,5 +72,7 @@ def test_text_report_lists_every_case():
                                 target_ms=1.0)
     report = bench.BenchReport([case], [], None, {"numpy": np.__version__, "cpus": 2, "load_average": [0, 0, 0]})
     text = bench.format_report(report)
-    assert "hand" in text and "target" in text
-    assert json.dumps(report.to_dict(), default=float)
+    assert "hand" in text and "target" in text and "accelerator" in text
+    d = report.to_dict()
+    assert json.dumps(d, default=float)
+    assert d["targets"]["shadow_hand_time"]["met"] is None  # a case without the key is not a target case
