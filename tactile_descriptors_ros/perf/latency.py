@@ -213,6 +213,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float = 0.05, lateness_
     tmp = tempfile.TemporaryDirectory(prefix="tactile_bench_")
     received: list[tuple[int, int]] = []  # (arrival ns, window end ns)
     diagnostics: dict[str, dict[str, str]] = {}
+    diag_arrival = [0]  # monotonic ns of the last window node diagnostics
     lock = threading.Lock()
     stop = threading.Event()
     nodes = []
@@ -250,6 +251,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float = 0.05, lateness_
                 if "descriptors_published" in values:
                     with lock:
                         diagnostics[st.name] = values
+                        diag_arrival[0] = time.monotonic_ns()
 
         probe.create_subscription(Prediction, PREDICTION_TOPIC, on_prediction,
                                   QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
@@ -298,7 +300,11 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float = 0.05, lateness_
                 msg.sequence = k
                 seq_pub.publish(msg)
             published.append((t0, sent))
+        done_ns = time.monotonic_ns()
         time.sleep(max(1.2, 2 * lateness_s + 2 * batch_s))  # the last predictions and one diagnostics period
+        deadline = time.monotonic() + 5.0  # a loaded machine delays the diagnostics timer: wait for a fresh one
+        while diag_arrival[0] < done_ns and time.monotonic() < deadline:
+            time.sleep(0.05)
         for name, pid in pids.items():
             end = _cpu_s(pid)
             cpu[name] = None if end is None or cpu_start[name] is None else end - cpu_start[name]
