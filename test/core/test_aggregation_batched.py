@@ -138,7 +138,7 @@ options = st.fixed_dictionaries({
 })
 
 
-@settings(max_examples=120, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(st.lists(st.integers(1, 12), min_size=1, max_size=6), st.integers(0, 2**31), options,
        st.sampled_from(["concat", "pooled"]), st.sampled_from(["averaged", "per_channel"]))
 def test_batched_equals_per_body_part(part_sizes, seed, opts, layout, channels):

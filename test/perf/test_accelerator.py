@@ -78,7 +78,7 @@ def integer_batches(draw):
     return s, (ts if per_cell else ts[0]), v, (tv if per_cell else tv[0])
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=120, deadline=None)
 @given(integer_batches(), st.sampled_from([1000.0, 2200.0]), st.sampled_from([100.0, 250.0]))
 def test_compiled_equals_numpy_bit_for_bit(batch, fs_s, fs_v):
     _identical(*_both(*batch, fs_s, fs_v))

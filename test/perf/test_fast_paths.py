@@ -126,7 +126,7 @@ def batches(draw):
 
 
 @pytest.mark.parametrize("accel", ACCELS)
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=100, deadline=None)
 @given(batches(), st.sampled_from([100.0, 1000.0]), st.sampled_from([25.0, 250.0]))
 def test_cell_quantities_equal_reference(accel, batch, fs_s, fs_v):
     s, ts, v, tv = batch
