@@ -4,6 +4,7 @@
 #   make test     set everything up, then run the tests
 #   make demo     set everything up, then run a simulated robot through the live graph
 #   make report   regenerate docs/results.md and its plots from the real recordings
+#   make protocols  the paper's protocols on simulated robots (docs/simulated.md)
 #   make bench    time the descriptor path against a naive baseline
 #   make clean    remove the venv and build products
 
@@ -27,7 +28,7 @@ export PATH := $(VIRTUAL_ENV)/bin:$(PATH)
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
-.PHONY: setup test demo demo-nao report bench fuzz clean
+.PHONY: setup test demo demo-nao report protocols bench fuzz clean
 
 setup: $(VENV)/.installed
 
@@ -69,6 +70,9 @@ demo-nao: setup
 
 report: setup
 	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs
+
+protocols: setup
+	$(VENV)/bin/tactile protocols --out docs
 
 bench: setup
 	$(VENV)/bin/tactile bench
