@@ -37,6 +37,13 @@ check with property-based tests (ties, flat channels, NaN, short windows,
 cells with their own time bases).  Edge cases the fast route does not cover
 (fewer than 3 paired samples, no V sample) are delegated to the reference.
 
+Integer data are computed by a compiled kernel when numba is installed
+(:mod:`._numba_kernel`: the same exact sums in one pass per cell, the same
+floating-point operations after them, so bit-identical results; loaded on
+first use, see :func:`accelerator`, :func:`set_accelerator`,
+:func:`warm_up`; ``TACTILE_NO_NUMBA=1`` disables it).  This module stays
+the reference and computes everything the compiled kernel hands back.
+
 Large scratch arrays live in a per-thread workspace reused between calls:
 on these machines a fresh multi-megabyte array costs more in page faults
 than the arithmetic done on it.  :func:`release_buffers` frees it.
@@ -315,7 +322,8 @@ def _hjorth_from_moments(prep: _Prepared, fs: float) -> Hjorth:
 def _hjorth_from_ints(n: int, s1: np.ndarray, q: np.ndarray, r1: np.ndarray, r2: np.ndarray, x0: np.ndarray,
                       x1: np.ndarray, xm: np.ndarray, xl: np.ndarray, fs: float) -> Hjorth:
     """Hjorth parameters from exact int64 row moments (sum, sum of squares, lag-1 and
-    lag-2 products, samples 0, 1, n-2, n-1); shared by the numpy and compiled kernels."""
+    lag-2 products, samples 0, 1, n-2, n-1).  The compiled kernel's ``_hjorth_row`` makes
+    the same floating-point operations in the same order."""
     # n^2 var(x)
     num_x = n * q - s1 * s1
     # first difference d_i = x_{i+1} - x_i, i < n-1: (n-1)^2 var(d)
