@@ -925,7 +925,7 @@ def _plan_text(results: Mapping[str, Any]) -> list[str]:
         + (f"; test exploration time fixed to {plan['test_duration_s']} s" if plan["test_duration_s"] else "")
         + ".",
         f"* SVM: C by 5-fold CV repeated {plan['cv_repeats']} times over the paper's grid; PA-I curves averaged "
-        f"over {plan['pa_orders']} presentation orders; GMM-EM fitted on the training set, NMI on the test set.",
+        f"over {plan['pa_orders']} presentation orders; GMM-EM fitted on the training set, NMI on that set and on the test set.",
     ]
     skipped = sorted({n for p in results["protocols"].values() if "error" not in p
                       for s in [p["train"]] + [t["set"] for t in p["tests"].values()]
