@@ -706,11 +706,25 @@ def format_report(report: BenchReport) -> str:
         for key, what in (("e2e", "window end stamp -> Prediction received"),
                           ("wait", "waiting for the closing batch (batch + lateness)"),
                           ("processing", "closing batch published -> Prediction received"),
+                          ("complete", "window end stamp -> last Prediction of that window"),
                           ("publish_lag", "probe publishing behind acquisition")):
             sm = lat.get(key) or {}
             if sm.get("n"):
                 lines.append(f"  {what:50s} median {sm['median_ms']:8.1f}  p95 {sm['p95_ms']:8.1f}  "
                              f"max {sm['max_ms']:8.1f} ms")
+        if lat.get("window_cpu_us_per_message") is not None:
+            lines.append(f"  window node CPU per message {lat['window_cpu_us_per_message']:.0f} us "
+                         f"({100 * (lat.get('window_cpu_fraction_of_core') or 0.0):.0f} % of one core), "
+                         f"frames per callback {lat.get('frames_per_callback') or 0.0:.1f}")
+        if lat.get("window_faults"):
+            lines.append(f"  window node faults: {lat['window_faults']}")
+        per = (lat.get("per_message") or {}).get("us_per_message")
+        if per:
+            lines.append("  per-message CPU (micro benchmark, us): "
+                         + ", ".join(f"{k} {v:.0f}" for k, v in per.items()))
+        if "target_met" in lat:
+            lines.append(f"  latency target <= {lat.get('target_ms')} ms (median): "
+                         f"{'met' if lat['target_met'] else 'NOT met'}")
     lines += ["", "targets (issue 8, one core, CPU time per window):"]
     for key, t in targets(report).items():
         value = next((f"{t[k]:.2f}" + (" x" if k == "speedup_cpu" else " ms") for k in

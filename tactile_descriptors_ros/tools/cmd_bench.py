@@ -62,6 +62,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="sample time per SkinCellFrame for --latency (default 0.05, the skin driver's batch_s)")
     p.add_argument("--latency-lateness-s", type=float, default=0.05,
                    help="window_node window.lateness_s for --latency (default 0.05)")
+    p.add_argument("--latency-split-window-nodes", action="store_true",
+                   help="one window node per body part, each its own process (the launcher's scale-out option)")
+    p.add_argument("--latency-drain-max", type=int, default=None,
+                   help="window_node frames.drain_max for --latency (default: the robot's; 0 = one message "
+                   "per callback)")
+    p.add_argument("--latency-no-micro", action="store_true",
+                   help="skip the per-message cost micro benchmark of --latency")
     p.add_argument("--latency-in-process", action="store_true",
                    help="run window_node and classifier_node in the bench process (default: own processes)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -101,7 +108,9 @@ def run(args: argparse.Namespace) -> int:
         try:
             report.latency = measure_latency(duration_s=args.latency_s, batch_s=args.latency_batch_s,
                                              lateness_s=args.latency_lateness_s,
-                                             in_process=args.latency_in_process)
+                                             in_process=args.latency_in_process,
+                                             split_window_nodes=args.latency_split_window_nodes,
+                                             drain_max=args.latency_drain_max, micro=not args.latency_no_micro)
         except (ImportError, RuntimeError, ValueError) as exc:
             print(f"tactile bench: error: latency measurement failed: {exc}", file=sys.stderr)
             return 1

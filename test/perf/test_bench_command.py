@@ -76,3 +76,31 @@ def test_text_report_lists_every_case():
     d = report.to_dict()
     assert json.dumps(d, default=float)
     assert d["targets"]["shadow_hand_time"]["met"] is None  # a case without the key is not a target case
+
+
+def test_text_report_prints_the_latency_fields(monkeypatch, capsys):
+    """``--latency`` flags reach measure_latency and its summary is printed (the ROS run itself is in test_latency)."""
+    from tactile_descriptors_ros.perf import latency
+
+    seen = {}
+
+    def fake(**kwargs):
+        seen.update(kwargs)
+        summary = {"n": 3, "median_ms": 96.0, "p95_ms": 113.0, "max_ms": 115.0}
+        return {"nodes": "processes", "cells": 116, "batch_s": 0.05, "lateness_s": 0.0, "predictions": 3,
+                "e2e": summary, "wait": summary, "processing": summary, "complete": summary,
+                "window_cpu_us_per_message": 250.0, "window_cpu_fraction_of_core": 0.58,
+                "frames_per_callback": 3.5, "window_faults": {"late": 2},
+                "per_message": {"us_per_message": {"deserialize": 60.0, "convert": 50.0}},
+                "target_ms": 20.0, "target_met": False}
+
+    monkeypatch.setattr(latency, "measure_latency", fake)
+    code = main(["bench", "--sizes", "130", "--lengths", "0.5", "--repeat", "1", "--baseline-cells", "3",
+                 "--no-windowing", "--latency", "--latency-split-window-nodes", "--latency-drain-max", "0",
+                 "--latency-no-micro"])
+    assert code == 0
+    assert seen["split_window_nodes"] is True and seen["drain_max"] == 0 and seen["micro"] is False
+    out = capsys.readouterr().out
+    assert "window end stamp -> last Prediction of that window" in out
+    assert "window node CPU per message 250 us (58 % of one core)" in out
+    assert "deserialize 60, convert 50" in out and "NOT met" in out
