@@ -273,7 +273,9 @@ class SimContext:
 
     def material(self, name: str) -> MaterialModel:
         if name not in self._materials:
-            self._materials[name] = get_material(name, seed=self.scene.seed)
+            # A material is its name: the same parametric material in a training scene and a test
+            # scene (different scene seeds) must be the same texture, so its seed is fixed.
+            self._materials[name] = get_material(name)
         return self._materials[name]
 
     # -- kinematics (not effects: every effect that needs them asks) ------------

@@ -129,3 +129,32 @@ def test_fit_reproduces_the_shipped_model(biotac_data_dir):
     shipped = tx.get_material("soft_sponge")
     assert np.allclose(fitted.vibration.ar, shipped.vibration.ar, rtol=1e-9)
     assert fitted.deformation.electrode_mean == pytest.approx(shipped.deformation.electrode_mean)
+
+
+def test_slow_parametric_textures_have_a_finite_variance():
+    """Poles near z = 1 defeat the step-down recursion; the impulse-response sum still gives the variance."""
+    a = -np.real(np.poly([0.9995, 0.9994 * np.exp(0.01j), 0.9994 * np.exp(-0.01j), 0.985]))[1:]
+    var = tx.ar_process_variance(a, 1.0)
+    # the same number from a long simulated realisation (sample variance within 10 %)
+    x = signal.lfilter([1.0], np.r_[1.0, -a], np.random.default_rng(0).normal(size=2_000_000))[200_000:]
+    assert np.isfinite(var) and x.var() == pytest.approx(var, rel=0.1)
+    # agrees with the step-down formula where that one is well conditioned
+    b = np.array([1.5, -0.56])
+    k = tx._reflection_coefficients(b)
+    assert tx.ar_process_variance(b, 2.0) == pytest.approx(2.0 / np.prod(1 - k * k), rel=1e-12)
+    c = -np.real(np.poly([0.995, 0.5]))[1:]  # radius above 0.99: impulse-response path
+    k = tx._reflection_coefficients(c)
+    assert tx.ar_process_variance(c, 1.0) == pytest.approx(1.0 / np.prod(1 - k * k), rel=1e-9)
+    with pytest.raises(SceneError):
+        tx.ar_process_variance(np.array([1.0]), 1.0)  # a pole on the unit circle
+
+
+def test_a_parametric_material_is_the_same_texture_in_every_scene():
+    from tactile_descriptors_ros.sim.engine import SimContext
+
+    ctx_a = object.__new__(SimContext)
+    ctx_b = object.__new__(SimContext)
+    for ctx, seed in ((ctx_a, 5), (ctx_b, 77)):
+        ctx._materials = {}
+        ctx.scene = type("S", (), {"seed": seed})()
+    assert ctx_a.material("param:probe_001") == ctx_b.material("param:probe_001")
