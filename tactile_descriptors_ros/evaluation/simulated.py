@@ -360,8 +360,10 @@ def material_world(seed: int = 0):
     *different* textures under the same name.  Inside this context the
     material seed is ``seed`` for every scene, so ``param:material_007`` is
     the same texture in training and test, while each scene's own seed still
-    drives its exploration draws, noise and everything else.  (A workaround
-    in this module: the engine has no per-scene material seed yet.)
+    drives its exploration draws, noise and everything else.  The engine
+    itself now renders every material from seed 0 whatever the scene's seed,
+    so ``material_world(0)`` changes nothing; another seed gives another
+    world of parametric materials.
     """
     from ..sim import engine
 
@@ -970,8 +972,9 @@ def write_report(results: Mapping[str, Any], out_dir) -> dict[str, str]:
         "* Descriptors: **paper descriptor** = eq. 17 / 28 (channels of an axis averaged), body parts "
         "concatenated (eq. 18 / 29); **per-channel** = every channel kept, concatenated; **pooled** = "
         "averaged channels, mean over the body parts in contact (same layout whichever hand or fingers touch).",
-        "* Parametric materials are rendered from one material seed in training and test (the engine "
-        "would otherwise draw a different texture per scene seed; see `material_world`). For the NAO material "
+        "* Parametric materials are rendered from one material seed in training and test (a material is "
+        "its name: the engine no longer draws it from the scene's seed; `material_world` can pick another "
+        "material seed). For the NAO material "
         "protocol only the two hands are simulated: the simulator keys every draw by cell, so their samples "
         "equal a full-robot run, and the other five parts (no contact) would add only gated zeros.",
         *_plan_text(results),
