@@ -30,6 +30,7 @@ import numpy as np
 from ..errors import CodecError, FrameError
 
 __all__ = [
+    "check_batch_ids",
     "Modality",
     "PAYLOAD_SIZE",
     "VALUE_COUNT",
@@ -250,6 +251,21 @@ class SkinSampleBatch:
         return [SkinSample(c, Modality(m), q, tuple(v[:k]), None if t == NO_STAMP else t)
                 for c, m, q, v, k, t in zip(self.cell_id.tolist(), self.modality.tolist(), self.sequence.tolist(),
                                             self.values.tolist(), counts, self.stamp_ns.tolist())]
+
+
+def check_batch_ids(samples: "SkinSampleBatch") -> None:
+    """Refuse a batch whose sequence numbers or cell ids do not fit the wire formats (8 and 16 bits).
+
+    Raises
+    ------
+    CodecError
+        Naming the first value out of range.
+    """
+    cell, seq = samples.cell_id, samples.sequence
+    if ((seq < 0) | (seq > 255)).any():
+        raise CodecError(f"sequence must be 0..255, got {int(seq[(seq < 0) | (seq > 255)][0])}")
+    if ((cell < 0) | (cell > 0xFFFF)).any():
+        raise CodecError(f"cell id must be 0..65535, got {int(cell[(cell < 0) | (cell > 0xFFFF)][0])}")
 
 
 def pack_values_batch(modality: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import CodecError
 from .can_frames import CAN_FRAME_DTYPE, FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, empty_frames
 from .framing import SequenceEvent, SequenceTracker
-from .skin import (NO_STAMP, PAYLOAD_SIZE, Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch,
+from .skin import (NO_STAMP, check_batch_ids, PAYLOAD_SIZE, Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch,
                    unpack_values, unpack_values_batch)
 
 __all__ = [
@@ -103,10 +103,7 @@ def encode_can_frames(samples: SkinSampleBatch, corrupt: np.ndarray | None = Non
     if not n:
         return out
     cell, mod, seq = samples.cell_id, samples.modality, samples.sequence
-    if ((seq < 0) | (seq > 255)).any():
-        raise CodecError(f"sequence must be 0..255, got {int(seq[(seq < 0) | (seq > 255)][0])}")
-    if ((cell < 0) | (cell > 0xFFFF)).any():
-        raise CodecError(f"cell id must be 0..65535, got {int(cell[(cell < 0) | (cell > 0xFFFF)][0])}")
+    check_batch_ids(samples)
     payload = pack_values_batch(mod, samples.values)
     out["arbitration_id"] = (PROTOCOL_TAG << 20) | (mod << 16) | cell
     out["flags"] = FLAG_EXTENDED

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import CodecError, FrameError
 from .framing import SequenceTracker, StreamDecoder, crc32
-from .skin import Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch, unpack_values
+from .skin import Modality, SkinSample, check_batch_ids, SkinSampleBatch, pack_values, pack_values_batch, unpack_values
 
 __all__ = ["SYNC", "HEADER_SIZE", "MAX_PAYLOAD", "encode_skin_frame", "encode_skin_frames", "crc32_rows",
            "SkinSerialEncoder", "SkinSerialDecoder"]
@@ -100,10 +100,7 @@ def encode_skin_frames(samples: SkinSampleBatch, corrupt: np.ndarray | None = No
     """
     n = len(samples)
     cell, mod, seq = samples.cell_id, samples.modality, samples.sequence
-    if ((seq < 0) | (seq > 255)).any():
-        raise CodecError(f"sequence must be 0..255, got {int(seq[(seq < 0) | (seq > 255)][0])}")
-    if ((cell < 0) | (cell > 0xFFFF)).any():
-        raise CodecError(f"cell id must be 0..65535, got {int(cell[(cell < 0) | (cell > 0xFFFF)][0])}")
+    check_batch_ids(samples)
     payload = pack_values_batch(mod, samples.values)
     size = np.array([0, 4, 5, 2, 2], dtype=np.int64)[mod] if n else np.zeros(0, dtype=np.int64)
     frame = np.zeros((n, 7 + 5 + 4), dtype=np.uint8)
