@@ -40,8 +40,8 @@ def _offline(biotac_data_dir: Path):
         cell = CellSignals(rec.pac[None], rec.pac_t_ns, rec.electrodes, rec.frame_t_ns, rec.pdc * n_per_count)
         d = describe_window(robot, {1: cell})
         index = d.body_parts[1].values
-        if clf is None:
-            clf = OnlineClassifier(d.labels)
+        if clf is None:  # classifier_node's defaults: max-loss update, averaged weights
+            clf = OnlineClassifier(d.labels, update="max_loss", average=True)
         clf.observe(d.values)
         guess, _ = clf.predict(d.values)
         truth = MATERIAL_NAMES[m]
