@@ -418,6 +418,10 @@ class _RobotPlan(NamedTuple):
     index: dict[int, tuple[BodyPart, Cell]]
     # per cell type, in the order of its first body part: (cell type, [(position, body part)])
     types: tuple[tuple[CellType, tuple[tuple[int, BodyPart], ...]], ...]
+    # per cell type as in ``types``: the cell ids of each of its body parts
+    part_ids: tuple[tuple[tuple[int, ...], ...], ...]
+    # concat labels per ``channels`` (filled on first use; descriptions are immutable)
+    concat_labels: dict[str, tuple[str, ...]]
 
 
 _PLANS: dict[int, tuple[weakref.ref, _RobotPlan]] = {}
@@ -432,8 +436,10 @@ def _plan(robot: RobotDescription) -> _RobotPlan:
     by_type: dict[str, list[tuple[int, BodyPart]]] = {}
     for pos, part in enumerate(robot.body_parts):
         by_type.setdefault(part.cell_type, []).append((pos, part))
-    plan = _RobotPlan(robot.cell_index(),
-                      tuple((robot.cell_types[name], tuple(parts)) for name, parts in by_type.items()))
+    types = tuple((robot.cell_types[name], tuple(parts)) for name, parts in by_type.items())
+    plan = _RobotPlan(robot.cell_index(), types,
+                      tuple(tuple(tuple(c.id for c in part.cells) for _, part in parts) for _, parts in types),
+                      {})
     with _PLANS_LOCK:
         for key in [k for k, (ref, _) in _PLANS.items() if ref() is None]:
             del _PLANS[key]
@@ -456,12 +462,14 @@ def _force_means(forces: list) -> np.ndarray:
         shapes = {np.shape(f) for f in forces}
     n = next(iter(shapes))
     if len(shapes) == 1 and len(n) == 1 and n[0]:
-        f2 = np.stack(forces).astype(np.float64, copy=False)
-        finite = np.isfinite(f2).all(axis=1)
-        if finite.all():
-            return np.add.reduce(f2, axis=1) / n[0]  # the mean of each row, as ndarray.mean takes it
-        out = np.add.reduce(np.where(finite[:, None], f2, 0.0), axis=1) / n[0]
-        out[~finite] = _mean_forces([f2[k] for k in np.flatnonzero(~finite)])
+        f2 = np.concatenate(forces).reshape(len(forces), n[0]).astype(np.float64, copy=False)
+        out = np.add.reduce(f2, axis=1)  # the sum of each row, as ndarray.mean takes it
+        out /= n[0]
+        # a finite sum means finite samples; the other rows (NaN or inf samples, or an overflowing
+        # sum) are taken one by one, as _mean_forces takes them
+        redo = np.flatnonzero(~np.isfinite(out))
+        if redo.size:
+            out[redo] = _mean_forces([f2[k] for k in redo.tolist()])
         return out
     return _mean_forces(forces)
 
@@ -470,69 +478,108 @@ def _segment_sums(y: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> np.n
     """Row sums of each segment ``y[starts[p]:starts[p] + counts[p]]`` (contiguous, in order), added row after row.
 
     The order of the additions is that of ``numpy.sum(segment, axis=0)``
-    on a segment with two or more columns (first row, then each next row),
-    so the result is identical to it; ``numpy.add.at`` adds the rows in
-    index order.
+    on a segment with two or more columns (row 0 + row 1 + ..., which is
+    what this takes), plus ``0.0`` (``numpy.add.at`` onto zeros, the
+    previous form, gave a zero's sign so; the sum is ``-0.0`` only when every
+    term is).  ``numpy.add.reduceat`` sums in another order.
     """
-    out = np.zeros((starts.size, y.shape[1]))
-    np.add.at(out, np.repeat(np.arange(starts.size), counts), y[starts[0]:starts[-1] + counts[-1]])
+    out = np.empty((starts.size, y.shape[1]))
+    for p, (s0, n) in enumerate(zip(starts.tolist(), counts.tolist())):
+        np.add.reduce(y[s0:s0 + n], axis=0, out=out[p])
+    out += 0.0
     return out
 
 
+class _Reduction(NamedTuple):
+    """How :func:`_reduce_parts` turns per-body-part column sums into values (per cell type and ``channels``).
+
+    The per-cell quantities are laid out as the columns of one matrix
+    ``[A_S, A_V, M_S, M_V, C_S, C_V, L, N]`` (``L`` and ``N`` flattened
+    ``(n_s, n_v)``).  Every output value is the mean of a set of ``k`` such
+    columns (one axis of channels, or one correlation pair's block;
+    ``k == 1`` per channel): ``groups`` holds, per ``k``, the columns
+    ``(n_outputs, k)`` and the output positions.
+    """
+
+    n_s: int
+    n_v: int
+    n_out: int
+    single_cols: tuple[int, ...]
+    groups: tuple[tuple[int, np.ndarray, np.ndarray], ...]
+
+
+@functools.lru_cache(maxsize=256)
+def _reduction(cell_type: CellType, channels: str) -> _Reduction:
+    n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
+    widths = [n_s, n_v] * 3 + [n_s * n_v] * 2
+    edges = np.concatenate(([0], np.cumsum(widths))).tolist()
+    s_axes = _channel_slices(cell_type.vibration.axes)
+    v_axes = _channel_slices(cell_type.deformation.axes)
+    pairs = cell_type.correlation_pairs()
+    outputs: list[list[int]] = []  # the columns averaged into each output value, in layout order
+    for q in range(3):
+        s0, v0 = edges[2 * q], edges[2 * q + 1]
+        if channels == "averaged":
+            outputs += [list(range(s0 + sl.start, s0 + sl.stop)) for sl in s_axes]
+            outputs += [list(range(v0 + sl.start, v0 + sl.stop)) for sl in v_axes]
+        else:
+            outputs += [[s0 + c] for c in range(n_s)] + [[v0 + c] for c in range(n_v)]
+    for c in (6, 7):
+        for i, j in pairs:
+            block = [edges[c] + s * n_v + v for s in range(s_axes[i].start, s_axes[i].stop)
+                     for v in range(v_axes[j].start, v_axes[j].stop)]
+            outputs += [block] if channels == "averaged" else [[col] for col in block]
+    by_k: dict[int, list[int]] = {}
+    for pos, cols in enumerate(outputs):
+        by_k.setdefault(len(cols), []).append(pos)
+    groups = tuple((k, np.array([outputs[pos] for pos in pos_k], dtype=np.intp).reshape(len(pos_k), k),
+                    np.array(pos_k, dtype=np.intp))
+                   for k, pos_k in sorted(by_k.items()) if k)  # k == 0 (an empty axis): stays zero
+    single_cols = tuple(int(edges[b]) for b, w in enumerate(widths) if w == 1)
+    return _Reduction(n_s, n_v, len(outputs), single_cols, groups)
+
+
 def _reduce_parts(feats: CellFeatures, starts: np.ndarray, counts: np.ndarray, cell_type: CellType,
-                  channels: str) -> np.ndarray:
+                  channels: str, red: _Reduction | None = None) -> np.ndarray:
     """:func:`reduce_body_part` of several body parts at once, identical values.
 
     ``feats`` holds the cells in contact of every body part, each body
     part's cells contiguous (``starts``, ``counts``).  Returns one row of
-    values per body part.
+    values per body part.  The same floating-point operations in the same
+    order as :func:`reduce_body_part` (``a / n`` summed row after row over
+    the cells, then each axis' ``a / k`` summed), batched over body parts and
+    outputs by the cached :func:`_reduction`.
     """
+    red = _reduction(cell_type, channels) if red is None else red
     n_rows = feats.act_s.shape[0]
-    blocks = [feats.act_s, feats.act_v, feats.mob_s, feats.mob_v, feats.com_s, feats.com_v,
-              feats.lin.reshape(n_rows, -1), feats.nonlin.reshape(n_rows, -1)]
-    widths = [b.shape[1] for b in blocks]
-    edges = np.concatenate(([0], np.cumsum(widths)))
-    y = np.concatenate([np.asarray(b, dtype=np.float64) for b in blocks], axis=1)
-    y /= np.repeat(counts.astype(np.float64), counts)[:, None]  # a / n per cell, as _finite_mean
-    m = _segment_sums(y, starts, counts)
-    # numpy sums a single column pairwise, not row after row: take those sums as reduce_body_part does
-    big = np.flatnonzero(counts >= 8)
-    for b, w in enumerate(widths):
-        if w == 1 and big.size:
-            col = int(edges[b])
-            for p in big:
-                m[p, col] = np.sum(y[starts[p]:starts[p] + counts[p], col:col + 1], axis=0)[0]
-    q = [m[:, edges[k]:edges[k + 1]] for k in range(8)]
-    n_s, n_v = widths[0], widths[1]
-    s_axes = _channel_slices(cell_type.vibration.axes)
-    v_axes = _channel_slices(cell_type.deformation.axes)
-    pairs = cell_type.correlation_pairs()
-    cols: list[np.ndarray] = []
-    for s_m, v_m in ((q[0], q[1]), (q[2], q[3]), (q[4], q[5])):
-        if channels == "averaged":
-            cols += [_row_means(s_m[:, sl]) for sl in s_axes]
-            cols += [_row_means(v_m[:, sl]) for sl in v_axes]
+    y = np.concatenate([feats.act_s, feats.act_v, feats.mob_s, feats.mob_v, feats.com_s, feats.com_v,
+                        feats.lin.reshape(n_rows, -1), feats.nonlin.reshape(n_rows, -1)], axis=1,
+                       dtype=np.float64)
+    if counts.size == n_rows:  # one cell per body part: y / 1 summed onto zeros
+        m = np.add(y, 0.0, out=y)
+    else:
+        y /= np.repeat(counts.astype(np.float64), counts)[:, None]  # a / n per cell, as _finite_mean
+        m = _segment_sums(y, starts, counts)
+        # numpy sums a single column pairwise, not row after row: take those sums as reduce_body_part does
+        if red.single_cols:
+            for p in np.flatnonzero(counts >= 8).tolist():
+                seg = y[starts[p]:starts[p] + counts[p]]
+                for col in red.single_cols:
+                    m[p, col] = np.sum(seg[:, col:col + 1], axis=0)[0]
+    out = np.zeros((m.shape[0], red.n_out))
+    for k, cols, pos in red.groups:
+        if k == 1:
+            out[:, pos] = m[:, cols[:, 0]]
         else:
-            cols += [s_m, v_m]
-    for c in (q[6], q[7]):
-        c3 = c.reshape(-1, n_s, n_v)
-        if channels == "averaged":
-            cols += [_row_means(c3[:, s_axes[i], v_axes[j]]) for i, j in pairs]
-        else:
-            cols += [c3[:, s_axes[i], v_axes[j]].reshape(c3.shape[0], -1) for i, j in pairs]
-    return np.concatenate([x.reshape(x.shape[0], -1) for x in cols], axis=1)
-
-
-def _row_means(a: np.ndarray) -> np.ndarray:
-    """:func:`_finite_mean` of each row's block (all axes but the first), as a column."""
-    n = math.prod(a.shape[1:])
-    if n == 0:
-        return np.zeros((a.shape[0], 1))
-    return np.add.reduce((a / n).reshape(a.shape[0], n), axis=1)[:, None]
+            # np.take gives C order (m[:, cols] would not): each mean is then summed along a contiguous
+            # row of k values, as reduce_body_part sums it
+            out[:, pos] = np.add.reduce(np.take(m, cols, axis=1) / k, axis=2)
+    return out
 
 
 def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...], cells: Mapping[int, CellSignals],
-                   threshold_n: float, channels: str) -> list[BodyPartDescriptor]:
+                   threshold_n: float, channels: str,
+                   part_ids: tuple[tuple[int, ...], ...] | None = None) -> list[BodyPartDescriptor]:
     """The descriptors of every body part of one cell type: one kernel call for all their cells.
 
     Gate, saturation check and per-cell quantities run once on the cells in
@@ -540,19 +587,25 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     then taken together (:func:`_reduce_parts`).  Values and flags are
     identical to :func:`_body_part_descriptor` per body part: cells of
     different window shapes or dtypes, float data and integer data too large
-    for exact moments take that path.
+    for exact moments take that path.  ``part_ids``: each body part's cell
+    ids (from the robot's cached plan).
     """
     labels = _layout(cell_type, channels)
+    red = _reduction(cell_type, channels)
+    if part_ids is None:
+        part_ids = tuple(tuple(c.id for c in part.cells) for _, part in parts)
     flags: list[int] = []
-    usable: list[list[int]] = []
+    n_usable: list[int] = []
+    usable_ids: list[int] = []
     sigs: list[CellSignals] = []
-    for _, part in parts:
+    get = cells.get
+    for ids in part_ids:
         quality = 0
-        ids = []
         n_present = 0
+        n_valid = len(sigs)
         bad = False
-        for c in part.cells:
-            sig = cells.get(c.id)
+        for cid in ids:
+            sig = get(cid)
             if sig is None:
                 continue
             n_present += 1
@@ -561,27 +614,28 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
             if sig.invalid_samples:
                 bad = True
             if sig.valid:
-                ids.append(c.id)
+                usable_ids.append(cid)
                 sigs.append(sig)
-        if n_present < len(part.cells):
+        n_valid = len(sigs) - n_valid
+        if n_present < len(ids):
             quality |= _GAP
-        if bad or len(ids) < n_present:
+        if bad or n_valid < n_present:
             quality |= _INVALID
         flags.append(quality)
-        usable.append(ids)
+        n_usable.append(n_valid)
     means = _force_means([s.force_n for s in sigs])
     gate = means >= threshold_n
-    touching_sigs: list[CellSignals] = []
-    touching_ids: list[int] = []
-    counts = np.zeros(len(parts), dtype=np.intp)
-    k = 0
-    for p, ids in enumerate(usable):
-        for cid in ids:
-            if gate[k]:
-                touching_sigs.append(sigs[k])
-                touching_ids.append(cid)
-                counts[p] += 1
-            k += 1
+    if gate.all():
+        touching_sigs, touching_ids = sigs, usable_ids
+        counts = np.array(n_usable, dtype=np.intp)
+        touching_means = means
+    else:
+        on_k = np.flatnonzero(gate)
+        touching_sigs = [sigs[k] for k in on_k.tolist()]
+        touching_ids = [usable_ids[k] for k in on_k.tolist()]
+        counts = np.bincount(np.repeat(np.arange(len(part_ids)), n_usable)[on_k],
+                             minlength=len(part_ids)).astype(np.intp)
+        touching_means = means[on_k]
     if not touching_sigs:
         return [BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
                                    len(part.cells), 0.0, quality | _NO_CONTACT)
@@ -589,31 +643,36 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     if not _uniform_integers(touching_sigs):
         _check_channels(touching_sigs, cell_type, touching_ids)
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
-    _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
+    if touching_sigs[0].vibration.shape[0] != red.n_s or touching_sigs[0].deformation.shape[0] != red.n_v:
+        _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
     out: list[BodyPartDescriptor] = []
     feats = _type_features(touching_sigs, cell_type)
     if feats is None:
         # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
     feats, saturated = feats
+    counts_l = counts.tolist()
     on = np.flatnonzero(counts)
-    starts_all = np.concatenate(([0], np.cumsum(counts)[:-1]))
-    values = _reduce_parts(feats, starts_all[on], counts[on], cell_type, channels)
+    starts_all = np.zeros(len(counts_l), dtype=np.intp)
+    np.cumsum(counts[:-1], out=starts_all[1:])
+    starts_on = starts_all[on]
+    values = _reduce_parts(feats, starts_on, counts[on], cell_type, channels, red)
     cell_q = feats.quality | np.where(saturated, np.uint32(_SATURATED), np.uint32(0))
-    part_q = np.bitwise_or.reduceat(cell_q, starts_all[on])
-    touching_means = means[gate]
+    part_q = np.bitwise_or.reduceat(cell_q, starts_on).tolist()
+    starts_l = starts_all.tolist()
+    single = touching_means.tolist()
     row = 0
     for p, ((_, part), quality) in enumerate(zip(parts, flags)):
-        n = int(counts[p])
+        n = counts_l[p]
         if n == 0:
             out.append(BodyPartDescriptor(part.name, part.cell_type, np.zeros(len(labels)), labels, False, 0,
                                           len(part.cells), 0.0, quality | _NO_CONTACT))
             continue
-        s0 = int(starts_all[p])
-        out.append(BodyPartDescriptor(part.name, part.cell_type, values[row].copy(), labels, True, n,
+        s0 = starts_l[p]
+        out.append(BodyPartDescriptor(part.name, part.cell_type, values[row], labels, True, n,
                                       len(part.cells),
-                                      float(touching_means[s0]) if n == 1 else float(touching_means[s0:s0 + n].mean()),
-                                      quality | int(part_q[row])))
+                                      single[s0] if n == 1 else float(np.add.reduce(touching_means[s0:s0 + n]) / n),
+                                      quality | part_q[row]))
         row += 1
     return out
 
@@ -629,7 +688,7 @@ class _Buffers(threading.local):
         self.arrays: dict[tuple[str, str], np.ndarray] = {}
 
     def get(self, slot: str, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
-        size = int(np.prod(shape))
+        size = math.prod(shape)
         key = (slot, np.dtype(dtype).str)
         buf = self.arrays.get(key)
         if buf is None or buf.size < size:
@@ -658,15 +717,20 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFe
     saturated = np.zeros(len(sigs), dtype=bool)
     for c0 in range(0, len(sigs), step):
         chunk = sigs[c0:c0 + step]
-        vib = np.stack([s.vibration for s in chunk], out=_BUFFERS.get("vib", (len(chunk),) + s0.shape, s0.dtype))
-        dfm = np.stack([s.deformation for s in chunk], out=_BUFFERS.get("dfm", (len(chunk),) + v0.shape, v0.dtype))
+        # np.stack, without its per-array expand_dims: the rows of all cells concatenated into the buffer
+        vib = _BUFFERS.get("vib", (len(chunk),) + s0.shape, s0.dtype)
+        np.concatenate([s.vibration for s in chunk], out=vib.reshape(len(chunk) * s0.shape[0], n_fast))
+        dfm = _BUFFERS.get("dfm", (len(chunk),) + v0.shape, v0.dtype)
+        np.concatenate([s.deformation for s in chunk], out=dfm.reshape(len(chunk) * v0.shape[0], n_slow))
         peaks, sat = _peaks_and_saturation(vib, dfm, cell_type)
         if not exact_integer_ok(n_max, *peaks):
             return None
         saturated[c0:c0 + len(chunk)] = sat
-        parts.append(cell_features(vib, _shared_or_stacked([s.vibration_t_ns for s in chunk]),
-                                   dfm, _shared_or_stacked([s.deformation_t_ns for s in chunk]),
-                                   cell_type.vibration.rate_hz, cell_type.deformation.rate_hz))
+        # cell_features without its float checks (integer data)
+        parts.append(CellFeatures(*cell_quantities(
+            vib, _shared_or_stacked([s.vibration_t_ns for s in chunk]),
+            dfm, _shared_or_stacked([s.deformation_t_ns for s in chunk]),
+            cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)))
     if len(parts) == 1:
         return parts[0], saturated
     return CellFeatures(*(np.concatenate([getattr(f, name) for f in parts])
@@ -680,10 +744,12 @@ def _uniform_integers(sigs: list[CellSignals]) -> bool:
             or s0.dtype.kind not in "iu" or v0.dtype.kind not in "iu":
         return False
     shape_s, shape_v, dt_s, dt_v = s0.shape, v0.shape, s0.dtype, v0.dtype
+    nd = np.ndarray
     for sig in sigs:
         s, v = sig.vibration, sig.deformation
-        if not (isinstance(s, np.ndarray) and isinstance(v, np.ndarray)) or s.shape != shape_s \
-                or v.shape != shape_v or s.dtype != dt_s or v.dtype != dt_v:
+        if not ((s.__class__ is nd or isinstance(s, nd)) and (v.__class__ is nd or isinstance(v, nd))) \
+                or s.shape != shape_s or v.shape != shape_v or not (s.dtype is dt_s or s.dtype == dt_s) \
+                or not (v.dtype is dt_v or v.dtype == dt_v):
             return False
     return True
 
@@ -711,8 +777,11 @@ def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType
             peaks.append(0.0)
             continue
         a_min, a_max = cell_bounds(a)
-        peaks.append(float(max(abs(int(a_min.min())), abs(int(a_max.max())))))
+        low, high = int(a_min.min()), int(a_max.max())
+        peaks.append(float(max(abs(low), abs(high))))
         lo, hi = mod.adc_range
+        if low > lo and high < hi:
+            continue  # no cell reaches the limits
         near = np.flatnonzero((a_min <= lo) | (a_max >= hi))
         if near.size:
             sub = a[near]
@@ -774,18 +843,21 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     channels = channels or robot.descriptor.channels
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
     plan = _plan(robot)
-    unknown = sorted(c for c in cells if c not in plan.index)
+    unknown = cells.keys() - plan.index.keys()
     if unknown:
+        unknown = sorted(unknown)
         raise SignalError(f"cells {unknown} are not in robot description {robot.name!r}")
     # One batch per cell type (gate, saturation, kernel), then the averages per body part.
     by_pos: dict[int, BodyPartDescriptor] = {}
-    for cell_type, parts_of_type in plan.types:
-        descs = _describe_type(cell_type, parts_of_type, cells, threshold, channels)
+    for (cell_type, parts_of_type), part_ids in zip(plan.types, plan.part_ids):
+        descs = _describe_type(cell_type, parts_of_type, cells, threshold, channels, part_ids)
         by_pos.update(zip((pos for pos, _ in parts_of_type), descs))
     parts = tuple(by_pos[pos] for pos in range(len(robot.body_parts)))
     if layout == "concat":
         values = np.concatenate([bp.values for bp in parts])
-        labels = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
+        labels = plan.concat_labels.get(channels)
+        if labels is None:
+            labels = plan.concat_labels[channels] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
     elif layout == "pooled":
         values, labels = pool_body_parts(robot, parts)
     else:
