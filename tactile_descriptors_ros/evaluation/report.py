@@ -30,6 +30,8 @@ __all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "build_report"]
 class ReportPlan:
     """What the report runs (the full plan, or a quick one for tests).
 
+    The last headline mode is the recommended one (its confusion matrix is plotted).
+
     Attributes mirror the report's sections: headline modes and windows,
     the window-length sweep, the exploration-time test windows, the
     ablation window and modes, CV repeats for the headline and for the
@@ -183,12 +185,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     ax.set_ylabel("test accuracy (%)")
     ax.set_title("Accuracy against window length (train trials {}, test {})".format(
         format_trials(tr_trials), format_trials(te_trials)), fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    figs["accuracy_vs_window"] = fig_dir / "accuracy_vs_window.png"
-    fig.savefig(figs["accuracy_vs_window"], dpi=110)
-    plt.close(fig)
+    figs["accuracy_vs_window"] = _save_figure(fig, fig_dir / "accuracy_vs_window.png", ax=ax, legend_size=7)
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for m in plan.sweep_modes:
@@ -197,12 +194,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                 "o-", label=f"descriptor, {m}")
     ax.set_xlabel("window length (s)")
     ax.set_ylabel("descriptor time per window (ms)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    figs["time_vs_window"] = fig_dir / "time_vs_window.png"
-    fig.savefig(figs["time_vs_window"], dpi=110)
-    plt.close(fig)
+    figs["time_vs_window"] = _save_figure(fig, fig_dir / "time_vs_window.png", ax=ax, legend_size=7)
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for m in plan.ablation_modes:
@@ -211,12 +203,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                      for w in plan.exploration_test], "o-", label=f"SVM, {m}")
     ax.set_xlabel(f"test window length (s); trained on {plan.ablation_window} s windows")
     ax.set_ylabel("test accuracy (%)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    figs["exploration_time"] = fig_dir / "exploration_time.png"
-    fig.savefig(figs["exploration_time"], dpi=110)
-    plt.close(fig)
+    figs["exploration_time"] = _save_figure(fig, fig_dir / "exploration_time.png", ax=ax, legend_size=7)
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for (m, w), res in results["headline"].items():
@@ -227,17 +214,9 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     ax.set_xlabel("training trials per class seen (online)")
     ax.set_ylabel("test accuracy (%)")
     ax.set_title("Online PA-I learning curves", fontsize=9)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=6)
-    fig.tight_layout()
-    figs["pa_curves"] = fig_dir / "pa_curves.png"
-    fig.savefig(figs["pa_curves"], dpi=110)
-    plt.close(fig)
+    figs["pa_curves"] = _save_figure(fig, fig_dir / "pa_curves.png", ax=ax, legend_size=6)
 
-    best_key = (plan.headline_modes[-2] if len(plan.headline_modes) > 2 else plan.headline_modes[-1],
-                plan.headline_windows[0])
-    best_key = ("combined", plan.headline_windows[0]) if ("combined", plan.headline_windows[0]) in \
-        results["headline"] else best_key
+    best_key = (plan.headline_modes[-1], plan.headline_windows[0])  # the recommended mode comes last
     res = results["headline"][best_key]
     cm = np.array(res["classifiers"]["svm"]["confusion"])
     fig, ax = plt.subplots(figsize=(6.4, 5.6))
@@ -252,10 +231,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                         color="white" if cm[i, j] > cm.max() / 2 else "black")
     ax.set_xlabel("predicted")
     ax.set_title(f"SVM confusion, {best_key[0]}, {_wlabel(best_key[1], common_s)}", fontsize=9)
-    fig.tight_layout()
-    figs["confusion"] = fig_dir / "confusion_svm.png"
-    fig.savefig(figs["confusion"], dpi=110)
-    plt.close(fig)
+    figs["confusion"] = _save_figure(fig, fig_dir / "confusion_svm.png")
 
     # ---------------------------------------------------------------- markdown
     md = _markdown(results, plan, tr_trials, te_trials, common_s, runtime_s, figs, out_dir, data_dir, recs)
@@ -264,6 +240,19 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     serial["runtime_s"] = runtime_s
     (out_dir / "results.json").write_text(json.dumps(serial, indent=1, default=_json_default))
     return serial
+
+
+def _save_figure(fig, path: Path, *, ax=None, legend_size: int | None = None) -> Path:
+    """Grid and legend on ``ax`` (if given), tight layout, write ``path`` as PNG and close the figure."""
+    import matplotlib.pyplot as plt
+
+    if ax is not None:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=legend_size)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _json_default(obj):
