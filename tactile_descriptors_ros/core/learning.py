@@ -55,11 +55,17 @@ import numpy as np
 from ..errors import ModelError, SignalError
 from .scaling import FeatureScaler
 
-__all__ = ["PA_UPDATES", "PassiveAggressive", "OnlineClassifier", "save_json_atomic"]
+__all__ = ["PA_UPDATES", "RECOMMENDED_PA_UPDATE", "RECOMMENDED_PA_AVERAGE", "PassiveAggressive",
+           "OnlineClassifier", "save_json_atomic"]
 
 #: Update rules of :class:`PassiveAggressive`: the paper's prediction-based
 #: update (eq. 30-32) and Crammer et al.'s max-loss update.
 PA_UPDATES: tuple[str, ...] = ("prediction", "max_loss")
+
+#: The variant the classifier node and ``tactile evaluate`` use by default
+#: (the classes themselves default to the paper's): max-loss, averaged.
+RECOMMENDED_PA_UPDATE: str = "max_loss"
+RECOMMENDED_PA_AVERAGE: bool = True
 
 _FORMAT = "tactile_descriptors_ros/online_classifier"
 _FORMAT_VERSION = 1

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from sklearn.metrics import confusion_matrix
 
+from ..core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
 from ..datasets.biotac_slide import MATERIAL_NAMES, BiotacRecording
 from ..errors import ConfigError
 from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
@@ -88,8 +89,8 @@ class EvalConfig:
     cv_repeats: int = 10
     pa_max: int = 30
     pa_orders: int = 5
-    pa_update: str = "max_loss"
-    pa_average: bool = True
+    pa_update: str = RECOMMENDED_PA_UPDATE
+    pa_average: bool = RECOMMENDED_PA_AVERAGE
     jobs: int = 2
     cache_dir: str | None = "build/cache"
     progress: bool = False

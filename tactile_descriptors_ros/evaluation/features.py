@@ -49,8 +49,8 @@ mode), ``per_channel`` (the core's ``per_channel`` mode), ``multiband``
 (``combined`` + ``subwindows``, 493 values).  On cross-validation over
 blocks of trials (2 s windows) ``combined`` scored 97.3 % and
 ``combined_subwindows`` 97.7 %, a gain inside the noise of 400 test windows
-per fold for twice the descriptor time, so the default stays ``combined``.  ``averaged`` is accepted as an alias of
-``paper``.
+per fold for twice the descriptor time, so the default stays ``combined``.
+``averaged`` is accepted as an alias of ``paper``.
 
 The contact gate (eq. 16) is applied when a mode is selected: a window whose
 mean PDC force is below F_t yields zeros, like the core's body-part
@@ -74,6 +74,7 @@ from scipy import signal, stats
 from ..core.aggregation import body_part_layout, cell_features, contact_gate, reduce_body_part
 from ..core.descriptors import hjorth
 from ..core.robot import CellType, RobotDescription, load_robot
+from ..core.scaling import activity_mask, log_activity
 from ..datasets.biotac_slide import PAC_PER_FRAME, BiotacRecording
 from ..errors import ConfigError
 from .windows import Window
@@ -108,9 +109,6 @@ ELECTRODE_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.0, 2.0), (2.0, 10.0), 
 
 #: Feature groups in bank order (computed per window and cached).
 GROUPS: tuple[str, ...] = ("paper", "per_channel", "bands", "levels", "baseline")
-
-#: Groups derived from the banks of other windows (the pieces of a window).
-DERIVED_GROUPS: tuple[str, ...] = ("subwindows",)
 
 #: Pieces of the ``subwindows`` group and the groups described per piece.
 N_SUBWINDOWS: int = 4
@@ -394,9 +392,7 @@ def _add_subwindows(bank: FeatureBank, recordings: Sequence[BiotacRecording], **
     sub = compute_bank(recordings, pieces, **kwargs)
     values = np.concatenate([sub.groups[g] for g in _SUBWINDOW_SOURCE], axis=1)
     labels = [lab.split("/", 1)[1] for g in _SUBWINDOW_SOURCE for lab in sub.labels[g]]
-    act = np.array([lab.startswith("A_") for lab in labels])
-    values[:, act] = np.log1p(np.maximum(values[:, act], 0.0))
-    values = values.reshape(len(bank.windows), N_SUBWINDOWS, -1)
+    values = log_activity(values, activity_mask(labels)).reshape(len(bank.windows), N_SUBWINDOWS, -1)
     bank.groups["subwindows"] = np.concatenate([values.mean(axis=1), values.std(axis=1)], axis=1)
     bank.labels["subwindows"] = tuple([f"subwindows/mean_{lab}" for lab in labels]
                                       + [f"subwindows/sd_{lab}" for lab in labels])

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from rclpy.node import Node
 
-from ..core.learning import PA_UPDATES, OnlineClassifier
+from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
 from ..errors import ModelError, SignalError
 from .common import Diagnostics, Status, declare, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
@@ -65,9 +65,9 @@ class ClassifierNode(Node):
         self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1)", minimum=1e-12)
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
         self.standardize = declare(self, "standardize", True, "running standardisation of features")
-        self.pa_update = declare(self, "pa_update", "max_loss",
+        self.pa_update = declare(self, "pa_update", RECOMMENDED_PA_UPDATE,
                                  "PA-I update: max_loss, or prediction (the paper's eq. 30-32)", choices=PA_UPDATES)
-        self.pa_average = declare(self, "pa_average", True,
+        self.pa_average = declare(self, "pa_average", RECOMMENDED_PA_AVERAGE,
                                   "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,
                                "descriptors kept for late labels (and early labels held)", minimum=1)
@@ -105,6 +105,12 @@ class ClassifierNode(Node):
         self.get_logger().info(f"model file {self.model_path}; predictions on {self.pub.topic_name}")
 
     # ------------------------------------------------------------ descriptors
+
+    def _new_model(self, labels) -> OnlineClassifier:
+        """An empty model of a descriptor layout, with this node's learning parameters."""
+        return OnlineClassifier(labels, eta=self.eta, log_activity=self.log_activity, standardize=self.standardize,
+                                update=self.pa_update, average=self.pa_average)
+
     def _on_descriptor(self, msg) -> None:
         try:
             sample = descriptor_from_msg(msg)
@@ -117,9 +123,7 @@ class ClassifierNode(Node):
             self.counts["no_contact"] += 1
             return
         if self.model is None:
-            self.model = OnlineClassifier(sample.labels, eta=self.eta, log_activity=self.log_activity,
-                                          standardize=self.standardize, update=self.pa_update,
-                                          average=self.pa_average)
+            self.model = self._new_model(sample.labels)
         if sample.labels != self.model.labels:
             self.counts["layout_mismatch"] += 1
             self.layout_error = (f"descriptor layout ({len(sample.labels)} values, {sample.robot} "
@@ -226,9 +230,7 @@ class ClassifierNode(Node):
         self.correct_before_label = self.scored_labels = 0
         try:
             if labels is not None:
-                self.model = OnlineClassifier(labels, eta=self.eta, log_activity=self.log_activity,
-                                              standardize=self.standardize, update=self.pa_update,
-                                              average=self.pa_average)
+                self.model = self._new_model(labels)
                 self.model.save(self.model_path)
             elif self.model_path.exists():
                 self.model_path.unlink()

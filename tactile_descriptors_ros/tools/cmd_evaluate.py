@@ -41,7 +41,7 @@ def default_trials(train_dir: str, test_dir: str, train_text: str | None,
 
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
-    from ..core.learning import PA_UPDATES
+    from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
     from ..evaluation.features import DEFAULT_MODE, DESCRIPTOR_MODES
     from ..evaluation.modes import SCALINGS
 
@@ -64,14 +64,15 @@ def register(subparsers) -> None:
                    choices=["averaged", *DESCRIPTOR_MODES],
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
                    "multiband (per_channel + Hjorth of 6 PAC bands), multiband_levels, baseline, "
-                   f"combined (all of them, 261 values); default {DEFAULT_MODE}")
+                   "combined (all of them, 261 values), combined_subwindows (+ mean and sd over 4 successive "
+                   f"pieces, 493); default {DEFAULT_MODE}")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
     p.add_argument("--gate", action=argparse.BooleanOptionalAction, default=False,
                    help="contact gate (eq. 16; off by default: recorded slides are all in contact and the "
                    "tared PDC misfires on soft materials, see docs/evaluation.md)")
-    p.add_argument("--pa-update", default="max_loss", choices=list(PA_UPDATES),
+    p.add_argument("--pa-update", default=RECOMMENDED_PA_UPDATE, choices=list(PA_UPDATES),
                    help="PA-I update: max_loss (default) or prediction (the paper's eq. 30-32)")
-    p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=True,
+    p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=RECOMMENDED_PA_AVERAGE,
                    help="predict with averaged PA weights (default on; --no-pa-average is the paper's PA-I)")
     p.add_argument("--drop", default="", help="quantities to leave out, e.g. L,N (ablation)")
     p.add_argument("--train-windows", type=int, default=8, help="random windows per training trial (default 8)")

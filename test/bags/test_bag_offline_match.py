@@ -27,7 +27,7 @@ FRAMES = 300
 
 def _offline(biotac_data_dir: Path):
     from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
-    from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.datasets.biotac_slide import MATERIAL_NAMES, read_biotac_csv
 
@@ -40,8 +40,8 @@ def _offline(biotac_data_dir: Path):
         cell = CellSignals(rec.pac[None], rec.pac_t_ns, rec.electrodes, rec.frame_t_ns, rec.pdc * n_per_count)
         d = describe_window(robot, {1: cell})
         index = d.body_parts[1].values
-        if clf is None:  # classifier_node's defaults: max-loss update, averaged weights
-            clf = OnlineClassifier(d.labels, update="max_loss", average=True)
+        if clf is None:  # classifier_node's defaults
+            clf = OnlineClassifier(d.labels, update=RECOMMENDED_PA_UPDATE, average=RECOMMENDED_PA_AVERAGE)
         clf.observe(d.values)
         guess, _ = clf.predict(d.values)
         truth = MATERIAL_NAMES[m]
