@@ -34,17 +34,23 @@ def _run_graph(ros_context, bag, model_path, rate=8.0):
     io.create_subscription(Prediction, "tactile/prediction",
                            lambda m: pred.append((m.exploration_id, m.has_model, m.class_name, list(m.class_names),
                                                   list(m.scores), m.updates)), 50)
-    ex = SingleThreadedExecutor(context=ros_context)
-    for n in (w, c, io):
-        ex.add_node(n)
+    # The window node and the classifier spin in their own executors, as they run in their own processes
+    # under ros2 launch: in one shared executor a long frames callback (the window node takes every waiting
+    # frame at once) can leave a label and the next descriptor ready together, and the executor may then
+    # serve the descriptor first.
+    executors = [SingleThreadedExecutor(context=ros_context) for _ in range(2)]
+    executors[0].add_node(w)
+    executors[1].add_node(c)
+    executors[1].add_node(io)
     stop = threading.Event()
 
-    def spin_nodes():
+    def spin_nodes(ex):
         while not stop.is_set():
             ex.spin_once(timeout_sec=0.01)
 
-    spin = threading.Thread(target=spin_nodes)
-    spin.start()
+    spins = [threading.Thread(target=spin_nodes, args=(ex,)) for ex in executors]
+    for t in spins:
+        t.start()
     try:
         player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=10), context=ros_context)
         report = player.play()
@@ -55,11 +61,13 @@ def _run_graph(ros_context, bag, model_path, rate=8.0):
         time.sleep(0.3)
     finally:
         stop.set()
-        spin.join()
-        for n in (w, c, io):
-            ex.remove_node(n)
-            n.destroy_node()
-        ex.shutdown(timeout_sec=0.5)
+        for t in spins:
+            t.join()
+        for ex, nodes in zip(executors, ((w,), (c, io))):
+            for n in nodes:
+                ex.remove_node(n)
+                n.destroy_node()
+            ex.shutdown(timeout_sec=0.5)
     return desc, pred
 
 
