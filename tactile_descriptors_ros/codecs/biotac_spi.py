@@ -888,7 +888,7 @@ class BiotacFrameDecoder:
         return arr
 
     def decode_many(self, sensor: int, data: bytes | np.ndarray, first_sequence: int | None = None,
-                    lengths: np.ndarray | None = None) -> BiotacFrames:
+                    lengths: np.ndarray | None = None, max_frames: int | None = None) -> BiotacFrames:
         """Decode many frames of one sensor at once.
 
         Parameters
@@ -896,8 +896,9 @@ class BiotacFrameDecoder:
         sensor : int
             Chip select.
         data : bytes or numpy.ndarray of uint8
-            Either concatenated frames (1-D; a short last frame has its tail
-            marked missing) or a matrix ``(n_frames, k)`` with ``k <= byte_count``
+            Either whole frames back to back (1-D; a single reply shorter
+            than one frame has its tail marked missing, as :meth:`decode`
+            does) or a matrix ``(n_frames, k)`` with ``k <= byte_count``
             (columns beyond ``k`` are missing).
         first_sequence : int, optional
             Sequence number of the first frame; by default continues the
@@ -905,17 +906,30 @@ class BiotacFrameDecoder:
         lengths : numpy.ndarray of int, optional
             With a matrix: received bytes per frame (the rest of each row is
             missing), for frames truncated by different amounts.
+        max_frames : int, optional
+            How many frames ``data`` may hold (a bridge payload carries one).
 
         Raises
         ------
         FrameError
-            If more bytes arrive than the pattern has words (pattern mismatch).
+            If more bytes arrive than the pattern has words (pattern mismatch):
+            1-D data longer than one frame that is not a whole number of
+            frames (a BioTac SP frame read with the BioTac pattern), more
+            than ``max_frames`` frames, or matrix rows longer than a frame.
         CodecError
             If the chip select is not configured.
         """
         s = self._check_sensor(sensor)
         nbytes = self.pattern.byte_count
         arr = self._to_matrix(data, None)
+        if arr.ndim == 1 and arr.size > nbytes and arr.size % nbytes:
+            raise FrameError(f"{arr.size} reply bytes are not a whole number of {nbytes}-byte frames: "
+                             "the configured frame pattern does not match the device")
+        n_in = max(1, -(-arr.size // nbytes)) if arr.ndim == 1 else arr.shape[0]
+        if max_frames is not None and n_in > max_frames:
+            raise FrameError(f"{arr.size if arr.ndim == 1 else arr.shape[0] * arr.shape[1]} reply bytes hold "
+                             f"{n_in} frames of {nbytes} bytes where at most {max_frames} may come: the "
+                             "configured frame pattern does not match the device")
         if arr.ndim == 1:
             n = max(1, -(-arr.size // nbytes))
             full = np.zeros(n * nbytes, dtype=np.uint8)

@@ -20,8 +20,8 @@ it scans for the sync, validates the header, waits for the whole frame,
 checks the CRC, and on any failure drops *one* byte and scans again, so a
 good frame right after damaged bytes is always recovered.
 
-:class:`SequenceTracker` detects lost, duplicated and out-of-order frames
-from wrapping sequence numbers.
+:class:`~..streams.sequence.SequenceTracker` (re-exported here) detects lost,
+duplicated and out-of-order frames from wrapping sequence numbers.
 """
 
 from __future__ import annotations
@@ -29,12 +29,10 @@ from __future__ import annotations
 import zlib
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, fields
-from enum import IntEnum
 from typing import Generic, TypeVar
 
-import numpy as np
-
-from ..errors import CodecError, ConfigError
+from ..errors import CodecError
+from ..streams.sequence import SequenceEvent, SequenceTracker
 
 __all__ = [
     "CRC_NAME",
@@ -52,179 +50,6 @@ CRC_NAME = "CRC-32/ISO-HDLC"
 def crc32(data: bytes | bytearray | memoryview) -> int:
     """CRC-32/ISO-HDLC of ``data`` (``crc32(b"123456789") == 0xCBF43926``)."""
     return zlib.crc32(data) & 0xFFFFFFFF
-
-
-class SequenceEvent(IntEnum):
-    """What one sequence number means relative to those seen before."""
-
-    FIRST = 0  #: first frame of this key
-    IN_ORDER = 1  #: exactly the next number
-    GAP = 2  #: later than the next number: frames were lost in between
-    DUPLICATE = 3  #: seen recently: drop it
-    LATE = 4  #: earlier than the newest but not seen: arrived out of order (accept it)
-    RESET = 5  #: far earlier than the newest: the sender restarted its count (tracking restarts)
-
-
-class SequenceTracker:
-    """Track wrapping sequence numbers per key (a chip select, a cell and modality, ...).
-
-    Numbers are unwrapped relative to the newest one (differences beyond half
-    the modulus count as "earlier"), and the last ``window`` numbers are
-    remembered so that duplicates are recognised even after reordering.  A
-    number more than ``window`` before the newest means the sender restarted
-    (a replugged sensor, a rebooted bridge): tracking of that key restarts.
-
-    ``lost`` is the net number of frames missing inside the span seen so far:
-    it grows on gaps and shrinks when a late frame fills a hole.
-
-    Parameters
-    ----------
-    modulus : int
-        Sequence numbers run ``0..modulus-1`` and wrap.
-    window : int
-        How many recent numbers are remembered for duplicate detection.
-    """
-
-    def __init__(self, modulus: int, window: int = 64) -> None:
-        if modulus < 4 or window < 1 or window >= modulus // 2:
-            raise ConfigError(f"bad sequence tracker (modulus {modulus}, window {window})")
-        self.modulus = int(modulus)
-        self.window = int(window)
-        self._state: dict[Hashable, tuple[int, int, set[int]]] = {}  # key -> (low, high, seen)
-        self.gaps = 0
-        self.lost = 0
-        self.duplicates = 0
-        self.late = 0
-        self.resets = 0
-
-    def reset(self, key: Hashable | None = None) -> None:
-        """Forget one key (e.g. a sensor that was replugged) or all keys."""
-        if key is None:
-            self._state.clear()
-        else:
-            self._state.pop(key, None)
-
-    def update(self, key: Hashable, seq: int) -> SequenceEvent:
-        """Register ``seq`` for ``key`` and say what it was."""
-        m = self.modulus
-        seq = int(seq) % m
-        st = self._state.get(key)
-        if st is None:
-            self._state[key] = (seq, seq, {seq})
-            return SequenceEvent.FIRST
-        low, high, seen = st
-        d = (seq - high) % m
-        if d >= m // 2:
-            d -= m
-        u = high + d  # unwrapped
-        if u < high - self.window:
-            self.resets += 1
-            self._state[key] = (seq, seq, {seq})
-            return SequenceEvent.RESET
-        if u in seen:
-            self.duplicates += 1
-            return SequenceEvent.DUPLICATE
-        seen.add(u)
-        if u > high:
-            event = SequenceEvent.IN_ORDER if u == high + 1 else SequenceEvent.GAP
-            if u > high + 1:
-                self.gaps += 1
-                self.lost += u - high - 1
-            high = u
-            if len(seen) > 2 * self.window + 2:
-                cut = high - self.window
-                seen = {x for x in seen if x >= cut}
-        elif u < low:
-            self.late += 1
-            self.lost += low - u - 1
-            low = u
-            event = SequenceEvent.LATE
-        else:
-            self.late += 1
-            self.lost -= 1
-            event = SequenceEvent.LATE
-        self._state[key] = (low, high, seen)
-        return event
-
-    def update_many(self, codes: np.ndarray, seqs: np.ndarray, key_of: Callable[[int], Hashable]) -> np.ndarray:
-        """Register many numbers at once; the same events and counters as :meth:`update` one by one.
-
-        Keys are independent, so the numbers are taken key by key (in their
-        order within each key).  A key whose numbers all move forward (the
-        usual case: in order or with gaps) is handled with array operations;
-        any other key (duplicates, late frames, restarts) goes through
-        :meth:`update` number by number.
-
-        Parameters
-        ----------
-        codes : array of int, shape (n,)
-            An integer code of each number's key.
-        seqs : array of int, shape (n,)
-            The sequence numbers, in arrival order.
-        key_of : callable(int) -> hashable
-            The key of a code, as :meth:`update` would be given it (so the
-            two methods can be mixed on one tracker).
-
-        Returns
-        -------
-        numpy.ndarray of int8, shape (n,)
-            The :class:`SequenceEvent` of each number.
-        """
-        codes = np.asarray(codes, dtype=np.int64)
-        n = codes.size
-        events = np.empty(n, dtype=np.int8)
-        if not n:
-            return events
-        m = self.modulus
-        order = np.argsort(codes, kind="stable")
-        sc = codes[order]
-        ss = np.asarray(seqs, dtype=np.int64)[order] % m
-        starts = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
-        ends = np.r_[starts[1:], n]
-        keys = [key_of(c) for c in sc[starts].tolist()]
-        states = [self._state.get(k) for k in keys]
-        first_seq = ss[starts]
-        is_new = np.array([st is None for st in states], dtype=bool)
-        high = np.array([0 if st is None else st[1] for st in states], dtype=np.int64)
-        diff = np.empty(n, dtype=np.int64)
-        diff[1:] = (ss[1:] - ss[:-1]) % m
-        diff[starts] = (first_seq - high) % m
-        diff = np.where(diff >= m // 2, diff - m, diff)
-        diff[starts[is_new]] = 1  # placeholder, the FIRST number of a new key
-        fast = np.minimum.reduceat(diff, starts) > 0
-        base = np.where(is_new, first_seq - 1, high)
-        cs = np.cumsum(diff)
-        before = cs[starts] - diff[starts]
-        unwrapped = cs + np.repeat(base - before, ends - starts)
-        ev = np.where(diff == 1, SequenceEvent.IN_ORDER, SequenceEvent.GAP).astype(np.int8)
-        ev[starts[is_new]] = SequenceEvent.FIRST
-        in_fast = np.repeat(fast, ends - starts)
-        gap = in_fast & (diff > 1)
-        self.gaps += int(gap.sum())
-        self.lost += int((diff[gap] - 1).sum())
-        u_list = unwrapped.tolist()
-        s_list = ss.tolist()
-        ev_sorted = ev
-        w = self.window
-        for g, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            key = keys[g]
-            if fast[g]:
-                st = states[g]
-                if st is None:
-                    low, seen = s_list[a], set()
-                else:
-                    low, _, seen = st
-                seen.update(u_list[a:b])
-                new_high = u_list[b - 1]
-                if len(seen) > 2 * w + 2:
-                    cut = new_high - w
-                    seen = {x for x in seen if x >= cut}
-                self._state[key] = (low, new_high, seen)
-            else:
-                for i in range(a, b):
-                    ev_sorted[i] = self.update(key, s_list[i])
-        events[order] = ev_sorted
-        return events
 
 
 @dataclass
@@ -310,19 +135,24 @@ class StreamDecoder(Generic[F]):
     sequence_of : callable(F) -> (key, seq)
         Sequence key and number of a frame.
     tracker : SequenceTracker
+    period_of : callable(F) -> float, optional
+        Nominal period of a frame's key [ns]: with it, the arrival times
+        given to :meth:`feed` take part in unwrapping (a silence longer than
+        half a wrap is a gap of the right length).
     """
 
     CRC_SIZE = 4
 
     def __init__(self, sync: bytes, header_size: int, parse_header: Callable[[bytes], int | None],
                  build: Callable[[bytes, bytes], F], sequence_of: Callable[[F], tuple[Hashable, int]],
-                 tracker: SequenceTracker) -> None:
+                 tracker: SequenceTracker, period_of: Callable[[F], float] | None = None) -> None:
         self.sync = bytes(sync)
         self.header_size = int(header_size)
         self._parse_header = parse_header
         self._build = build
         self._sequence_of = sequence_of
         self.tracker = tracker
+        self._period_of = period_of
         self.stats = StreamStats()
         self._buf = bytearray()
         self._in_sync = True
@@ -341,8 +171,8 @@ class StreamDecoder(Generic[F]):
         del self._buf[:n]
         self.stats.garbage_bytes += n
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[F]:
-        """Add bytes; return the frames completed by them (possibly none)."""
+    def feed(self, data: bytes | bytearray | memoryview, t_ns: int | None = None) -> list[F]:
+        """Add bytes (received at host time ``t_ns``, optional); return the frames completed by them."""
         self._buf += data
         self.stats.bytes_in += len(data)
         out: list[F] = []
@@ -398,7 +228,10 @@ class StreamDecoder(Generic[F]):
                 self._on_bad_payload(exc)
                 continue
             key, seq = self._sequence_of(frame)
-            event = self.tracker.update(key, seq)
+            if t_ns is None or self._period_of is None:
+                event = self.tracker.update(key, seq)
+            else:
+                event = self.tracker.update(key, seq, t_ns, self._period_of(frame))
             if event is SequenceEvent.DUPLICATE:
                 self.stats.duplicates += 1
                 continue

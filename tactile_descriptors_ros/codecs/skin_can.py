@@ -31,7 +31,7 @@ decides.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 
 import can
@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import CodecError
 from .can_frames import CAN_FRAME_DTYPE, FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, empty_frames
 from .framing import SequenceEvent, SequenceTracker
-from .skin import (NO_STAMP, check_batch_ids, PAYLOAD_SIZE, Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch,
+from .skin import (NO_STAMP, NOMINAL_RATE_HZ, check_batch_ids, PAYLOAD_SIZE, Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch,
                    unpack_values, unpack_values_batch)
 
 __all__ = [
@@ -208,11 +208,21 @@ class SkinCanDecoder:
         ``stats.unknown_cell_ids`` and not returned.  ``None`` returns all.
     duplicate_window : int
         Recent sequence numbers remembered per (cell, modality) (< 128).
+    rates_hz : mapping of Modality to float, optional
+        Sample rate per modality (default :data:`~.skin.NOMINAL_RATE_HZ`).
+        Sequence numbers are unwrapped with the frames' bus times (or the
+        arrival time given to :meth:`decode_frames`), so a cell silent for
+        longer than half a wrap (128 frames) is a gap of the right length.
     """
 
-    def __init__(self, known_cell_ids: Iterable[int] | None = None, duplicate_window: int = 32) -> None:
+    def __init__(self, known_cell_ids: Iterable[int] | None = None, duplicate_window: int = 32,
+                 rates_hz: Mapping[Modality, float] | None = None) -> None:
         self.known_cell_ids = None if known_cell_ids is None else frozenset(int(c) for c in known_cell_ids)
         self.tracker = SequenceTracker(256, duplicate_window)
+        rates = {**NOMINAL_RATE_HZ, **(rates_hz or {})}
+        self._period_ns = np.zeros(16)
+        for m, r in rates.items():
+            self._period_ns[int(m)] = 1e9 / float(r)
         self.stats = SkinCanStats()
 
     def decode(self, msg: can.Message) -> SkinSample | None:
@@ -246,7 +256,8 @@ class SkinCanDecoder:
         except CodecError:
             st.bad_payload += 1
             return None
-        event = self.tracker.update((cell, int(modality)), data[0])
+        t = int(round(msg.timestamp * 1e9)) if msg.timestamp else None
+        event = self.tracker.update((cell, int(modality)), data[0], t, self._period_ns[int(modality)])
         st.sequence_gaps = self.tracker.gaps
         st.lost_frames = self.tracker.lost
         st.sequence_resets = self.tracker.resets
@@ -259,12 +270,15 @@ class SkinCanDecoder:
         stamp = None if not msg.timestamp else int(round(msg.timestamp * 1e9))
         return SkinSample(cell, modality, data[0], values, stamp)
 
-    def decode_frames(self, frames: np.ndarray) -> SkinSampleBatch:
+    def decode_frames(self, frames: np.ndarray, arrival_ns: int | None = None) -> SkinSampleBatch:
         """Decode a batch of frames (:data:`~.can_frames.CAN_FRAME_DTYPE`) at once.
 
         The result and every counter are exactly those of :meth:`decode` on
         the frames one by one, in order (a property test checks this on
         random valid and damaged streams); the two can be mixed on one decoder.
+        ``arrival_ns`` (the host time of the read, in the clock of the bus
+        time stamps) times the frames for unwrapping when none of them has a
+        bus time (an adapter that does not stamp).
         """
         if frames.dtype != CAN_FRAME_DTYPE:
             raise CodecError(f"decode_frames needs a CAN_FRAME_DTYPE array, got dtype {frames.dtype}")
@@ -308,7 +322,11 @@ class SkinCanDecoder:
         idx, values = idx[ok], values[ok]
         seq = data[idx, 0].astype(np.int64)
         code = (cell[idx] << 4) | mod[idx]
-        events = self.tracker.update_many(code, seq, _key_of_code)
+        ts = frames["timestamp"][idx]
+        # the arrival time stands in only on a bus that gives no times at all (one clock per key)
+        stand_in = -1 if arrival_ns is None or (ts != 0.0).any() else int(arrival_ns)
+        t = np.where(ts == 0.0, stand_in, np.rint(ts * 1e9)).astype(np.int64)
+        events = self.tracker.update_many(code, seq, _key_of_code, t, self._period_ns[mod[idx]])
         st.sequence_gaps = self.tracker.gaps
         st.lost_frames = self.tracker.lost
         st.sequence_resets = self.tracker.resets

@@ -24,13 +24,13 @@ from __future__ import annotations
 
 import struct
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
 from ..errors import CodecError, FrameError
 from .framing import SequenceTracker, StreamDecoder, crc32
-from .skin import Modality, SkinSample, check_batch_ids, SkinSampleBatch, pack_values, pack_values_batch, unpack_values
+from .skin import NOMINAL_RATE_HZ, Modality, SkinSample, check_batch_ids, SkinSampleBatch, pack_values, pack_values_batch, unpack_values
 
 __all__ = ["SYNC", "HEADER_SIZE", "MAX_PAYLOAD", "encode_skin_frame", "encode_skin_frames", "crc32_rows",
            "SkinSerialEncoder", "SkinSerialDecoder"]
@@ -166,6 +166,10 @@ class SkinSerialDecoder(StreamDecoder[SkinSample]):
         Configured cells; others are counted in ``unknown_cell_ids`` and dropped.
     duplicate_window : int
         Recent sequence numbers remembered per (cell, modality) (< 128).
+    rates_hz : mapping of Modality to float, optional
+        Sample rate per modality (default :data:`~.skin.NOMINAL_RATE_HZ`):
+        with the arrival times given to :meth:`feed`, a cell silent for
+        longer than half a wrap (128 frames) is a gap of the right length.
 
     Attributes
     ----------
@@ -177,13 +181,16 @@ class SkinSerialDecoder(StreamDecoder[SkinSample]):
         Frames per unknown cell id.
     """
 
-    def __init__(self, known_cell_ids: Iterable[int] | None = None, duplicate_window: int = 32) -> None:
+    def __init__(self, known_cell_ids: Iterable[int] | None = None, duplicate_window: int = 32,
+                 rates_hz: Mapping[Modality, float] | None = None) -> None:
         self.known_cell_ids = None if known_cell_ids is None else frozenset(int(c) for c in known_cell_ids)
         self.reject_reasons: Counter = Counter()
         self.unknown_cell_ids: Counter = Counter()
+        rates = {**NOMINAL_RATE_HZ, **(rates_hz or {})}
+        periods_ns = {int(m): 1e9 / float(r) for m, r in rates.items()}
         super().__init__(SYNC, HEADER_SIZE, _parse_header, self._build_sample,
                          lambda s: ((s.cell_id, int(s.modality)), s.sequence),
-                         SequenceTracker(256, duplicate_window))
+                         SequenceTracker(256, duplicate_window), lambda s: periods_ns[int(s.modality)])
 
     def _build_sample(self, header: bytes, payload: bytes) -> SkinSample:
         _length, seq, cell, mod = _HEADER.unpack(header)
@@ -196,9 +203,9 @@ class SkinSerialDecoder(StreamDecoder[SkinSample]):
             raise _UnknownCell(cell)
         return SkinSample(cell, modality, seq, values)
 
-    def feed_batch(self, data: bytes | bytearray | memoryview) -> SkinSampleBatch:
+    def feed_batch(self, data: bytes | bytearray | memoryview, t_ns: int | None = None) -> SkinSampleBatch:
         """:meth:`feed` returning the samples as one :class:`~.skin.SkinSampleBatch`."""
-        return SkinSampleBatch.from_samples(self.feed(data))
+        return SkinSampleBatch.from_samples(self.feed(data, t_ns))
 
     def _on_bad_payload(self, exc: CodecError) -> None:
         if isinstance(exc, _UnknownCell):

@@ -41,188 +41,22 @@ reader thread, deactivate stops it, cleanup closes the device.  With
 from __future__ import annotations
 
 import time
-from collections import Counter, deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
-import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
-from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
-from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
-from ..errors import CodecError, ConfigError
+from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, FramePattern
+from ..errors import ConfigError
+from ..streams.biotac import BiotacStream, BridgeFrameSource, ReadItem, SensorConfig, SensorState, SpiFrameSource
 from .common import RateMeter, Status, declare, run_node
 from .conversions import BioTacBatch, biotac_batch_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
 from .window_node import FRAMES_TOPIC
 
-__all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "Unwrapper", "main"]
+__all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "main"]
 
 TRANSPORTS = ("cheetah", "serial", "simulated", "loopback")
-
-
-@dataclass
-class SensorConfig:
-    """One BioTac as the robot description places it."""
-
-    chip_select: int
-    sensor_name: str
-    body_part: str
-    frame_id: str
-
-
-class Unwrapper:
-    """Unwrap a wrapping counter (16-bit sequence, 32-bit microseconds) to a growing integer."""
-
-    def __init__(self, modulus: int) -> None:
-        self.modulus = int(modulus)
-        self.last: int | None = None
-        self.value = 0
-
-    def __call__(self, raw: int) -> int:
-        raw = int(raw) % self.modulus
-        if self.last is None:
-            self.value = raw
-        else:
-            d = (raw - self.last) % self.modulus
-            if d >= self.modulus // 2:
-                d -= self.modulus
-            self.value += d
-        self.last = raw
-        return self.value
-
-
-@dataclass
-class ReadItem:
-    """Frames of one BioTac from one read: decoded frames, their device times [ns] and sequence numbers."""
-
-    chip_select: int
-    frames: BiotacFrames
-    device_t_ns: np.ndarray
-    sequence: np.ndarray
-
-
-class SpiFrameSource:
-    """SPI sampling (Cheetah, or a simulated SPI bus): one frame of every BioTac per :meth:`read`.
-
-    The device clock is the frame count times the frame period; reads are
-    paced to ``word_rate_hz`` (a real adapter paces itself; pacing then only
-    sleeps when ahead of schedule).
-    """
-
-    def __init__(self, spi, pattern: FramePattern, chip_selects: Sequence[int], word_rate_hz: float,
-                 decoder: BiotacFrameDecoder) -> None:
-        from ..transports.biotac import read_frame, read_serial_number
-
-        self._read_frame = read_frame
-        self._read_serial = read_serial_number
-        self.spi = spi
-        self.pattern = pattern
-        self.chip_selects = list(chip_selects)
-        self.word_rate_hz = float(word_rate_hz)
-        self.period_ns = int(round(pattern.slot_count / self.word_rate_hz * 1e9))
-        self.decoder = decoder
-        self.frame = 0
-        self._t0: float | None = None
-        self.overruns = 0
-        self.serial_numbers: dict[int, str] = {}
-        self.serial_errors: dict[int, str] = {}
-
-    def read_serial_numbers(self) -> None:
-        for cs in self.chip_selects:
-            try:
-                self.serial_numbers[cs] = self._read_serial(self.spi, cs)
-            except CodecError as exc:
-                self.serial_errors[cs] = str(exc)
-
-    def read(self) -> list[ReadItem]:
-        now = time.monotonic()
-        if self._t0 is None:
-            self._t0 = now
-        due = self._t0 + self.frame * self.period_ns * 1e-9
-        if due > now:
-            time.sleep(due - now)
-        elif now - due > 0.5:  # fell behind by more than half a second: restart the schedule
-            self.overruns += 1
-            self._t0 = now - self.frame * self.period_ns * 1e-9
-        replies = self._read_frame(self.spi, self.pattern, self.chip_selects, self.word_rate_hz)
-        k = self.frame
-        self.frame += 1
-        out = []
-        for cs in self.chip_selects:
-            frames = self.decoder.decode_many(cs, replies[cs], first_sequence=k)
-            out.append(ReadItem(cs, frames, np.array([k * self.period_ns], np.int64), np.array([k], np.int64)))
-        return out
-
-
-class BridgeFrameSource:
-    """Our USB-serial bridge framing over a byte transport (serial, loopback, simulated)."""
-
-    def __init__(self, stream, pattern: FramePattern, chip_selects: Sequence[int],
-                 decoder: BiotacFrameDecoder, read_timeout_s: float = 0.05) -> None:
-        self.stream = stream
-        self.pattern = pattern
-        self.chip_selects = set(int(c) for c in chip_selects)
-        self.decoder = decoder
-        self.bridge = BridgeDecoder()
-        self.read_timeout_s = float(read_timeout_s)
-        self.serial_numbers: dict[int, str] = {}
-        self.serial_errors: dict[int, str] = {}
-        self.unconfigured_frames: Counter[int] = Counter()
-        self.decode_errors = 0
-        self._seq = {cs: Unwrapper(1 << 16) for cs in self.chip_selects}
-        self._t = {cs: Unwrapper(1 << 32) for cs in self.chip_selects}
-
-    def read_serial_numbers(self) -> None:
-        """Serial numbers arrive as bridge frames; nothing to ask."""
-
-    def read(self) -> list[ReadItem]:
-        data = self.stream.read(65536, self.read_timeout_s)
-        if not data:
-            return []
-        out: list[ReadItem] = []
-        for fr in self.bridge.feed(data):
-            cs = fr.chip_select
-            if cs not in self.chip_selects:
-                self.unconfigured_frames[cs] += 1
-                continue
-            if fr.kind == BridgeFrameType.SERIAL_NUMBER:
-                try:
-                    self.serial_numbers[cs] = fr.payload.decode("ascii")
-                except UnicodeDecodeError:
-                    self.serial_errors[cs] = f"serial number is not ASCII: {fr.payload!r}"
-                continue
-            seq = self._seq[cs](fr.sequence)
-            t_us = self._t[cs](fr.t_us)
-            try:
-                frames = self.decoder.decode_many(cs, fr.payload, first_sequence=seq)
-            except CodecError:
-                self.decode_errors += 1
-                continue
-            out.append(ReadItem(cs, frames, np.array([t_us * 1000], np.int64), np.array([seq], np.int64)))
-        return out
-
-
-@dataclass
-class _SensorState:
-    cfg: SensorConfig
-    frames: list[tuple[int, int, BiotacFrames]] = field(default_factory=list)  # (seq, stamp_ns, frames)
-    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, pdc)
-    recent_el: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, electrodes)
-    tare_pdc: float = 0.0
-    tare_electrodes: np.ndarray | None = None
-    tared: bool = False
-    tracked_frames: int = 0
-    counts: WordCounts = field(default_factory=WordCounts)
-    frames_total: int = 0
-    messages: int = 0
-    lost_frames: int = 0
-    next_seq: int | None = None
-    last_frame_monotonic: float | None = None
-    rate: RateMeter = field(default_factory=RateMeter)
-    bad_rate: RateMeter = field(default_factory=RateMeter)
-    first_stamp_ns: int | None = None
 
 
 class BiotacDriver(DriverBase):
@@ -254,9 +88,6 @@ class BiotacDriver(DriverBase):
                                minimum=0.0)
         self.track_band_n = declare(self, "tare.track_band_n", self.contact_threshold_n,
                                     "baseline tracking only while |force| is below this [N]", minimum=0.0)
-        # weight of one frame in the tracked baseline (exponential, time constant tare.track_s)
-        frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
-        self._track_alpha = min(1.0, 1.0 / (frame_hz * self.track_s)) if self.track_s > 0 else 0.0
         self.pdc_pa_per_count = declare(self, "pdc_pa_per_count", 0.0,
                                         "static pressure scale [Pa/count] (0 = not calibrated)", minimum=0.0)
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
@@ -291,9 +122,10 @@ class BiotacDriver(DriverBase):
                               f"cell type has {n_el}", key="frame_pattern")
 
         self.source = None
-        self.state: dict[int, _SensorState] = {}
+        self.stream: BiotacStream | None = None
+        self._rates: dict[int, tuple[RateMeter, RateMeter]] = {}
+        self._last_frame: dict[int, float] = {}
         self.publishers_by_cs: dict[int, object] = {}
-        self._offset_ns: int | None = None
         self._start(autostart, [("transport", self._transport_status)]
                     + [(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
                        for cs, cfg in sorted(self.sensors.items())])
@@ -318,13 +150,35 @@ class BiotacDriver(DriverBase):
             self.source = SpiFrameSource(self.transport, self.pattern, sorted(self.sensors), self.word_rate_hz,
                                          decoder)
         else:
-            self.source = BridgeFrameSource(self.transport, self.pattern, sorted(self.sensors), decoder)
+            period_ns = 1e9 / self.pattern.rates(self.word_rate_hz).frame_rate_hz
+            self.source = BridgeFrameSource(self.transport, self.pattern, sorted(self.sensors), decoder,
+                                            frame_period_ns=period_ns)
         self.source.read_serial_numbers()
         for cs, err in self.source.serial_errors.items():
             self.get_logger().warning(f"{self.sensors[cs].sensor_name} (chip select {cs}): no serial number: {err}")
 
+    def _reopened(self, gap_s: float) -> None:
+        if isinstance(self.source, BridgeFrameSource):
+            self.source.restart(self.transport)
+        else:
+            self.source.spi = self.transport
+        with self._lock:
+            pending = self.stream.resume(gap_s) if self.stream is not None else []
+        for st, batch in pending:
+            self._publish(st, batch)
+
+    @property
+    def state(self) -> dict[int, SensorState]:
+        """Per chip select: pending frames, tare, counters (empty before configure)."""
+        return self.stream.state if self.stream is not None else {}
+
     def _configured(self) -> TransitionCallbackReturn:
-        self.state = {cs: _SensorState(cfg) for cs, cfg in self.sensors.items()}
+        self.stream = BiotacStream(
+            self.sensors, self.pattern, self.word_rate_hz, self.batch_frames, self.stamp_source, self.resync_s,
+            self.tare_on_start_s, self.track_s, self.track_band_n, self.force_n_per_count,
+            lambda: self.get_clock().now().nanoseconds, self.faults, self._log_stream)
+        self._rates = {cs: (RateMeter(), RateMeter()) for cs in self.sensors}
+        self._last_frame = {}
         from tactile_descriptors_msgs.msg import BioTacFrameBatch
 
         topics = {}
@@ -349,78 +203,26 @@ class BiotacDriver(DriverBase):
         return self.source.read()
 
     def _consume(self, items: list[ReadItem]) -> None:
-        for item in items:
-            self._handle(item)
-
-    def _stamp(self, device_t_ns: int) -> int:
-        if self.stamp_source == "device":
-            return int(device_t_ns)
-        now = self.get_clock().now().nanoseconds
-        if self._offset_ns is None:
-            self._offset_ns = now - int(device_t_ns)
-        stamp = self._offset_ns + int(device_t_ns)
-        if self.resync_s > 0 and abs(stamp - now) > self.resync_s * 1e9:
-            self.faults["clock_resync"] += 1
-            self._offset_ns = now - int(device_t_ns)
-            stamp = now
-        return stamp
-
-    def _handle(self, item: ReadItem) -> None:
-        st = self.state[item.chip_select]
-        frames = item.frames
-        stamp = self._stamp(int(item.device_t_ns[0]))
-        seq = int(item.sequence[0])
+        host = time.monotonic_ns()
+        out = []
         with self._lock:
-            st.frames_total += len(frames)
-            st.counts = st.counts + frames.counts
-            st.rate.add(len(frames))
-            if frames.counts.bad:
-                st.bad_rate.add(frames.counts.bad)
-            st.last_frame_monotonic = time.monotonic()
-            if st.next_seq is not None and seq != st.next_seq:
-                if seq > st.next_seq:
-                    st.lost_frames += seq - st.next_seq
-                self._flush(st)
-            st.next_seq = seq + len(frames)
-            if st.first_stamp_ns is None:
-                st.first_stamp_ns = stamp
-            for k in range(len(frames)):
-                if frames.pdc_valid[k]:
-                    st.recent_pdc.append((stamp, float(frames.pdc[k])))
-                    if st.tared and self._track_alpha > 0:
-                        self._track_baseline(st, float(frames.pdc[k]))
-                if frames.electrodes_valid[k].all():
-                    st.recent_el.append((stamp, frames.electrodes[k].astype(np.float64)))
-            if not st.tared and self.tare_on_start_s > 0:
-                if stamp - st.first_stamp_ns >= self.tare_on_start_s * 1e9:
-                    ok, why = self._tare_one(st, self.tare_on_start_s, check_contact=False)
-                    if ok:
-                        self.get_logger().info(f"{st.cfg.sensor_name}: start tare {why}")
-                    else:
-                        self.get_logger().warning(f"{st.cfg.sensor_name}: start tare failed: {why}",
-                                               throttle_duration_sec=5.0)
-                return  # nothing is published before the start tare
-            st.frames.append((seq, stamp, frames))
-            if sum(len(f) for _, _, f in st.frames) >= self.batch_frames:
-                self._flush(st)
+            for item in items:
+                rate, bad_rate = self._rates[item.chip_select]
+                rate.add(len(item.frames))
+                if item.frames.counts.bad:
+                    bad_rate.add(item.frames.counts.bad)
+                self._last_frame[item.chip_select] = host * 1e-9
+                out += self.stream.add(item, host)
+        for st, batch in out:
+            self._publish(st, batch)
 
-    def _flush(self, st: _SensorState) -> None:
-        if not st.frames:
-            return
-        pac_off = self.pattern.pac_offsets_ns(self.word_rate_hz)
-        seq0, t0, _ = st.frames[0]
-        frame_t = np.array([t for _, t, f in st.frames for _ in range(len(f))], np.int64)
-        stamp = int(frame_t[0] + pac_off[0])
-        pac = np.concatenate([f.pac for _, _, f in st.frames]).reshape(-1)
-        pac_t = (frame_t[:, None] + pac_off[None, :]).reshape(-1)
-        el = np.concatenate([f.electrodes for _, _, f in st.frames])
-        bad = sum(f.counts.bad for _, _, f in st.frames)
-        batch = BioTacBatch(
-            stamp_ns=stamp, pac=pac, pac_offset_ns=pac_t - stamp, frame_offset_ns=frame_t - stamp,
-            pdc=np.concatenate([f.pdc for _, _, f in st.frames]), tac=np.concatenate([f.tac for _, _, f in st.frames]),
-            tdc=np.concatenate([f.tdc for _, _, f in st.frames]), electrodes=el, first_frame_sequence=seq0,
-            bad_words=bad)
-        st.frames = []
+    def _log_stream(self, level: str, text: str) -> None:
+        if level == "info":
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text, throttle_duration_sec=5.0)
+
+    def _publish(self, st: SensorState, batch: BioTacBatch) -> None:
         cfg = st.cfg
         msg = biotac_batch_to_msg(
             batch, sensor_name=cfg.sensor_name, body_part=cfg.body_part, chip_select=cfg.chip_select,
@@ -434,41 +236,6 @@ class BiotacDriver(DriverBase):
             st.messages += 1
 
     # ------------------------------------------------------------------- tare
-    def _track_baseline(self, st: _SensorState, pdc: float) -> None:
-        """Follow slow PDC drift (temperature) while the finger is clearly not touching.
-
-        A start tare alone lets the baseline drift by tenths of a newton
-        within a minute, above the release threshold, so explorations never
-        end.  Frames whose tared force is under ``tare.track_band_n`` move the
-        baseline towards them; a touch (force above the band) freezes it.
-        """
-        if abs(pdc - st.tare_pdc) * self.force_n_per_count < self.track_band_n:
-            st.tare_pdc += (pdc - st.tare_pdc) * self._track_alpha
-            st.tracked_frames += 1
-
-    def _force_now(self, st: _SensorState) -> float | None:
-        if not st.tared or not st.recent_pdc:
-            return None
-        last = [p for _, p in list(st.recent_pdc)[-10:]]
-        return (float(np.mean(last)) - st.tare_pdc) * self.force_n_per_count
-
-    def _tare_one(self, st: _SensorState, window_s: float, check_contact: bool) -> tuple[bool, str]:
-        if check_contact:
-            f = self._force_now(st)
-            if f is not None and f >= self.contact_threshold_n:
-                return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {self.contact_threshold_n} N)"
-        if not st.recent_pdc:
-            return False, f"{st.cfg.sensor_name}: no valid PDC samples yet"
-        newest = st.recent_pdc[-1][0]
-        pdc = [p for t, p in st.recent_pdc if t >= newest - window_s * 1e9]
-        el = [e for t, e in st.recent_el if t >= newest - window_s * 1e9]
-        if len(pdc) < 3:
-            return False, f"{st.cfg.sensor_name}: only {len(pdc)} valid PDC samples in the last {window_s} s"
-        st.tare_pdc = float(np.mean(pdc))
-        st.tare_electrodes = np.mean(el, axis=0) if el else None
-        st.tared = True
-        return True, f"PDC baseline {st.tare_pdc:.1f} counts from {len(pdc)} frames"
-
     def _srv_tare(self, request, response):
         with self._lock:
             if not self.state or all(not s.recent_pdc for s in self.state.values()):
@@ -476,7 +243,7 @@ class BiotacDriver(DriverBase):
                 return response
             touching = []
             for st in self.state.values():
-                f = self._force_now(st)
+                f = self.stream.force_now(st)
                 if f is not None and f >= self.contact_threshold_n:
                     touching.append(f"{st.cfg.sensor_name} ({f:.2f} N)")
             if touching:
@@ -484,7 +251,8 @@ class BiotacDriver(DriverBase):
                 response.message = (f"refused: in contact: {', '.join(touching)}; release the fingers "
                                     f"(force < {self.contact_threshold_n} N) and call ~/tare again")
                 return response
-            results = [self._tare_one(st, self.tare_window_s, check_contact=False) for st in self.state.values()]
+            results = [self.stream.tare_one(st, self.tare_window_s, check_contact=False)
+                       for st in self.state.values()]
         response.success = all(ok for ok, _ in results)
         response.message = "; ".join(f"{st.cfg.sensor_name}: {why}" for st, (ok, why) in zip(self.state.values(),
                                                                                                results))
@@ -505,6 +273,9 @@ class BiotacDriver(DriverBase):
         error = self._transport_error(values)
         if error is not None:
             return error
+        if isinstance(src, BridgeFrameSource) and src.decode_errors:
+            return Status("warn", f"{src.decode_errors} bridge payloads do not fit the frame pattern "
+                                  f"{str(self.pattern)!r}: {src.last_decode_error}", values)
         if isinstance(src, BridgeFrameSource) and (src.bridge.stats.crc_errors or src.unconfigured_frames):
             return Status("warn", "bridge frames rejected (CRC errors or unconfigured chip selects)", values)
         return Status("ok", "open", values)
@@ -517,23 +288,27 @@ class BiotacDriver(DriverBase):
         if st is None:
             return Status("stale", "not configured", values)
         rates = self.pattern.rates(self.word_rate_hz)
-        fr = st.rate.rate_hz
+        rate, bad_rate = self._rates[cs]
+        fr = rate.rate_hz
         values.update({"frame_rate_hz": fr, "pac_rate_hz": fr * self.pattern.pac_count,
                        "expected_frame_rate_hz": rates.frame_rate_hz, "frames": st.frames_total,
-                       "messages": st.messages, "lost_frames": st.lost_frames, "tared": st.tared,
-                       "pdc_tare_counts": st.tare_pdc,
-                       "baseline_tracked_frames": st.tracked_frames, "bad_words_per_s": st.bad_rate.rate_hz,
+                       "messages": st.messages, "lost_frames": st.lost_frames, "gaps": st.gaps,
+                       "device_absences": st.resumed_gaps, "tared": st.tared, "pdc_tare_counts": st.tare_pdc,
+                       "baseline_tracked_frames": st.tracked_frames, "bad_words_per_s": bad_rate.rate_hz,
                        "bad_words_total": st.counts.bad})
+        if st.last_gap_s is not None:
+            values["last_absence_s"] = round(st.last_gap_s, 3)
         values.update({f"bad_{k}": v for k, v in st.counts.as_dict().items()})
-        f = self._force_now(st)
+        f = self.stream.force_now(st)
         if f is not None:
             values["force_n"] = f
-        age = None if st.last_frame_monotonic is None else time.monotonic() - st.last_frame_monotonic
+        last = self._last_frame.get(cs)
+        age = None if last is None else time.monotonic() - last
         if age is None or age > 1.0:
             return Status("error", f"no frames {'yet' if age is None else f'for {age:.1f} s'} "
                                    f"(unplugged? wrong chip select?)", values)
-        if st.bad_rate.rate_hz > 0:
-            return Status("warn", f"{st.bad_rate.rate_hz:.1f} bad words/s (parity or error words)", values)
+        if bad_rate.rate_hz > 0:
+            return Status("warn", f"{bad_rate.rate_hz:.1f} bad words/s (parity or error words)", values)
         if not serial and self.source is not None and cs in self.source.serial_errors:
             return Status("warn", f"serial number unreadable: {self.source.serial_errors[cs]}", values)
         return Status("ok", f"{fr:.0f} frames/s", values)

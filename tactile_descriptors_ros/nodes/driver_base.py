@@ -10,15 +10,21 @@ which publishers to create and destroy, and its own diagnostics.
 
 Lifecycle: configure opens the device (:meth:`DriverBase._open_source` may
 build a decoder on it), activate starts the reader thread, deactivate stops
-it, cleanup closes the device and destroys the publishers.  A
-:class:`~tactile_descriptors_ros.errors.TransportError` in the reader is
-counted (``transport_errors``), any other exception too (``reader_errors``);
-the thread waits 0.5 s and reads on.
+it, cleanup closes the device and destroys the publishers.  The device is
+held by a :class:`~tactile_descriptors_ros.streams.link.DeviceLink`: a
+:class:`~tactile_descriptors_ros.errors.TransportError` in the reader
+(an unplugged device) is counted (``transport_errors``), the device is
+closed and reopened every ``reconnect_s`` until it is back, without a
+lifecycle transition; the time it was gone is counted as lost frames by the
+stream (:meth:`DriverBase._reopened`).  Any other exception while reading
+(``reader_errors``) or while handling what was read (``consume_errors``) is
+counted and reported; the thread reads on.
 """
 
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -27,6 +33,7 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 from ..core.robot import RobotDescription, load_robot
 from ..errors import ConfigError, TactileError, TransportError
+from ..streams.link import DeviceLink
 from ..transports import create_transport
 from .common import Diagnostics, Status, declare
 from .window_node import message_kind, select_body_parts
@@ -58,11 +65,13 @@ class DriverBase(LifecycleNode):
         super().__init__(node_name, **kwargs)
         self._transport_factory = transport_factory
         self.transport = None
+        self.link: DeviceLink | None = None
         self.faults: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.last_error: str | None = None
+        self._last_error_monotonic = float("-inf")
 
     # ---------------------------------------------------------- parameters
     def _declare_robot(self, kind: str, example: str, parts_what: str
@@ -102,6 +111,9 @@ class DriverBase(LifecycleNode):
         """Create ``~/tare`` and the diagnostics (``tasks``), then configure and activate if ``autostart``."""
         from std_srvs.srv import Trigger
 
+        self.reconnect_s = declare(self, "reconnect_s", 0.25, "retry period of reopening a lost device [s]",
+                                   minimum=0.01)
+
         self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
                                                      minimum=0.01), hardware_id=self.transport_name)
@@ -137,6 +149,10 @@ class DriverBase(LifecycleNode):
         """Handle what one :meth:`_read` returned."""
         raise NotImplementedError
 
+    def _reopened(self, gap_s: float) -> None:
+        """The device was reopened after ``gap_s`` away: rebind the source to ``self.transport``."""
+        raise NotImplementedError
+
     def _srv_tare(self, request, response):
         raise NotImplementedError
 
@@ -154,8 +170,9 @@ class DriverBase(LifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            self.transport = self._make_transport()
-            self.transport.open()
+            self.link = DeviceLink(self._make_transport, retry_s=getattr(self, "reconnect_s", 0.25))
+            self.link.open()
+            self.transport = self.link.transport
             self._open_source()
         except TactileError as exc:
             self.last_error = str(exc)
@@ -163,6 +180,7 @@ class DriverBase(LifecycleNode):
             if self.transport is not None and self.close_on_failed_configure:
                 self.transport.close()
             self.transport = None
+            self.link = None
             return TransitionCallbackReturn.FAILURE
         return self._configured()
 
@@ -198,44 +216,80 @@ class DriverBase(LifecycleNode):
             self._thread = None
 
     def _close_transport(self) -> None:
-        if self.transport is not None:
-            try:
-                self.transport.close()
-            finally:
-                self.transport = None
+        link, self.link = self.link, None
+        transport, self.transport = self.transport, None
+        if link is not None:
+            link.close()
+        elif transport is not None:
+            transport.close()
 
     # ---------------------------------------------------------------- reading
     def _run(self) -> None:
         while not self._stop.is_set():
+            link = self.link
+            if link is not None and not link.connected:
+                if not link.poll_reopen():
+                    self._stop.wait(max(0.01, link.wait_s()))
+                    continue
+                self.transport = link.transport
+                self.get_logger().info(f"{self.transport_name} device back after {link.last_gap_s:.2f} s")
+                try:
+                    self._reopened(link.last_gap_s)
+                except Exception as exc:  # noqa: BLE001 - report and keep the node alive
+                    self._count_error("reader_errors", f"after reopening: {exc!r}")
+                continue
             try:
                 items = self._read()
             except TransportError as exc:
                 self.faults["transport_errors"] += 1
                 self.last_error = str(exc)
-                self.get_logger().error(f"transport: {exc}", throttle_duration_sec=5.0)
-                self._stop.wait(0.5)
+                self.get_logger().error(f"transport: {exc}; reopening every {self.reconnect_s} s",
+                                        throttle_duration_sec=5.0)
+                if link is not None:
+                    link.lost(exc)
+                else:
+                    self._stop.wait(0.5)
                 continue
             except Exception as exc:  # noqa: BLE001 - report and keep the node alive
-                self.faults["reader_errors"] += 1
-                self.last_error = repr(exc)
-                self.get_logger().error(f"reader: {exc!r}", throttle_duration_sec=5.0)
+                self._count_error("reader_errors", f"reader: {exc!r}")
                 self._stop.wait(0.5)
                 continue
-            self._consume(items)
+            try:
+                self._consume(items)
+            except Exception as exc:  # noqa: BLE001 - a bad batch is counted, the thread reads on
+                self._count_error("consume_errors", f"handling a read: {exc!r}")
+
+    def _count_error(self, counter: str, text: str) -> None:
+        self.faults[counter] += 1
+        self.last_error = text
+        self._last_error_monotonic = time.monotonic()
+        self.get_logger().error(text, throttle_duration_sec=5.0)
 
     # ------------------------------------------------------------ diagnostics
     def _transport_values(self, settings: dict[str, Any]) -> dict[str, Any]:
-        """Key/values of the transport status: name, ``settings``, stamp source, device description, faults."""
+        """Key/values of the transport status: name, ``settings``, stamp source, device description, link, faults."""
         values = {"transport": self.transport_name, **settings, "stamp_source": self.stamp_source}
         if self.transport is not None:
             values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
+        if self.link is not None:
+            values.update({f"link_{k}": v for k, v in self.link.as_dict().items()})
         values.update(dict(self.faults))
+        if self.last_error:
+            values["last_error"] = self.last_error
         return values
 
     def _transport_error(self, values: dict[str, Any]) -> Status | None:
-        """The error status of a closed transport or one with reader faults; ``None`` when neither."""
-        if self.transport is None:
+        """The status of a closed or lost transport, or of recent reader faults; ``None`` when all is well.
+
+        Faults are history (counters in ``values``); the level says what holds
+        now: error while the device is gone, warn for a reader or handling
+        fault in the last 10 s, nothing once the device is back and reading.
+        """
+        if self.transport is None or (self.link is not None and not self.link.connected):
+            if self.link is not None and not self.link.connected:
+                return Status("error", f"device lost {self.link.down_for_s:.1f} s ago, reopening: "
+                                       f"{self.link.last_error}", values)
             return Status("error", f"not open{': ' + self.last_error if self.last_error else ''}", values)
-        if self.faults.get("transport_errors") or self.faults.get("reader_errors"):
-            return Status("error", self.last_error or "transport errors", values)
+        if time.monotonic() - self._last_error_monotonic < 10.0:
+            return Status("warn", self.last_error or "reader errors", values)
         return None

@@ -40,6 +40,7 @@ from ..core.fast import warm_up
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
+from ..streams.sequence import unwrap
 from .common import Diagnostics, RateMeter, Status, declare, run_node
 from .conversions import biotac_msg_to_chunk, descriptor_to_msg, skin_msg_to_chunk
 from .qos import QosDefaults, declare_qos
@@ -287,13 +288,15 @@ class WindowNode(Node):
 
     def _sequence(self, key: str, first: int, count: int) -> None:
         expected = self._next_seq.get(key)
-        if expected is not None and first != expected:
-            gap = (first - expected) & 0xFFFFFFFF
-            if gap < 0x80000000:
-                self.faults["lost_frames"] += gap
-            else:
-                self.faults["sequence_restart"] += 1
-        self._next_seq[key] = (first + count) & 0xFFFFFFFF
+        if expected is None:
+            self._next_seq[key] = int(first) + count
+            return
+        u = unwrap(first, expected, 1 << 32)  # message sequences are 32-bit
+        if u > expected:
+            self.faults["lost_frames"] += u - expected
+        elif u < expected:
+            self.faults["sequence_restart"] += 1
+        self._next_seq[key] = u + count
 
     # ----------------------------------------------------------- output
     def _publish(self, window: Window) -> None:

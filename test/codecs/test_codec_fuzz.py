@@ -36,8 +36,8 @@ def test_fuzzer_catches_a_decoder_that_ignores_parity(monkeypatch):
 def test_fuzzer_catches_a_decoder_that_passes_duplicates(monkeypatch):
     real = SequenceTracker.update
 
-    def no_dups(self, key, seq):
-        event = real(self, key, seq)
+    def no_dups(self, key, seq, *args):
+        event = real(self, key, seq, *args)
         return SequenceEvent.IN_ORDER if event is SequenceEvent.DUPLICATE else event
     monkeypatch.setattr(SequenceTracker, "update", no_dups)
     for codec in ("bridge_serial", "skin_can", "skin_serial"):

@@ -1,0 +1,381 @@
+"""The skin-cell stream: decoded samples -> unwrap -> lost frames -> stamps -> tare -> ``batch_s`` batches.
+
+:class:`SkinStream` takes the :class:`~..codecs.skin.SkinSampleBatch` of one
+read (CAN or serial, any cells and modalities mixed) and, for every (cell,
+modality) at once with array operations:
+
+* unwraps the 8-bit sequence numbers with the one
+  :class:`~.sequence.SequenceTracker`, using the samples' bus times (or the
+  arrival time of the read) as well as their numbers, so a cell silent for
+  longer than a wrap (256 ms at 1 kHz) comes back with a gap of the right
+  length, never a shifted clock;
+* counts lost frames (jumps beyond the highest number seen);
+* stamps the samples: ``clock`` runs a sample clock per cell and modality
+  (the host clock at its first sample plus sequence number times the
+  nominal period), re-anchored when it drifts from the host clock by more
+  than ``resync_s``; ``device`` uses the bus times (a sample without one is
+  extrapolated from the nearest stamped sample of its cell and modality);
+* keeps the force baseline (start tare, ``tare``) and cuts each cell's
+  accelerometer samples into ``batch_s`` batches with the force and
+  proximity samples of the same span (:class:`~..nodes.conversions.SkinFrame`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
+from ..nodes.conversions import SkinFrame
+from .sequence import SequenceTracker
+
+__all__ = ["SkinStream", "CellState", "RECENT_FORCE"]
+
+
+class _Stream:
+    """Pending samples of one modality of one cell: time stamps and counts, as a list of array pieces."""
+
+    __slots__ = ("t", "v")
+
+    def __init__(self) -> None:
+        self.t: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+
+    def add(self, t_ns: np.ndarray, values: np.ndarray) -> None:
+        self.t.append(t_ns)
+        self.v.append(values)
+
+    def clear(self) -> None:
+        self.t, self.v = [], []
+
+    def __bool__(self) -> bool:
+        return bool(self.t)
+
+    def arrays(self, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """All pending samples, sorted by time (late, reordered frames back in place)."""
+        if not self.t:
+            return np.zeros(0, np.int64), np.zeros((0, width), np.int64)
+        t = np.concatenate(self.t) if len(self.t) > 1 else self.t[0]
+        v = np.concatenate(self.v) if len(self.v) > 1 else self.v[0]
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order]
+
+    def keep(self, t_ns: np.ndarray, values: np.ndarray) -> None:
+        """Replace the pending samples by these (sorted) ones."""
+        self.t, self.v = ([t_ns], [values]) if t_ns.size else ([], [])
+
+
+@dataclass
+class CellState:
+    """One served cell: pending samples per modality, the last temperature, tare and counters."""
+
+    cell_id: int
+    body_part: str
+    frame_id: str
+    accel: _Stream = field(default_factory=_Stream)  # (t_ns, (x, y, z))
+    force: _Stream = field(default_factory=_Stream)  # (t_ns, (f0, f1, f2))
+    proximity: _Stream = field(default_factory=_Stream)  # (t_ns, p)
+    temperature_c: float = float("nan")
+    recent_force_t: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # last 500 force samples
+    recent_force_v: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    tare: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    tared: bool = False
+    first_t_ns: int | None = None
+    last_accel_t_ns: int | None = None
+    sequence: int = 0
+    lost: int = 0
+    lost_since_msg: int = 0
+    samples: int = 0
+    messages: int = 0
+    last_monotonic: float | None = None
+
+
+#: Force samples kept per cell for ~/tare and the contact check.
+RECENT_FORCE = 500
+
+
+class SkinStream:
+    """Skin samples of the served cells -> per-cell batches (see the module docstring).
+
+    Parameters
+    ----------
+    cells : mapping of cell id to (body part, frame id)
+        The served cells.
+    accel_rate_hz, force_rate_hz : float
+        Nominal sample rates (proximity runs with force; temperature at its nominal rate).
+    batch_s : float
+        Sample time per batch and cell [s].
+    stamp_source : {"clock", "device"}
+    resync_s : float
+        Re-anchor ``clock`` stamps beyond this drift [s] (0 = never).
+    tare_on_start_s : float
+        Force baseline from the first samples [s] (nothing is emitted before); 0 = off.
+    now_ns : callable() -> int
+        The host (node) clock [ns] of ``clock`` stamps.
+    faults : collections.Counter
+        Shared fault counters (``clock_resync``, ``no_device_time``).
+    log : callable(level, text), optional
+        Where start-tare warnings go.
+    """
+
+    def __init__(self, cells: dict[int, tuple[str, str]], accel_rate_hz: float, force_rate_hz: float,
+                 batch_s: float, stamp_source: str, resync_s: float, tare_on_start_s: float,
+                 now_ns: Callable[[], int], faults: Counter, log: Callable[[str, str], None] | None = None) -> None:
+        self.accel_rate_hz = float(accel_rate_hz)
+        self.force_rate_hz = float(force_rate_hz)
+        self.batch_s = float(batch_s)
+        self.stamp_source = stamp_source
+        self.resync_s = float(resync_s)
+        self.tare_on_start_s = float(tare_on_start_s)
+        self._now = now_ns
+        self.faults = faults
+        self._log = log or (lambda level, text: None)
+        self.cells = {cid: CellState(cid, part, frame_id) for cid, (part, frame_id) in cells.items()}
+        self._cell_list = list(self.cells.values())
+        self._cell_index = np.full(0x10000, -1, dtype=np.int64)
+        for i, cell in enumerate(self._cell_list):
+            self._cell_index[cell.cell_id] = i
+        k = 4 * len(self._cell_list)
+        self._clk = {"anchored": np.zeros(k, bool), "anchor": np.zeros(k, np.int64), "first": np.zeros(k, np.int64),
+                     "last": np.zeros(k, np.int64), "have": np.zeros(k, bool)}
+        self._period_ns = 1e9 / np.array([self.accel_rate_hz, self.force_rate_hz, self.force_rate_hz,
+                                          NOMINAL_RATE_HZ[Modality.TEMPERATURE]])
+        # duplicates were dropped by the codec: no duplicate memory, only unwrapping
+        self.tracker = SequenceTracker(256, window=0)
+        self.other_part_frames: Counter[int] = Counter()
+
+    def rates_hz(self) -> dict[Modality, float]:
+        """The sample rate of each modality (for the codecs' own unwrapping)."""
+        return {Modality(m + 1): 1e9 / p for m, p in enumerate(self._period_ns)}
+
+    def resume(self) -> None:
+        """The device was reopened: ``clock`` sample clocks are anchored again at their next sample."""
+        self._clk["anchored"][:] = False
+
+    def add(self, batch: SkinSampleBatch, arrival_ns: int | None = None) -> list[tuple[CellState, SkinFrame]]:
+        """Take the samples of one read; return the batches completed, per cell.
+
+        ``arrival_ns`` is the host time of the read in the clock of the bus
+        times (epoch nanoseconds, as python-can's time stamps): it times the
+        samples for unwrapping when none of them came with a bus time (an
+        adapter or framing without times), so each key keeps one clock.
+        """
+        if not len(batch):
+            return []
+        ci = self._cell_index[batch.cell_id]
+        served = ci >= 0
+        if not served.all():  # configured cells of body parts this stream does not serve
+            ids, counts = np.unique(batch.cell_id[~served], return_counts=True)
+            for c, k in zip(ids.tolist(), counts.tolist()):
+                self.other_part_frames[c] += k
+            batch, ci = batch.take(served), ci[served]
+            if not len(batch):
+                return []
+        return self._add_batch(ci, batch, arrival_ns)
+
+    def _add_batch(self, ci: np.ndarray, batch: SkinSampleBatch, arrival_ns: int | None
+                   ) -> list[tuple[CellState, SkinFrame]]:
+        """Add a batch of served samples: sequence unwrapping, lost frames and sample times for every
+        (cell, modality) at once with array operations, then the samples to each cell's buffers."""
+        key = ci * 4 + (batch.modality - 1)
+        order = np.argsort(key, kind="stable")  # per cell and modality, in arrival order
+        ks = key[order]
+        n = ks.size
+        starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+        ends = np.r_[starts[1:], n]
+        lens = ends - starts
+        gk = ks[starts]
+        clk = self._clk
+        have = clk["have"][gk]
+        # unwrap the 8-bit sequence numbers with their times (a silence longer than a wrap is a gap)
+        bus_t = batch.stamp_ns[order]
+        stand_in = -1 if arrival_ns is None or (bus_t != NO_STAMP).any() else int(arrival_ns)
+        t_ref = np.where(bus_t == NO_STAMP, stand_in, bus_t)
+        _, useq = self.tracker.track_many(ks, batch.sequence[order] & 0xFF, int, t_ref, self._period_ns[ks % 4])
+        # frames lost: jumps beyond the highest number seen so far
+        prev = np.empty(n, np.int64)
+        prev[1:] = useq[:-1]
+        prev[starts] = np.where(have, clk["last"][gk], useq[starts] - 1)
+        offset = np.repeat(np.arange(gk.size, dtype=np.int64) << 42, lens)
+        highest = np.maximum.accumulate(prev + offset) - offset
+        lost = np.maximum(useq - highest - 1, 0)
+        clk["have"][gk] = True
+        clk["last"][gk] = np.maximum(highest[ends - 1], useq[ends - 1])
+        # sample times
+        t = np.empty(n, np.int64)
+        need = np.ones(n, bool)
+        if self.stamp_source == "device":
+            stamp = batch.stamp_ns[order]
+            need = stamp == NO_STAMP
+            t[~need] = stamp[~need]
+            if need.any():
+                self.faults["no_device_time"] += int(need.sum())
+        if need.any():
+            group = np.repeat(np.arange(gk.size), lens)
+            if self.stamp_source == "device":
+                need = self._extrapolate_device_times(t, need, useq, gk, group, starts, ends)
+            if need.any():
+                t[need] = self._clock_times(gk, group[need], useq[need])
+            if self.stamp_source == "device":  # missing bus times later on extrapolate from the last known one
+                stamped = np.flatnonzero(~need)
+                if stamped.size:
+                    last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
+                    ok = (last >= starts) & (last >= 0)
+                    self._clk["anchored"][gk[ok]] = True
+                    self._clk["anchor"][gk[ok]] = t[last[ok]]
+                    self._clk["first"][gk[ok]] = useq[last[ok]]
+        # into the cells' buffers
+        vals = batch.values[order]
+        cell_of = gk // 4
+        mono = time.monotonic()
+        lost_per_group = np.add.reduceat(lost, starts)
+        touched: dict[int, CellState] = {}
+        for g, (c, m, a, b, nl) in enumerate(zip(cell_of.tolist(), (gk % 4 + 1).tolist(), starts.tolist(),
+                                                 ends.tolist(), lost_per_group.tolist())):
+            cell = self._cell_list[c]
+            tt, vv = t[a:b], vals[a:b]
+            cell.lost += nl
+            cell.lost_since_msg += nl
+            cell.samples += b - a
+            cell.last_monotonic = mono
+            if cell.first_t_ns is None:
+                cell.first_t_ns = int(tt[0])
+            if m == Modality.ACCEL:
+                cell.accel.add(tt, vv)
+                last = int(tt.max())
+                cell.last_accel_t_ns = last if cell.last_accel_t_ns is None else max(last, cell.last_accel_t_ns)
+            elif m == Modality.FORCE:
+                cell.force.add(tt, vv)
+                cell.recent_force_t = np.concatenate([cell.recent_force_t, tt])[-RECENT_FORCE:]
+                cell.recent_force_v = np.concatenate([cell.recent_force_v, vv])[-RECENT_FORCE:]
+            elif m == Modality.PROXIMITY:
+                cell.proximity.add(tt, vv[:, :1])
+            else:
+                cell.temperature_c = float(vv[-1, 0]) * 0.01
+            touched[c] = cell
+        out: list[tuple[CellState, SkinFrame]] = []
+        for cell in touched.values():
+            out += self._cut(cell)
+        return out
+
+    def _extrapolate_device_times(self, t: np.ndarray, need: np.ndarray, useq: np.ndarray, gk: np.ndarray,
+                                  group: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """``device`` stamps: a sample without a bus time (python-can's timestamp 0.0) gets the time of the
+        nearest stamped sample of its cell and modality in this batch plus the sequence distance times the
+        nominal period.  Fills ``t`` in place; returns the samples still without a time."""
+        n = t.size
+        pos = np.arange(n)
+        stamped = np.where(~need, pos, -1)
+        offset = np.repeat(starts, ends - starts)
+        before = np.maximum.accumulate(stamped)  # nearest stamped sample at or before, any group
+        after = np.minimum.accumulate(np.where(~need, pos, n)[::-1])[::-1]  # nearest at or after
+        ref = np.where(before >= offset, before, np.where(after < np.repeat(ends, ends - starts), after, -1))
+        fill = need & (ref >= 0)
+        if fill.any():
+            r = ref[fill]
+            period = self._period_ns[gk[group[fill]] % 4]
+            t[fill] = t[r] + np.rint((useq[fill] - useq[r]) * period).astype(np.int64)
+        return need & ~fill
+
+    def _clock_times(self, gk: np.ndarray, group: np.ndarray, useq: np.ndarray) -> np.ndarray:
+        """Sample-clock times (``clock`` stamps, or ``device`` samples without a bus time): per cell and
+        modality the node clock at its first sample plus sequence number times the nominal period,
+        re-anchored when it drifts from the node clock by more than ``resync_s``."""
+        clk = self._clk
+        now = self._now()
+        keys = gk[group]
+        first_of = np.r_[True, group[1:] != group[:-1]]
+        new = first_of & ~clk["anchored"][keys]
+        clk["anchor"][keys[new]] = now
+        clk["first"][keys[new]] = useq[new]
+        clk["anchored"][keys[new]] = True
+        period = self._period_ns[keys % 4]
+        t = clk["anchor"][keys] + np.rint((useq - clk["first"][keys]) * period).astype(np.int64)
+        if self.resync_s > 0:
+            limit = self.resync_s * 1e9
+            far = np.abs(t - now) > limit
+            for k in np.unique(keys[far]).tolist():  # rare: walk that cell and modality sample by sample
+                for i in np.flatnonzero(keys == k).tolist():
+                    ti = int(clk["anchor"][k]) + int(round((int(useq[i]) - int(clk["first"][k])) * period[i]))
+                    if abs(ti - now) > limit:
+                        self.faults["clock_resync"] += 1
+                        clk["anchor"][k], clk["first"][k] = now, useq[i]
+                        ti = now
+                    t[i] = ti
+        return t
+
+    def _cut(self, cell: CellState) -> list[tuple[CellState, SkinFrame]]:
+        """Every complete ``batch_s`` of a cell's accelerometer samples, one batch each."""
+        out: list[tuple[CellState, SkinFrame]] = []
+        if not cell.accel:
+            return out
+        if not cell.tared and self.tare_on_start_s > 0:
+            if cell.last_accel_t_ns - cell.first_t_ns >= self.tare_on_start_s * 1e9:
+                ok, why = self.tare_cell(cell, self.tare_on_start_s)
+                if not ok:
+                    self._log("warning", f"cell {cell.cell_id}: start tare failed: {why}")
+                    cell.tared = True  # publish anyway, untared (the diagnostics say so)
+            cell.accel.clear()
+            cell.force.clear()
+            cell.proximity.clear()
+            return out
+        period_ns = 1e9 / self.accel_rate_hz
+        batch_ns = self.batch_s * 1e9
+        acc_t, acc_v = cell.accel.arrays(3)
+        if acc_t[-1] - acc_t[0] + period_ns < batch_ns:
+            cell.accel.keep(acc_t, acc_v)
+            return out
+        f_t, f_v = cell.force.arrays(3)
+        p_t, p_v = cell.proximity.arrays(1)
+        while acc_t.size and acc_t[-1] - acc_t[0] + period_ns >= batch_ns:
+            t0 = int(acc_t[0])
+            end = t0 + batch_ns - period_ns / 2  # this message: accelerometer samples of [t0, t0 + batch_s)
+            na = int(np.searchsorted(acc_t, end, side="right"))
+            nf = int(np.searchsorted(f_t, end, side="right"))
+            np_ = int(np.searchsorted(p_t, end, side="right"))
+            out.append((cell, self._frame(cell, t0, acc_t[:na], acc_v[:na], f_t[:nf], f_v[:nf],
+                                          p_v[:np_, 0] if np_ == nf else None)))
+            acc_t, acc_v = acc_t[na:], acc_v[na:]
+            f_t, f_v, p_t, p_v = f_t[nf:], f_v[nf:], p_t[np_:], p_v[np_:]
+        cell.accel.keep(acc_t, acc_v)
+        cell.force.keep(f_t, f_v)
+        cell.proximity.keep(p_t, p_v)
+        return out
+
+    def _frame(self, cell: CellState, t0: int, acc_t: np.ndarray, acc_v: np.ndarray, f_t: np.ndarray,
+               f_v: np.ndarray, prox: np.ndarray | None) -> SkinFrame:
+        frame = SkinFrame(
+            stamp_ns=t0,
+            accel=acc_v.T.astype(np.int16),
+            accel_offset_ns=acc_t - t0,
+            force=f_v.T.astype(np.uint16),
+            force_offset_ns=f_t - t0,
+            proximity=np.zeros(0, np.uint16) if prox is None else prox.astype(np.uint16),
+            temperature_c=cell.temperature_c, sequence=cell.sequence, bad_frames=cell.lost_since_msg)
+        cell.lost_since_msg = 0
+        cell.sequence += 1
+        return frame
+
+    def force_n(self, cell: CellState, force_n_per_count: float) -> float | None:
+        """Tared mean force of a cell's last five force samples [N] (``None`` before any)."""
+        if not cell.recent_force_t.size:
+            return None
+        last = cell.recent_force_v[-5:].astype(np.float64)
+        return float(np.mean(last - cell.tare[None, :])) * force_n_per_count
+
+    def tare_cell(self, cell: CellState, window_s: float) -> tuple[bool, str]:
+        """Zero a cell's force baseline over its last ``window_s`` of force samples."""
+        if not cell.recent_force_t.size:
+            return False, "no force samples yet"
+        newest = cell.recent_force_t[-1]
+        vals = cell.recent_force_v[cell.recent_force_t >= newest - window_s * 1e9]
+        if len(vals) < 3:
+            return False, f"only {len(vals)} force samples in the last {window_s} s"
+        cell.tare = np.mean(vals.astype(np.float64), axis=0)
+        cell.tared = True
+        return True, "ok"
+

@@ -1,0 +1,122 @@
+"""The one sequence tracker: wrapping numbers unwrapped with their times as well as their values."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_descriptors_ros.streams.sequence import SequenceEvent, SequenceTracker, Unwrapper, unwrap, unwrap_array
+
+MS = 1_000_000
+
+
+def test_unwrap_without_time_is_the_nearest_value_and_a_half_wrap_is_a_step_back():
+    assert unwrap(3, 254, 256) == 259
+    assert unwrap(250, 2, 256) == -6
+    assert unwrap(130, 2, 256) == 130 - 256  # exactly half a wrap away counts as earlier
+    assert unwrap(129, 2, 256) == 129
+
+
+def test_unwrap_with_the_expected_advance_picks_the_whole_number_of_wraps():
+    # 200 frames of silence: the number went 56 "back", the time says 200 forward
+    assert unwrap(200, 0, 256, advance=200.0) == 200
+    # 300 frames after number 200: 244 is 44 ahead, plus one whole wrap
+    assert unwrap(244, 200, 256, advance=300.2) == 500
+    # a late (reordered) frame just before the newest stays just before
+    assert unwrap(9, 10, 256, advance=-0.8) == 9
+    assert unwrap_array(np.array([200, 244]), np.array([0, 200]), 256, np.array([200.0, 300.2])).tolist() == [200, 500]
+
+
+def test_tracker_counts_silences_longer_than_a_wrap_with_their_length():
+    """A 1 kHz stream silent for 200 ms, then for 300 ms: two gaps of 199 and 299 lost frames."""
+    t = SequenceTracker(256, window=32, period_ns=MS)
+    assert t.track("c", 0, 0) == (SequenceEvent.FIRST, 0)
+    assert t.track("c", 200, 200 * MS) == (SequenceEvent.GAP, 200)
+    assert t.track("c", 500 % 256, 500 * MS) == (SequenceEvent.GAP, 500)
+    assert (t.gaps, t.lost, t.resets) == (2, 199 + 299, 0)
+    # without times the same numbers are a restart and a short gap: what the time fixes
+    blind = SequenceTracker(256, window=32)
+    assert blind.update("c", 0) is SequenceEvent.FIRST
+    assert blind.update("c", 200) is SequenceEvent.RESET
+    assert blind.update("c", 500 % 256) is SequenceEvent.GAP and blind.lost == 43
+
+
+def test_tracker_with_times_still_finds_duplicates_and_late_frames():
+    t = SequenceTracker(256, window=16, period_ns=MS)
+    for k in range(5):
+        t.update("c", k, k * MS)
+    assert t.update("c", 3, 5 * MS) is SequenceEvent.DUPLICATE
+    assert t.update("c", 7, 7 * MS) is SequenceEvent.GAP
+    assert t.update("c", 5, 7 * MS) is SequenceEvent.LATE
+    assert t.lost == 1 and t.duplicates == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 3), st.integers(1, 700)), min_size=1, max_size=120),
+       st.integers(0, 40))
+def test_track_many_equals_track_one_by_one_with_times(steps, window):
+    """Per key: frames with random silences (up to 700 periods, several wraps), times exact."""
+    period = [MS, 4 * MS, 4 * MS, 100 * MS]
+    now = {k: 0 for k in range(4)}
+    codes, seqs, times, true = [], [], [], []
+    for k, step in steps:
+        now[k] += step
+        codes.append(k)
+        seqs.append(now[k] % 256)
+        times.append(now[k] * period[k] + 1_700_000_000 * 10**9)
+        true.append(now[k])
+    codes, seqs, times = np.array(codes), np.array(seqs), np.array(times, dtype=np.int64)
+    per = np.array(period, dtype=float)[codes]
+    ref = SequenceTracker(256, window)
+    want = [ref.track(int(c), int(s), int(t), float(p)) for c, s, t, p in zip(codes, seqs, times, per)]
+    got = SequenceTracker(256, window)
+    half = len(codes) // 2
+    ev1, u1 = got.track_many(codes[:half], seqs[:half], int, times[:half], per[:half])
+    ev2, u2 = got.track_many(codes[half:], seqs[half:], int, times[half:], per[half:])
+    assert np.concatenate([ev1, ev2]).tolist() == [int(e) for e, _ in want]
+    assert np.concatenate([u1, u2]).tolist() == [u for _, u in want]
+    assert (got.gaps, got.lost, got.resets) == (ref.gaps, ref.lost, ref.resets)
+    # and the unwrapped numbers are the true ones, relative to each key's first
+    first = {}
+    for c, u, tr in zip(codes.tolist(), np.concatenate([u1, u2]).tolist(), true):
+        first.setdefault(c, (u, tr))
+        assert u - first[c][0] == tr - first[c][1]
+
+
+def test_unwrapper_follows_a_device_clock_across_wraps():
+    u = Unwrapper(1 << 32)
+    assert u(0xFFFF_FF00) == 0xFFFF_FF00
+    assert u(0x10) == (1 << 32) + 0x10
+    # 3 wraps of silence, told by the host time
+    assert u(0x20, advance=3 * (1 << 32)) == 4 * (1 << 32) + 0x20
+
+
+def test_bad_tracker_settings_are_refused():
+    from tactile_descriptors_ros.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        SequenceTracker(16, window=8)
+
+
+def test_stream_layer_imports_with_ros_blocked():
+    code = textwrap.dedent(
+        """
+        import sys
+        class Block:
+            def find_spec(self, name, path=None, target=None):
+                if name.split('.')[0] in ('rclpy', 'rosidl_runtime_py', 'tactile_descriptors_msgs', 'std_msgs',
+                                          'builtin_interfaces', 'launch', 'launch_ros'):
+                    raise ImportError('blocked for this test: ' + name)
+        sys.meta_path.insert(0, Block())
+        from tactile_descriptors_ros.streams import biotac, link, sequence, skin
+        print('ok')
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"
