@@ -64,6 +64,8 @@ class DeviceLink:
         self.last_gap_s: float | None = None
         self._down_since: float | None = None
         self._next_try = 0.0
+        #: start times of the reopen attempts that failed during the current or last absence
+        self.failed_attempts: list[float] = []
 
     @property
     def connected(self) -> bool:
@@ -91,6 +93,7 @@ class DeviceLink:
         if self.transport is None:
             return
         self.disconnects += 1
+        self.failed_attempts = []
         self._down_since = self._clock()
         self._next_try = self._down_since + self.retry_s
         self._close_quietly()
@@ -108,6 +111,7 @@ class DeviceLink:
             transport.open()
         except TactileError as exc:
             self.reopen_failures += 1
+            self.failed_attempts.append(now)
             self.last_error = f"reopening: {exc}"
             try:
                 transport.close()

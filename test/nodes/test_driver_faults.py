@@ -1,0 +1,286 @@
+"""Drivers under attack: an unplugged and replugged serial BioTac, payloads of another pattern,
+a failure while handling a read, a skin cell that goes quiet for longer than its sequence wraps."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import tty
+
+import numpy as np
+import pytest
+
+from helpers import spin_until
+
+pytestmark = pytest.mark.ros
+
+PARAMS = {"robot": "shadow_hand", "body_parts": ["thumb", "index"], "batch_frames": 5, "tare_on_start_s": 0.0}
+
+
+def _make_biotac(ros_context, params, factory=None):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch
+    from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver
+
+    drv = BiotacDriver(context=ros_context, transport_factory=factory,
+                       parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+    sink = rclpy.create_node("sink", context=ros_context)
+    got = {"thumb": [], "index": []}
+    for part in got:
+        sink.create_subscription(BioTacFrameBatch, f"tactile/{part}/frames", got[part].append, 500)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(drv)
+    ex.add_node(sink)
+    return drv, ex, got
+
+
+def _payload(pattern, pdc=2000):
+    from tactile_descriptors_ros.codecs.biotac_spi import encode_frame
+
+    return encode_frame(pattern, {"PAC": [2000 + k for k in range(pattern.pac_count)], "PDC": pdc, "TAC": 500,
+                                  "TDC": 600, "electrodes": [1000 + e for e in range(pattern.electrode_count)]})
+
+
+def _statuses(drv):
+    return {s.name.split(": ")[1]: s for s in drv.diagnostics.statuses()}
+
+
+def _values(status):
+    return {kv.key: kv.value for kv in status.values}
+
+
+class _Bridge:
+    """A BioTac bridge on a pty behind a stable name (as udev's /dev/serial/by-id links): frames of chip
+    selects 0 and 1 at 100 Hz from a thread; ``unplug`` closes the pty, ``replug`` makes a new one."""
+
+    def __init__(self, link_path) -> None:
+        from tactile_descriptors_ros.codecs.biotac_spi import FramePattern
+        from tactile_descriptors_ros.codecs.bridge_serial import BridgeEncoder
+
+        self.link_path = link_path
+        self.payload = _payload(FramePattern.default())
+        self.enc = BridgeEncoder()
+        self.k = 0
+        self.lock = threading.Lock()
+        self.master = None
+        self.slave = None
+        self.stop = threading.Event()
+        self.replug()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def replug(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        os.set_blocking(master, False)  # a full pty (nobody reading) drops frames, never blocks the writer
+        tmp = f"{self.link_path}.new"
+        os.symlink(os.ttyname(slave), tmp)
+        with self.lock:
+            self.enc = type(self.enc)()  # the bridge restarted: numbers and clock start again
+            self.k = 0
+            self.master, self.slave = master, slave
+        os.replace(tmp, self.link_path)
+
+    def unplug(self) -> None:
+        with self.lock:
+            master, slave, self.master, self.slave = self.master, self.slave, None, None
+        os.close(master)
+        os.close(slave)
+
+    def _run(self) -> None:
+        while not self.stop.wait(0.01):
+            with self.lock:
+                if self.master is None:
+                    continue
+                wire = b"".join(self.enc.encode(cs, self.payload, t_us=10_000 * self.k) for cs in (0, 1))
+                self.k += 1
+                try:
+                    os.write(self.master, wire)
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(timeout=5.0)
+        if self.master is not None:
+            self.unplug()
+
+
+def test_serial_biotac_comes_back_after_unplug_and_replug(ros_context, tmp_path):
+    """Close the pty (unplug), create it again (replug): frames flow again from the first reopen attempt
+    after the device returned, the absence is counted, the transport status is OK again, and no
+    lifecycle transition was needed."""
+    bridge = _Bridge(str(tmp_path / "ttyBioTac"))
+    drv, ex, got = _make_biotac(ros_context, {**PARAMS, "transport": "serial", "serial.port": bridge.link_path,
+                                              "reconnect_s": 0.25})
+    try:
+        assert spin_until(ex, lambda: len(got["index"]) >= 3)
+        bridge.unplug()
+        assert spin_until(ex, lambda: _statuses(drv)["transport"].level == b"\x02")  # ERROR while it is gone
+        ex.spin_once(timeout_sec=0.5)  # away for a while: reopen attempts fail meanwhile
+        before = len(got["index"])
+        back = time.monotonic()
+        bridge.replug()
+        assert spin_until(ex, lambda: len(got["index"]) > before + 2)
+        recovered_s = time.monotonic() - back
+        link = drv.link
+        assert link.connected and link.reconnects == 1 and link.disconnects == 1
+        # the reopen that worked was the first attempt after the device returned (every reconnect_s)
+        assert link.failed_attempts and all(t < back for t in link.failed_attempts), (link.failed_attempts, back)
+        assert drv._state_machine.current_state[1] == "active"  # no lifecycle transition was made
+        st = _statuses(drv)
+        assert st["transport"].level == b"\x00", st["transport"].message  # OK again, by itself
+        values = _values(st["transport"])
+        assert values["link_reconnects"] == "1" and values["transport_errors"] != "0"
+        sensor = _values(st["biotac_index"])
+        assert sensor["device_absences"] == "1" and int(sensor["lost_frames"]) >= 40  # >= 0.5 s at 100 Hz
+        print(f"recovered {recovered_s:.3f} s after the device returned")
+    finally:
+        drv.close()
+        bridge.close()
+
+
+def test_bridge_payload_of_another_pattern_is_counted_never_published(ros_context):
+    """BioTac SP frames sent to a driver configured for the default pattern: a counted error and a
+    WARN, never frames with electrode values in PDC/TAC/TDC."""
+    from tactile_descriptors_ros.codecs.biotac_spi import FramePattern
+    from tactile_descriptors_ros.codecs.bridge_serial import BridgeEncoder
+
+    drv, ex, got = _make_biotac(ros_context, {**PARAMS, "transport": "loopback", "stamp_source": "device"})
+    try:
+        enc = BridgeEncoder()
+        sp = _payload(FramePattern.parse("biotac_sp"), pdc=3333)
+        drv.transport.write(b"".join(enc.encode(1, sp, t_us=10_000 * k) for k in range(20)))
+        good = _payload(FramePattern.default(), pdc=2000)
+        drv.transport.write(b"".join(enc.encode(1, good, t_us=10_000 * k) for k in range(20, 30)))
+        assert spin_until(ex, lambda: len(got["index"]) >= 2)
+        pdc = np.concatenate([np.frombuffer(m.pdc, np.uint16) for m in got["index"]])
+        assert set(pdc.tolist()) == {2000} and pdc.size == 10
+        st = _statuses(drv)["transport"]
+        assert _values(st)["payload_decode_errors"] == "20" and st.level == b"\x01"
+    finally:
+        drv.close()
+
+
+def test_an_exception_while_handling_a_read_is_counted_and_reading_goes_on(ros_context):
+    from tactile_descriptors_ros.codecs.biotac_spi import FramePattern
+    from tactile_descriptors_ros.codecs.bridge_serial import BridgeEncoder
+
+    drv, ex, got = _make_biotac(ros_context, {**PARAMS, "transport": "loopback", "stamp_source": "device"})
+    try:
+        import tactile_descriptors_ros.nodes.biotac_driver as module
+
+        real = module.biotac_batch_to_msg
+        calls = {"n": 0}
+
+        def flaky(*args, **kwargs):
+            calls["n"] += 1
+            if calls["n"] == 1:
+                raise RuntimeError("boom while handling")
+            return real(*args, **kwargs)
+
+        module.biotac_batch_to_msg = flaky
+        enc = BridgeEncoder()
+        good = _payload(FramePattern.default())
+        drv.transport.write(b"".join(enc.encode(1, good, t_us=10_000 * k) for k in range(5)))
+        assert spin_until(ex, lambda: calls["n"] >= 1)
+        drv.transport.write(b"".join(enc.encode(1, good, t_us=10_000 * k) for k in range(5, 15)))
+        assert spin_until(ex, lambda: len(got["index"]) >= 2)  # the reader lived on
+        assert drv._thread is not None and drv._thread.is_alive()
+        st = _statuses(drv)["transport"]
+        assert _values(st)["consume_errors"] == "1" and "boom" in st.message
+    finally:
+        module.biotac_batch_to_msg = real
+        drv.close()
+
+
+class _CanQueue:
+    """A CAN adapter stand-in that hands over queued frame arrays (with their bus times) read by read."""
+
+    name = "can"
+
+    def __init__(self, reads) -> None:
+        self.reads = list(reads)
+        self.done = threading.Event()
+        self.is_open = False
+
+    def open(self) -> None:
+        self.is_open = True
+
+    def close(self) -> None:
+        self.is_open = False
+
+    def describe(self):
+        return {"transport": "queue"}
+
+    def recv_batch(self, max_frames=65536, timeout_s=None):
+        from tactile_descriptors_ros.codecs.can_frames import empty_frames
+
+        if self.reads:
+            return self.reads.pop(0)
+        self.done.set()
+        time.sleep(timeout_s or 0.0)  # an idle bus: the read times out
+        return empty_frames(0)
+
+
+def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
+    """A NAO cell silent for 200 ms, then 300 ms (8-bit numbers wrap every 256 ms at 1 kHz): published
+    accelerometer times are the sample times plus one anchor offset (no 256/512 ms shift, no step
+    back) and the body part's lost frames are those of the silences, as the bus counts them."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import SkinCellFrame
+    from tactile_descriptors_ros.codecs.skin import Modality, SkinSampleBatch
+    from tactile_descriptors_ros.codecs.skin_can import encode_can_frames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
+
+    part = load_robot("nao").body_part("left_hand")
+    cell = part.cells[0].id
+    t0, ms_ns = 1_700_000_000 * 10**9, 1_000_000
+    silent = [(300, 500), (700, 1000)]
+    rows = []
+    for ms in range(1300):
+        if any(a <= ms < b for a, b in silent):
+            continue
+        rows.append((int(Modality.ACCEL), ms % 256, ms))
+        if ms % 4 == 0:
+            rows.append((int(Modality.FORCE), (ms // 4) % 256, ms))
+    n = len(rows)
+    ms = np.array([r[2] for r in rows], np.int64)
+    batch = SkinSampleBatch(np.full(n, cell, np.int64), np.array([r[0] for r in rows], np.int64),
+                            np.array([r[1] for r in rows], np.int64), np.tile([1, 2, 3], (n, 1)).astype(np.int64),
+                            t0 + ms * ms_ns)
+    frames = encode_can_frames(batch)
+    reads = [frames[(ms >= a) & (ms < a + 10)] for a in range(0, 1300, 10)]
+    can = _CanQueue([r for r in reads if r.size])
+    drv = SkinDriver(context=ros_context, transport_factory=lambda node: can,
+                     parameter_overrides=[Parameter(k, value=v) for k, v in {
+                         "robot": "nao", "body_parts": ["left_hand"], "transport": "can", "tare_on_start_s": 0.0,
+                         "resync_s": 0.0, "stamp_source": "clock"}.items()])
+    sink = rclpy.create_node("sink", context=ros_context)
+    got = []
+    sink.create_subscription(SkinCellFrame, "tactile/left_hand/frames", got.append, 1000)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(drv)
+    ex.add_node(sink)
+    try:
+        accel_true = t0 + ms[batch.modality == int(Modality.ACCEL)] * ms_ns
+        assert spin_until(ex, lambda: can.done.is_set() and sum(len(m.accel_offset_ns) for m in got) >= 750)
+        mine = [m for m in got if m.cell_id == cell]
+        stamps = np.concatenate([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+                                 + np.frombuffer(m.accel_offset_ns, np.int64) for m in mine])
+        offset = stamps - accel_true[:stamps.size]
+        assert stamps.size >= 750 and np.all(offset == offset[0]), np.unique(offset)[:4]
+        assert np.all(np.diff(stamps) > 0)
+        lost = 200 + 300 + 50 + 75  # accelerometer and force frames of the silences
+        assert drv.decoder.stats.lost_frames == lost and drv.decoder.stats.sequence_resets == 0
+        assert int(_values(_statuses(drv)["left_hand"])["lost_frames"]) == lost
+    finally:
+        drv.close()
