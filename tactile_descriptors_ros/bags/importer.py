@@ -1,8 +1,10 @@
-"""Turn the public BioTac sliding recordings into a bag the live graph can replay.
+"""Turn BioTac recordings (tables or other drivers' bags) into a bag the live graph can replay.
 
-Each CSV trial (``raw_data/mat<M>/mat<M>_<N>_bio.csv``, one 10 ms frame a
-row, see :mod:`tactile_descriptors_ros.datasets.biotac_slide`) becomes a run
-of ``BioTacFrameBatch`` messages, as the BioTac driver would publish them:
+Any source :func:`~tactile_descriptors_ros.datasets.sources.read_source`
+reads (CSV, NPZ or HDF5 tables described by a mapping file; Shadow Robot
+``sr_robot_msgs/BiotacAll`` or UPenn ``biotac_sensors/BioTacHand`` bags, ROS
+1 or ROS 2) gives trials; each trial becomes a run of ``BioTacFrameBatch``
+messages, as the BioTac driver would publish them:
 
 * ``frames_per_batch`` frames a message (10 = 100 ms), PAC at full rate
   (22 samples a frame) with per-sample offsets, slow channels one sample a
@@ -23,8 +25,14 @@ of ``BioTacFrameBatch`` messages, as the BioTac driver would publish them:
   ``pac_pa_per_count`` = the vibration modality's ``si_per_count``,
   ``force_n_per_count`` = the force spec's ``n_per_count``;
   ``pdc_pa_per_count`` is the BioTac manual's 36.5 Pa/count (the robot
-  description has no PDC pressure scale).  The data are already tared:
-  ``pdc_tare_counts`` 0 and no electrode tares.
+  description has no PDC pressure scale).  Counts are written tared
+  (``pdc_tare_counts`` 0, no electrode tares): a source whose resting PDC is
+  far from zero is tared per trial on reading, and the report says so.
+
+The bag is written under a temporary name and renamed when complete, so a
+failed import leaves nothing behind and can simply be run again.  Its
+metadata (``custom_data``, key ``tactile.trials``) lists each trial's class,
+number and frames, so ``tactile evaluate`` reads the trials back exactly.
 
 The contact gate of the descriptor (paper eq. 13, mean force over a window
 at least F_t) reads force = PDC x ``force_n_per_count``: :class:`ImportReport`
@@ -34,7 +42,9 @@ gated out is seen before it is replayed.
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,8 +53,10 @@ from typing import Any
 import numpy as np
 
 from ..core.robot import RobotDescription, load_robot
-from ..datasets.biotac_slide import N_ELECTRODES, PAC_PER_FRAME, BiotacRecording, find_recordings, read_biotac_csv
-from ..errors import ConfigError, DataFormatError
+from ..datasets.bagfiles import TRIALS_KEY
+from ..datasets.recording import N_ELECTRODES, BiotacRecording
+from ..datasets.sources import LoadReport, read_source
+from ..errors import BagError, ConfigError, DataFormatError
 from .io import BagWriter
 from .qos import make_qos
 from .types import tactile_typestore
@@ -59,6 +71,8 @@ __all__ = [
     "TrialStats",
     "ImportReport",
     "import_biotac_slide",
+    "import_source",
+    "import_recordings",
     "parse_index_ranges",
 ]
 
@@ -169,6 +183,9 @@ class ImportReport:
     labels: int = 0
     release_frames: int = 0
     trials: list[TrialStats] = field(default_factory=list)
+    source: str = ""
+    mapping: str = ""
+    tare_notes: list[str] = field(default_factory=list)
 
     @property
     def frames(self) -> int:
@@ -192,6 +209,9 @@ class ImportReport:
         return {
             "bag": self.bag,
             "storage": self.storage,
+            "source": self.source,
+            "mapping": self.mapping,
+            "tare": self.tare_notes,
             "trials": len(self.trials),
             "batches": self.batches,
             "labels": self.labels,
@@ -314,57 +334,8 @@ class _BatchFactory:
         return self.label_cls(header=self.header(stamp_ns), exploration_id=0, class_name=class_name)
 
 
-def _ordered(paths: list[Path], order: str) -> list[Path]:
-    if order == "material":
-        return paths  # find_recordings sorts by material, then trial
-    from ..datasets.biotac_slide import _NAME  # same file-name pattern as the reader
-
-    keyed = []
-    for p in paths:
-        m = _NAME.match(p.name)
-        assert m is not None
-        keyed.append((int(m.group(2)), int(m.group(1)), p))
-    return [p for _, _, p in sorted(keyed)]
-
-
-def import_biotac_slide(
-    data_dir: str | os.PathLike[str],
-    bag_path: str | os.PathLike[str],
-    trials: Sequence[int] | None = None,
-    materials: Sequence[int] | None = None,
-    options: ImportOptions | None = None,
-    storage: str = "mcap",
-    progress: Callable[[Iterable[Path]], Iterable[Path]] | None = None,
-) -> ImportReport:
-    """Convert BioTac sliding recordings into a bag of ``BioTacFrameBatch`` and ``Label`` messages.
-
-    Parameters
-    ----------
-    data_dir : path
-        Folder holding ``raw_data/`` (or ``raw_data`` itself).
-    bag_path : path
-        Bag directory to create.
-    trials, materials : sequence of int, optional
-        Which trials and materials (default: all found).
-    options : ImportOptions, optional
-    storage : {"mcap", "sqlite3"}
-    progress : callable, optional
-        Wraps the list of files (e.g. ``tqdm``).
-
-    Returns
-    -------
-    ImportReport
-
-    Raises
-    ------
-    DataFormatError
-        For a malformed recording (nothing is silently skipped).
-    ConfigError
-        For bad options or an unknown body part.
-    """
-    opts = options or ImportOptions()
-    opts.validate()
-    biotac_topic = opts.biotac_topic.format(body_part=opts.body_part)
+def _biotac_part(opts: ImportOptions) -> tuple[RobotDescription, Any, Any]:
+    """The robot, body part and cell type the options name; the part must carry a BioTac."""
     robot: RobotDescription = load_robot(opts.robot)
     part = robot.body_part(opts.body_part)
     cell_type = robot.cell_types[part.cell_type]
@@ -375,35 +346,175 @@ def import_biotac_slide(
         )
     if not part.cells:
         raise ConfigError(f"body part {part.name!r} has no cells", key="body_part", source=robot.source)
+    return robot, part, cell_type
+
+
+def _ordered(recordings: list[BiotacRecording], order: str) -> list[BiotacRecording]:
+    if order == "material":
+        return sorted(recordings, key=lambda r: (r.material, r.trial))
+    return sorted(recordings, key=lambda r: (r.trial, r.material))
+
+
+def import_biotac_slide(
+    data_dir: str | os.PathLike[str],
+    bag_path: str | os.PathLike[str],
+    trials: Sequence[int] | None = None,
+    materials: Sequence[int] | None = None,
+    options: ImportOptions | None = None,
+    storage: str = "mcap",
+    progress: Callable[[Iterable[BiotacRecording]], Iterable[BiotacRecording]] | None = None,
+) -> ImportReport:
+    """Import the BioTac sliding recordings (the shipped ``biotac_slide_20_50`` mapping); see :func:`import_source`."""
+    return import_source(data_dir, bag_path, mapping=None, trials=trials,
+                         classes=None if materials is None else [str(int(m)) for m in materials],
+                         options=options, storage=storage, progress=progress)
+
+
+def import_source(
+    source: str | os.PathLike[str],
+    bag_path: str | os.PathLike[str],
+    mapping: str | os.PathLike[str] | None = None,
+    trials: Sequence[int] | None = None,
+    classes: Sequence[str] | None = None,
+    class_name: str | None = None,
+    tare: str | None = None,
+    options: ImportOptions | None = None,
+    storage: str = "mcap",
+    progress: Callable[[Iterable[BiotacRecording]], Iterable[BiotacRecording]] | None = None,
+) -> ImportReport:
+    """Read ``source`` (see :func:`~..datasets.sources.read_source`) and write its trials as a bag.
+
+    Parameters
+    ----------
+    source : path
+        Folder or file of tables, or bags.
+    bag_path : path
+        Bag directory to create (never overwritten).
+    mapping : str or path, optional
+        Shipped mapping name or mapping file (default: the bag default for
+        bags, else ``biotac_slide_20_50``).
+    trials : sequence of int, optional
+    classes : sequence of str, optional
+        By name or number; asking for what the data do not hold is an error.
+    class_name : str, optional
+        Class of every trial (overrides the mapping).
+    tare : {"auto", "per_trial", "none"}, optional
+    options, storage, progress
+        See :func:`import_recordings`.
+
+    Raises
+    ------
+    DataFormatError, ConfigError, BagError
+        Before anything is written for bad input; a failure while writing
+        removes the partial bag.
+    """
+    opts = options or ImportOptions()
+    opts.validate()
+    if Path(bag_path).exists():
+        raise BagError(f"{bag_path} exists already; bags are never overwritten")
+    _biotac_part(opts)  # bad options fail before any data is read
+    load = LoadReport(source=str(source), mapping="")
+    recs = read_source(source, mapping, trials=trials, classes=classes, class_name=class_name, tare=tare,
+                       report=load)
+    report = import_recordings(recs, bag_path, options=opts, storage=storage, progress=progress)
+    report.source = str(source)
+    report.mapping = load.mapping
+    report.tare_notes = load.tare_lines()
+    return report
+
+
+def import_recordings(
+    recordings: Sequence[BiotacRecording],
+    bag_path: str | os.PathLike[str],
+    options: ImportOptions | None = None,
+    storage: str = "mcap",
+    progress: Callable[[Iterable[BiotacRecording]], Iterable[BiotacRecording]] | None = None,
+) -> ImportReport:
+    """Write recordings as a bag of ``BioTacFrameBatch`` and ``Label`` messages.
+
+    The bag is written to a temporary folder beside ``bag_path`` and renamed
+    when complete; on any error the temporary folder is removed, so nothing
+    is left behind.
+
+    Parameters
+    ----------
+    recordings : sequence of BiotacRecording
+    bag_path : path
+        Bag directory to create.
+    options : ImportOptions, optional
+    storage : {"mcap", "sqlite3"}
+    progress : callable, optional
+        Wraps the list of recordings (e.g. ``tqdm``).
+
+    Returns
+    -------
+    ImportReport
+
+    Raises
+    ------
+    DataFormatError
+        For counts outside 12 bits or stamps that do not increase.
+    ConfigError
+        For bad options or an unknown body part.
+    """
+    opts = options or ImportOptions()
+    opts.validate()
+    final = Path(bag_path)
+    if final.exists():
+        raise BagError(f"{final} exists already; bags are never overwritten")
+    if not recordings:
+        raise ConfigError("no recordings to import")
+    biotac_topic = opts.biotac_topic.format(body_part=opts.body_part)
+    robot, part, cell_type = _biotac_part(opts)
     sensor_name = part.cells[0].name
     force_scale = float(cell_type.force.n_per_count)
     threshold_n = float(robot.contact.force_threshold_n)
 
-    paths = _ordered(find_recordings(data_dir, trials=trials, materials=materials), opts.order)
+    recs = [r.crop_frames(0, opts.max_frames) if opts.max_frames is not None else r for r in recordings]
+    for rec in recs:
+        _check_counts(rec)
+    recs = _ordered(recs, opts.order)
     store = tactile_typestore()
     factory = _BatchFactory(store, sensor_name, part.name, opts.frame_id or sensor_name,
                             float(cell_type.vibration.si_per_count), BIOTAC_PDC_PA_PER_COUNT, force_scale)
-    report = ImportReport(bag=str(bag_path), storage=storage, force_threshold_n=threshold_n,
+    report = ImportReport(bag=str(final), storage=storage, force_threshold_n=threshold_n,
                           force_n_per_count=force_scale)
-    release_ns = int(round(opts.release_s * 1e9))
-    label_delay_ns = int(round(opts.label_delay_s * 1e9))
     custom = {
-        "tactile.source": "BioTac_slide_20_50 (import)",
+        "tactile.source": "tactile import",
         "tactile.robot": robot.name,
         "tactile.body_part": part.name,
         "tactile.release_s": repr(opts.release_s),
         "tactile.frames_per_batch": str(opts.frames_per_batch),
     }
+    final.parent.mkdir(parents=True, exist_ok=True)
+    staging = final.parent / f".{final.name}.partial-{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir()
+    try:
+        _write(recs, staging / final.name, storage, store, custom, factory, opts, biotac_topic, report,
+               threshold_n, force_scale, progress)
+        os.replace(staging / final.name, final)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    shutil.rmtree(staging, ignore_errors=True)
+    return report
+
+
+def _write(recs: list[BiotacRecording], path: Path, storage: str, store: Any, custom: dict[str, str],
+           factory: _BatchFactory, opts: ImportOptions, biotac_topic: str, report: ImportReport,
+           threshold_n: float, force_scale: float, progress: Callable | None) -> None:
+    release_ns = int(round(opts.release_s * 1e9))
+    label_delay_ns = int(round(opts.label_delay_s * 1e9))
     seq = 0
     next_start_ns: int | None = None
-    with BagWriter(bag_path, storage=storage, typestore=store, custom_data=custom) as bag:
+    listed: list[dict[str, Any]] = []
+    with BagWriter(path, storage=storage, typestore=store, custom_data=custom) as bag:
         bag.add_topic(biotac_topic, _BATCH, [BIOTAC_QOS])
         bag.add_topic(opts.label_topic, _LABEL, [LABEL_QOS])
-        for path in (progress(paths) if progress else paths):
-            rec = read_biotac_csv(path)
-            if opts.max_frames is not None:
-                rec = rec.crop_frames(0, opts.max_frames)
-            _check_counts(rec)
+        for rec in (progress(recs) if progress else recs):
+            k = rec.pac_per_frame
             period_ns = int(np.median(np.diff(rec.frame_t_ns))) if rec.n_frames > 1 else 10_000_000
             shift = 0 if next_start_ns is None else next_start_ns - int(rec.frame_t_ns[0])
             frame_t = rec.frame_t_ns + shift
@@ -411,18 +522,19 @@ def import_biotac_slide(
             electrodes_fm = rec.electrodes.T  # (n_frames, 19), frame-major
             n = rec.n_frames
             fpb = opts.frames_per_batch
+            listed.append({"class_name": rec.class_name, "material": rec.material, "trial": rec.trial,
+                           "first_frame": seq, "frames": n, "source": rec.path})
             for s in range(0, n, fpb):
                 e = min(n, s + fpb)
-                msg = factory.batch(seq, frame_t[s:e], pac_t[s * PAC_PER_FRAME:e * PAC_PER_FRAME],
-                                    rec.pac[s * PAC_PER_FRAME:e * PAC_PER_FRAME], rec.pdc[s:e], rec.tac[s:e],
-                                    rec.tdc[s:e], electrodes_fm[s:e])
+                msg = factory.batch(seq, frame_t[s:e], pac_t[s * k:e * k], rec.pac[s * k:e * k], rec.pdc[s:e],
+                                    rec.tac[s:e], rec.tdc[s:e], electrodes_fm[s:e])
                 bag.write(biotac_topic, int(frame_t[e - 1]) + period_ns, msg)
                 seq += e - s
                 report.batches += 1
             end_ns = int(frame_t[-1]) + period_ns
-            force = rec.pdc.astype(np.float64) * force_scale
+            force = rec.force_n(force_scale)
             report.trials.append(TrialStats(
-                material=rec.material, material_name=rec.material_name, trial=rec.trial, frames=n,
+                material=rec.material, material_name=rec.class_name, trial=rec.trial, frames=n,
                 frames_in_contact=int(np.count_nonzero(force >= threshold_n)), mean_force_n=float(force.mean()),
                 min_force_n=float(force.min()), max_force_n=float(force.max()), start_ns=int(frame_t[0]),
                 end_ns=end_ns,
@@ -434,26 +546,26 @@ def import_biotac_slide(
             if opts.release_fill:
                 n_release = max(1, release_ns // period_ns)
                 next_start_ns = end_ns + n_release * period_ns  # the stream stays gap-free
-                offsets = np.arange(PAC_PER_FRAME, dtype=np.int64) * period_ns // PAC_PER_FRAME
+                offsets = np.arange(k, dtype=np.int64) * period_ns // k
                 last_tdc = int(rec.tdc[-1])
                 for s in range(0, n_release, fpb):
                     e = min(n_release, s + fpb)
                     rf_t = end_ns + np.arange(s, e, dtype=np.int64) * period_ns
                     rp_t = (rf_t[:, None] + offsets[None, :]).ravel()
-                    k = e - s
-                    zeros = np.zeros(k, dtype=np.int64)
-                    msg = factory.batch(seq, rf_t, rp_t, np.zeros(k * PAC_PER_FRAME, dtype=np.int64), zeros, zeros,
-                                        np.full(k, last_tdc, dtype=np.int64), np.zeros((k, N_ELECTRODES), np.int64))
+                    m = e - s
+                    zeros = np.zeros(m, dtype=np.int64)
+                    msg = factory.batch(seq, rf_t, rp_t, np.zeros(m * k, dtype=np.int64), zeros, zeros,
+                                        np.full(m, last_tdc, dtype=np.int64), np.zeros((m, N_ELECTRODES), np.int64))
                     log_ns = int(rf_t[-1]) + period_ns
                     if not label_written and log_ns > label_ns:
-                        bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.material_name))
+                        bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.class_name))
                         label_written = True
                         report.labels += 1
                     bag.write(biotac_topic, log_ns, msg)
-                    seq += k
+                    seq += m
                     report.batches += 1
-                    report.release_frames += k
+                    report.release_frames += m
             if not label_written:
-                bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.material_name))
+                bag.write(opts.label_topic, label_ns, factory.label(label_ns, rec.class_name))
                 report.labels += 1
-    return report
+        bag.set_custom_data(TRIALS_KEY, json.dumps(listed))

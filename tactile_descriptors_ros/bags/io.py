@@ -229,6 +229,10 @@ class BagWriter:
         # Keep what was written even when the caller stopped on an error or Ctrl-C.
         self.close()
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Add a ``custom_data`` entry to ``metadata.yaml`` (before :meth:`close`)."""
+        self._writer.set_custom_data(key, str(value))
+
     # ------------------------------------------------------------------ topics
     @property
     def topics(self) -> dict[str, str]:

@@ -17,11 +17,11 @@ import numpy as np
 from sklearn.metrics import confusion_matrix
 
 from ..core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
-from ..datasets.biotac_slide import MATERIAL_NAMES, BiotacRecording
+from ..datasets.recording import BiotacRecording
 from ..errors import ConfigError
 from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
 from .features import DEFAULT_MODE, compute_bank, mode_groups, select_features
-from .windows import common_length_frames, draw_windows, window_frames
+from .windows import WINDOW_PLACEMENTS, common_length_frames, draw_contact_windows, draw_windows, window_frames
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "evaluate", "trial_folds", "trial_cv", "descriptor_seconds"]
 
@@ -70,6 +70,9 @@ class EvalConfig:
         PA variant (:class:`~..core.learning.PassiveAggressive`): default the
         max-loss update with averaged weights; ``"prediction"`` and ``False``
         are the paper's eq. 30-32.
+    windows : {"random", "contact"}
+        Window placement: seeded random positions in the common-length crop,
+        or random positions wholly in contact (:func:`~.windows.draw_contact_windows`).
     jobs : int
     cache_dir : str or None
     progress : bool
@@ -91,6 +94,7 @@ class EvalConfig:
     pa_orders: int = 5
     pa_update: str = RECOMMENDED_PA_UPDATE
     pa_average: bool = RECOMMENDED_PA_AVERAGE
+    windows: str = "random"
     jobs: int = 2
     cache_dir: str | None = "build/cache"
     progress: bool = False
@@ -136,8 +140,24 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
     rate = 100.0 if abs(rate - 100.0) < 1.0 else rate
     n_train = window_frames(cfg.window, rate, common)
     n_test = window_frames(cfg.test_window or cfg.window, rate, common)
-    w_train = draw_windows(train, n_train, common, cfg.train_per_trial, cfg.seed)
-    w_test = draw_windows(test, n_test, common, cfg.test_per_trial, cfg.seed + 1)
+    without: list[str] = []
+    if cfg.windows == "random":
+        w_train = draw_windows(train, n_train, common, cfg.train_per_trial, cfg.seed)
+        w_test = draw_windows(test, n_test, common, cfg.test_per_trial, cfg.seed + 1)
+    elif cfg.windows == "contact":
+        from ..core.robot import load_robot
+
+        robot = load_robot("shadow_hand")
+        npc, ft = robot.cell_types["biotac"].force.n_per_count, robot.contact.force_threshold_n
+        w_train, miss_tr = draw_contact_windows(train, n_train, cfg.train_per_trial, cfg.seed, npc, ft)
+        w_test, miss_te = draw_contact_windows(test, n_test, cfg.test_per_trial, cfg.seed + 1, npc, ft)
+        without = [f"{r.class_name} trial {r.trial}" for r in miss_tr + miss_te]
+        if not w_train or not w_test:
+            raise ConfigError(f"no {'training' if not w_train else 'test'} window of {n_train} frames lies wholly "
+                              f"in contact (force >= {ft:g} N): shorten --window, or check the tare", key="windows")
+    else:
+        raise ConfigError(f"windows must be one of {', '.join(WINDOW_PLACEMENTS)}, got {cfg.windows!r}",
+                          key="windows")
     # Each split's windows are looked up in that split's recordings only: (material, trial) names a
     # recording uniquely inside one folder, not across two.
     sub = "subwindows" in mode_groups(cfg.mode)
@@ -149,6 +169,7 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
     X_te, _ = select_features(b_test, cfg.mode, gate=cfg.gate, drop=cfg.drop)
     y_tr, y_te = b_train.y, b_test.y
     classes = np.unique(np.concatenate([y_tr, y_te]))
+    names = {r.material: r.class_name for r in list(train) + list(test)}
     missing = sorted(set(y_te) - set(y_tr))
     if missing:
         raise ConfigError(f"test materials {missing} have no training trials")
@@ -165,7 +186,8 @@ def evaluate(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], 
         "train_trials": sorted({r.trial for r in train}),
         "test_trials": sorted({r.trial for r in test}),
         "classes": [int(c) for c in classes],
-        "class_names": [MATERIAL_NAMES.get(int(c), f"mat{c}") for c in classes],
+        "class_names": [names[int(c)] for c in classes],
+        "trials_without_contact_window": without,
         "in_contact_fraction": float(np.mean(np.concatenate([b_train.in_contact, b_test.in_contact]))),
         "descriptor_s_per_window": descriptor_seconds(b_test, cfg.mode),
         "classifiers": {},

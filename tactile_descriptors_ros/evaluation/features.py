@@ -75,7 +75,8 @@ from ..core.aggregation import body_part_layout, cell_features, contact_gate, re
 from ..core.descriptors import hjorth
 from ..core.robot import CellType, RobotDescription, load_robot
 from ..core.scaling import activity_mask, log_activity
-from ..datasets.biotac_slide import PAC_PER_FRAME, BiotacRecording
+from ..datasets.biotac_slide import PAC_PER_FRAME
+from ..datasets.recording import BiotacRecording
 from ..errors import ConfigError
 from .windows import Window
 
@@ -442,7 +443,7 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
     cpath = (_cache_path(Path(cache_dir), n_frames, threshold, cell_type.force.n_per_count)
              if cache_dir else None)
     cache = _load_cache(cpath) if cpath else {}
-    stamps = {r.path: _file_stamp(r.path) for r in recordings}
+    stamps = {r.path: _file_stamp(r.source_file) for r in recordings}
     todo: dict[str, list[int]] = {}
     for w in windows:
         rec = by_key.get((w.material, w.trial))

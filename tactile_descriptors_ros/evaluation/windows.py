@@ -11,6 +11,13 @@ of frames, and a window's position carries no class information.
 
 Positions are drawn from a generator seeded by ``(seed, material, trial,
 length)``, so they do not depend on which other trials are loaded.
+
+Contact windows (``tactile evaluate --windows contact``) lie wholly in
+contact: every frame's force (PDC x n_per_count) is at least F_t.  Their
+positions are drawn among the starts where that holds, anywhere in the
+trial (recordings from a gripper that opens and closes hold long stretches
+out of contact, where random windows would describe nothing).  A trial
+without such a stretch gives no window, and is reported.
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..datasets.biotac_slide import BiotacRecording, load_recordings
+from ..datasets.recording import BiotacRecording
+from ..datasets.sources import read_source
 from ..errors import ConfigError
 
 __all__ = [
@@ -32,8 +40,13 @@ __all__ = [
     "window_frames",
     "Window",
     "draw_windows",
+    "draw_contact_windows",
+    "WINDOW_PLACEMENTS",
     "load_split",
 ]
+
+#: How ``tactile evaluate`` places windows: seeded random positions in the crop, or wholly in contact.
+WINDOW_PLACEMENTS = ("random", "contact")
 
 _RANGE = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+))?\s*$")
 
@@ -164,7 +177,57 @@ def draw_windows(recordings: Sequence[BiotacRecording], n_frames: int, common_fr
     return out
 
 
+def draw_contact_windows(recordings: Sequence[BiotacRecording], n_frames: int, per_trial: int, seed: int,
+                         n_per_count: float, force_threshold_n: float
+                         ) -> tuple[list[Window], list[BiotacRecording]]:
+    """Seeded random windows lying wholly in contact (every frame's force >= F_t).
+
+    Parameters
+    ----------
+    recordings : sequence of BiotacRecording
+    n_frames : int
+        Window length in frames.
+    per_trial : int
+        Windows per trial (fewer when the trial has fewer contact positions; drawn without repetition).
+    seed : int
+    n_per_count : float
+        Force per PDC count (the cell type's force scale).
+    force_threshold_n : float
+        F_t (eq. 13).
+
+    Returns
+    -------
+    windows : list of Window
+    without : list of BiotacRecording
+        Trials with no window of ``n_frames`` in contact (they give no window).
+    """
+    out: list[Window] = []
+    without: list[BiotacRecording] = []
+    for r in recordings:
+        contact = r.force_n(n_per_count) >= force_threshold_n
+        if r.n_frames < n_frames:
+            without.append(r)
+            continue
+        # a start s is valid when frames s .. s + n_frames - 1 are all in contact
+        run = np.convolve(contact.astype(np.int64), np.ones(n_frames, dtype=np.int64), mode="valid")
+        starts = np.flatnonzero(run == n_frames)
+        if starts.size == 0:
+            without.append(r)
+            continue
+        rng = np.random.default_rng([int(seed), int(r.material), int(r.trial), int(n_frames), 1])
+        chosen = np.sort(rng.choice(starts, size=min(per_trial, starts.size), replace=False))
+        out.extend(Window(r.material, r.trial, int(s), n_frames) for s in chosen)
+    return out, without
+
+
 def load_split(data_dir: str | Path, trials: Sequence[int] | None,
-               materials: Sequence[int] | None = None) -> list[BiotacRecording]:
-    """Load the recordings of a split (see :func:`~..datasets.biotac_slide.load_recordings`)."""
-    return load_recordings(data_dir, trials=trials, materials=materials)
+               materials: Sequence[int | str] | None = None, mapping: str | Path | None = None,
+               report=None) -> list[BiotacRecording]:
+    """Load the recordings of a split from any source :func:`~..datasets.sources.read_source` reads.
+
+    ``materials`` selects classes by number or name.  Selecting trials or
+    classes the source does not hold is a :class:`ConfigError` naming what it holds.
+    """
+    classes = None if materials is None else [str(m) for m in materials]
+    return read_source(data_dir, mapping, trials=None if trials is None else list(trials), classes=classes,
+                       report=report)

@@ -552,7 +552,7 @@ def fit_materials(data_dir: str | Path, trials: Iterable[int] | None = None, pro
     Parameters
     ----------
     data_dir : path
-        Folder holding ``raw_data/`` (see :func:`~tactile_descriptors_ros.datasets.biotac_slide.find_recordings`).
+        Folder holding ``raw_data/`` (see :func:`~tactile_descriptors_ros.datasets.biotac_slide.load_recordings`).
     trials : iterable of int, optional
         Trials to use (default: all found).
     progress : bool
@@ -560,14 +560,12 @@ def fit_materials(data_dir: str | Path, trials: Iterable[int] | None = None, pro
     **kwargs
         Passed to :func:`fit_material`.
     """
-    from ..datasets.biotac_slide import MATERIAL_NAMES, find_recordings, read_biotac_csv
+    from ..datasets.biotac_slide import load_recordings
 
     trial_list = list(trials) if trials is not None else None
-    paths = find_recordings(data_dir, trials=trial_list)
-    by_mat: dict[int, list[Path]] = {}
-    for p in paths:
-        mat = int(p.name.split("_")[0][3:])
-        by_mat.setdefault(mat, []).append(p)
+    by_mat: dict[int, list[Any]] = {}
+    for rec in load_recordings(data_dir, trials=trial_list):
+        by_mat.setdefault(rec.material, []).append(rec)
     iterator: Iterable[int] = sorted(by_mat)
     if progress:
         from tqdm import tqdm
@@ -575,8 +573,8 @@ def fit_materials(data_dir: str | Path, trials: Iterable[int] | None = None, pro
         iterator = tqdm(list(iterator), desc="fit textures", unit="material")
     models = []
     for mat in iterator:
-        recs = [read_biotac_csv(p) for p in by_mat[mat]]
-        name = MATERIAL_NAMES.get(mat, f"mat{mat}")
+        recs = by_mat[mat]
+        name = recs[0].class_name
         src = {
             "dataset": Path(data_dir).name,
             "material": mat,

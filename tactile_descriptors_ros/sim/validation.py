@@ -104,7 +104,7 @@ def compare_with_recordings(data_dir: str | Path, trials: Sequence[int] | None =
     (:func:`~tactile_descriptors_ros.sim.textures.fit_material`), so the
     force decay along a recording is represented as it is in the model.
     """
-    from ..datasets.biotac_slide import MATERIAL_NAMES, load_recordings
+    from ..datasets.biotac_slide import load_recordings
 
     recs = load_recordings(data_dir, trials=list(trials) if trials is not None else None,
                            materials=list(materials) if materials is not None else None)
@@ -120,6 +120,6 @@ def compare_with_recordings(data_dir: str | Path, trials: Sequence[int] | None =
             for start in range(skip, r.n_frames - n_frames + 1, n_frames):
                 c = r.crop_frames(start, start + n_frames)
                 real.append(trial_quantities(c.pac.astype(np.float64), c.electrodes.astype(np.float64)))
-        name = MATERIAL_NAMES.get(mat, f"mat{mat}")
+        name = rs[0].class_name
         out.append(MaterialComparison(name, np.array(real), simulated_trials(name, n_sim, seed, window_s)))
     return out

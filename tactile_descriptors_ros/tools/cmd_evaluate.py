@@ -5,37 +5,76 @@ Example::
     tactile evaluate --train ../shared/data/biotac_slide_20_50 --test ../shared/data/biotac_slide_20_50 \\
         --train-trials 1-20 --test-trials 21-30 --classifier all --window 2 --json
 
-Trials default to 1-20 for training and 21-30 for testing when both folders
-are the same, and to every trial of each folder when they differ (a model
-trained on one set of recordings, scored on another).
+--train and --test take whatever ``tactile import`` takes (a folder or file
+of tables read through ``--mapping``, Shadow or UPenn bags) and the bags it
+writes.  Splits are always by trial: when both name the same source, trials
+default to the first two thirds for training and the rest for testing (1-20
+and 21-30 of 30), and the two ranges must not share a trial; when they
+differ, every trial of each.  A range naming trials or classes the data do
+not hold is an error listing what they hold.  ``--windows contact`` draws
+windows wholly in contact instead of at random positions.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["register", "run", "default_trials"]
+__all__ = ["register", "run", "default_trials", "split_trials"]
 
 
 def default_trials(train_dir: str, test_dir: str, train_text: str | None,
                    test_text: str | None) -> tuple[list[int] | None, list[int] | None]:
-    """Trial lists of the two splits (``None`` = every trial of that folder).
+    """Trial lists of the two splits as given (``None`` = not given, or ``all``).
 
-    Unset ranges default to 1-20 / 21-30 when both splits read the same
-    folder (disjoint by construction), and to every trial otherwise.
+    Unset ranges of one source are filled in by :func:`split_trials` once
+    the source's trials are known; of two sources they mean every trial.
     """
-    from pathlib import Path
-
     from ..evaluation.windows import parse_trials
 
-    same = Path(train_dir).resolve() == Path(test_dir).resolve()
-    train = parse_trials(train_text if train_text is not None else ("1-20" if same else "all"))
-    test = parse_trials(test_text if test_text is not None else ("21-30" if same else "all"))
+    return (parse_trials(train_text) if train_text is not None else None,
+            parse_trials(test_text) if test_text is not None else None)
+
+
+def split_trials(trials: list[int], train: list[int] | None, test: list[int] | None,
+                 train_given: bool, test_given: bool) -> tuple[list[int], list[int]]:
+    """Disjoint train and test trials of one source.
+
+    Unset: the first two thirds of the trials (rounded) train, the rest test;
+    one range set: the other is the remaining trials.
+
+    Raises
+    ------
+    ConfigError
+        When the two ranges share trials, or a split is empty.
+    """
+    have = sorted(trials)
+    if not train_given and not test_given:
+        k = int(round(len(have) * 2 / 3))
+        train, test = have[:k], have[k:]
+    elif not test_given:
+        train = have if train is None else train
+        test = [t for t in have if t not in set(train)]
+    elif not train_given:
+        test = have if test is None else test
+        train = [t for t in have if t not in set(test)]
+    train = have if train is None else train
+    test = have if test is None else test
+    shared = sorted(set(train) & set(test))
+    if shared:
+        from ..datasets.sources import format_numbers
+
+        raise ConfigError(f"--train-trials and --test-trials share trials {format_numbers(shared)} of one source: "
+                          "splits are by trial, use disjoint ranges", key="trials")
+    if not train or not test:
+        raise ConfigError(f"the source holds trials {have}: too few to split into training and test trials",
+                          key="trials")
     return train, test
 
 
@@ -49,14 +88,22 @@ def register(subparsers) -> None:
         "evaluate", help="train and score the paper's classifiers on recorded BioTac trials",
         description="Crop every trial to the common length (no duration leak), draw seeded random windows, "
         "compute descriptors (cached in build/cache), train on --train trials and score on --test trials.")
-    p.add_argument("--train", required=True, help="folder of training recordings (holding raw_data/)")
-    p.add_argument("--test", required=True, help="folder of test recordings (may be the same folder)")
+    p.add_argument("--train", required=True,
+                   help="training recordings: a folder or file of tables, bags, or a bag from tactile import")
+    p.add_argument("--test", required=True, help="test recordings (may be the same source)")
+    p.add_argument("--mapping", default=None,
+                   help="mapping of the tables (file or shipped name; default biotac_slide_20_50; bags need none)")
+    p.add_argument("--test-mapping", default=None, help="mapping of --test if different from --mapping")
     p.add_argument("--train-trials", default=None,
-                   help="trial range, e.g. 1-20, 1-5,8 or all (default: 1-20 if --train and --test are the "
-                   "same folder, else all)")
+                   help="trial range, e.g. 1-20, 1-5,8 or all (default: the first two thirds of the trials if "
+                   "--train and --test are the same source, else all)")
     p.add_argument("--test-trials", default=None,
-                   help="trial range (default: 21-30 if --train and --test are the same folder, else all)")
-    p.add_argument("--materials", default=None, help="material range (default: all)")
+                   help="trial range (default: the trials not trained on if the same source, else all)")
+    p.add_argument("--materials", "--classes", dest="materials", default=None,
+                   help="classes by number or name, e.g. 1-20 or cork,felt (default: all)")
+    p.add_argument("--windows", default="random", choices=["random", "contact"],
+                   help="window placement: random positions in the common crop (default), or random positions "
+                   "wholly in contact (force >= F_t in every frame)")
     p.add_argument("--classifier", default="svm", choices=["svm", "pa", "gmm", "all"])
     p.add_argument("--window", default="2", help="window in seconds, or 'whole' (the common length)")
     p.add_argument("--test-window", default=None, help="test window if different (exploration-time protocol)")
@@ -90,19 +137,40 @@ def run(args: argparse.Namespace) -> int:
     from ..evaluation.experiments import CLASSIFIERS, EvalConfig, evaluate
     from ..evaluation.windows import load_split, parse_trials
 
+    from ..datasets.sources import LoadReport, align_classes, check_selection
+    from ..tools.cmd_import import parse_classes
+
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
-    materials = parse_trials(args.materials) if args.materials else None
+    materials = parse_classes(args.materials) if args.materials else None
     if args.train_windows < 1 or args.test_windows < 1 or args.cv_repeats < 1:
         raise ConfigError("--train-windows, --test-windows and --cv-repeats must be >= 1")
     classifiers = CLASSIFIERS if args.classifier == "all" else (args.classifier,)
     drop = tuple(q.strip() for q in args.drop.split(",") if q.strip())
-    train = load_split(args.train, train_trials, materials)
-    test = load_split(args.test, test_trials, materials)
+    test_mapping = args.test_mapping or args.mapping
+    reports = [LoadReport(args.train, ""), LoadReport(args.test, "")]
+    if Path(args.train).resolve() == Path(args.test).resolve() and test_mapping == args.mapping:
+        both = None  # with both ranges given, only their trials are read
+        if train_trials is not None and test_trials is not None:
+            both = sorted(set(train_trials) | set(test_trials))
+        every = load_split(args.train, both, materials, args.mapping, report=reports[0])
+        reports = reports[:1]
+        train_trials, test_trials = split_trials(sorted({r.trial for r in every}), train_trials, test_trials,
+                                                 args.train_trials is not None, args.test_trials is not None)
+        train = check_selection(every, train_trials, None, args.train)
+        test = check_selection(every, test_trials, None, args.test)
+    else:
+        train = load_split(args.train, train_trials, materials, args.mapping, report=reports[0])
+        test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
+    train, test = align_classes(train, test)
+    for rep in reports:
+        for line in rep.tare_lines():
+            print(f"{rep.source}: {line}", file=sys.stderr)
     cfg = EvalConfig(window=args.window, test_window=args.test_window, mode=args.channels,
                      classifiers=tuple(classifiers), seed=args.seed, train_per_trial=args.train_windows,
                      test_per_trial=args.test_windows, scaling=args.scaling, gate=args.gate, drop=drop,
                      pa_update=args.pa_update, pa_average=args.pa_average,
-                     cv_repeats=args.cv_repeats, jobs=args.jobs, cache_dir=args.cache or None,
+                     cv_repeats=args.cv_repeats, windows=args.windows, jobs=args.jobs,
+                     cache_dir=args.cache or None,
                      progress=True)
     result = evaluate(train, test, cfg)
     if args.json:
@@ -113,8 +181,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(f"descriptor mode {args.channels} ({result['n_features']} values), window {args.window} s "
           f"(test {args.test_window or args.window}), crop {result['common_length_s']:.2f} s; "
-          f"{result['n_train']} training and {result['n_test']} test windows; contact gate "
-          f"{'on' if args.gate else 'off'}")
+          f"{result['n_train']} training and {result['n_test']} test windows ({args.windows} positions); "
+          f"contact gate {'on' if args.gate else 'off'}")
+    if result["trials_without_contact_window"]:
+        miss = result["trials_without_contact_window"]
+        print(f"{len(miss)} trials have no window wholly in contact and give none: {', '.join(miss[:10])}"
+              + (" ..." if len(miss) > 10 else ""))
     for name, res in result["classifiers"].items():
         line = f"{name}: accuracy {100 * res['accuracy']:.1f} %"
         if name == "svm":
@@ -126,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
             line += f", NMI {res['nmi']:.3f}"
         print(line)
         cm = np.array(res["confusion"])
-        print("  confusion (rows: true " + " ".join(str(c) for c in result["classes"]) + "):")
+        print("  confusion (rows: true " + " ".join(str(c) for c in result["classes"]) + "; "
+              + ", ".join(f"{c} {n}" for c, n in zip(result["classes"], result["class_names"])) + "):")
         for c, row in zip(result["classes"], cm):
             print(f"  {c:>3} " + " ".join(f"{v:3d}" for v in row))
     return 0

@@ -1,12 +1,16 @@
-"""``tactile import DATA_DIR -o BAG``: turn the BioTac sliding recordings into a replayable bag.
+"""``tactile import SOURCE -o BAG``: turn BioTac recordings into a replayable bag.
 
-Each trial ``raw_data/mat<M>/mat<M>_<N>_bio.csv`` becomes BioTacFrameBatch
-messages (10 frames = 100 ms a message, full-rate PAC with per-sample
+SOURCE is a folder or file of tables (CSV, NPZ, HDF5) described by a mapping
+file (``--mapping``; default the shipped ``biotac_slide_20_50`` layout
+``raw_data/mat<M>/mat<M>_<N>_bio.csv``), or ROS 1/ROS 2 bags of Shadow Robot
+``sr_robot_msgs/BiotacAll`` or UPenn ``biotac_sensors/BioTacHand``.  Each
+trial becomes BioTacFrameBatch messages (10 frames = 100 ms a message, full-rate PAC with per-sample
 offsets, CSV time stamps), followed by a release gap of no-contact frames and
-a Label with the material's name, so ``tactile replay`` drives the live
-window and classifier nodes exactly as a robot would.  Prints how many
+a Label with the class name taken from the data, so ``tactile replay`` drives
+the live window and classifier nodes exactly as a robot would.  Untared
+pressure is tared per trial (and said so); every import prints how many
 frames and trials pass the contact gate (force from PDC >= F_t).
-See docs/bags.md.
+See docs/import.md.
 """
 
 from __future__ import annotations
@@ -16,17 +20,41 @@ import json
 import sys
 from pathlib import Path
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "parse_classes"]
+
+
+def parse_classes(text: str) -> list[str]:
+    """``"1-3,cork"`` -> ``["1", "2", "3", "cork"]``: numbers and ranges of numbers, or class names."""
+    from ..bags.importer import parse_index_ranges
+
+    out: list[str] = []
+    for part in (p.strip() for p in text.split(",")):
+        if not part:
+            continue
+        if part.replace("-", "").isdigit():
+            out.extend(str(i) for i in parse_index_ranges(part))
+        else:
+            out.append(part)
+    return out
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    p = subparsers.add_parser("import", help="convert BioTac CSV recordings into a bag",
+    p = subparsers.add_parser("import", help="convert BioTac recordings (tables or bags) into a bag",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("data_dir", type=Path, help="folder holding raw_data/mat<M>/mat<M>_<N>_bio.csv")
+    p.add_argument("data_dir", type=Path, metavar="SOURCE",
+                   help="folder or file of tables, or bags (a .bag file, a rosbag2 folder, or a folder of them)")
     p.add_argument("-o", "--output", type=Path, required=True, help="bag directory to create")
+    p.add_argument("--mapping", default=None,
+                   help="mapping file or shipped mapping name (default: biotac_slide_20_50 for tables; "
+                   "bags need none)")
+    p.add_argument("--class", dest="class_name", default=None, help="class of every trial (overrides the mapping)")
+    p.add_argument("--tare", choices=("auto", "per_trial", "none"), default=None,
+                   help="tare PDC and electrodes per trial: auto (when the resting level is far from zero; "
+                   "the mapping's default), per_trial, none")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag storage (default mcap)")
     p.add_argument("--trials", default=None, help="trials, e.g. 1-30 or 1,3,5 (default: all found)")
-    p.add_argument("--materials", default=None, help="materials, e.g. 1-20 or 2,12 (default: all found)")
+    p.add_argument("--materials", "--classes", dest="materials", default=None,
+                   help="classes by number or name, e.g. 1-20, 2,12 or cork,felt (default: all found)")
     p.add_argument("--robot", default="shadow_hand", help="robot description (scales, sensor name, F_t)")
     p.add_argument("--body-part", default="index", help="body part carrying the BioTac (default index)")
     p.add_argument("--frames-per-batch", type=int, default=10, help="frames per message (default 10 = 100 ms)")
@@ -51,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         DEFAULT_BIOTAC_TOPIC,
         DEFAULT_LABEL_TOPIC,
         ImportOptions,
-        import_biotac_slide,
+        import_source,
         parse_index_ranges,
     )
 
@@ -62,19 +90,25 @@ def run(args: argparse.Namespace) -> int:
         biotac_topic=args.biotac_topic or DEFAULT_BIOTAC_TOPIC, label_topic=args.label_topic or DEFAULT_LABEL_TOPIC,
     )
     trials = parse_index_ranges(args.trials) if args.trials else None
-    materials = parse_index_ranges(args.materials) if args.materials else None
+    classes = parse_classes(args.materials) if args.materials else None
 
-    def progress(paths):
-        return tqdm(paths, desc="import", unit="trial", file=sys.stderr, disable=None)
+    def progress(recs):
+        return tqdm(recs, desc="import", unit="trial", file=sys.stderr, disable=None)
 
-    report = import_biotac_slide(args.data_dir, args.output, trials=trials, materials=materials,
-                                 options=options, storage=args.storage, progress=progress)
+    report = import_source(args.data_dir, args.output, mapping=args.mapping, trials=trials, classes=classes,
+                           class_name=args.class_name, tare=args.tare, options=options, storage=args.storage,
+                           progress=progress)
     if args.json:
         print(json.dumps(report.to_dict()))
         return 0
     print(f"wrote {args.output} ({args.storage}): {len(report.trials)} trials, {report.batches} BioTacFrameBatch "
           f"on {options.biotac_topic.format(body_part=options.body_part)} ({report.frames} recorded + {report.release_frames} release frames), "
           f"{report.labels} Label on {options.label_topic}")
+    names = sorted({(t.material, t.material_name) for t in report.trials})
+    print(f"classes ({len(names)}, from the data; mapping {report.mapping}): "
+          + ", ".join(f"{m} {n}" for m, n in names))
+    for line in report.tare_notes:
+        print(line)
     print(f"contact gate (force = PDC x {report.force_n_per_count:g} N/count >= {report.force_threshold_n:g} N): "
           f"{report.frames_in_contact}/{report.frames} frames ({100 * report.contact_fraction:.1f} %), "
           f"{report.trials_passing_gate}/{len(report.trials)} trials by mean force")

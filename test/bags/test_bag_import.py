@@ -9,7 +9,7 @@ import pytest
 
 from tactile_descriptors_ros.bags.importer import ImportOptions, import_biotac_slide, parse_index_ranges
 from tactile_descriptors_ros.bags.io import BagReader
-from tactile_descriptors_ros.datasets.biotac_slide import MATERIAL_NAMES, read_biotac_csv
+from tactile_descriptors_ros.datasets.biotac_slide import read_biotac_csv
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 from tactile_descriptors_ros.tools.cli import main
 
@@ -37,7 +37,7 @@ def test_import_two_materials_two_trials(tmp_path, biotac_data_dir):
         assert set(info.topics) == {"/tactile/index/frames", "/tactile/label"}
         msgs = [(m, reader.deserialize(m)) for m in reader.messages()]
     labels = [d for m, d in msgs if m.topic == "/tactile/label"]
-    assert [d.class_name for d in labels] == [MATERIAL_NAMES[m] for m, _ in order]
+    assert [d.class_name for d in labels] == [recs[k].class_name for k in order] == ["cotton", "cork"] * 2
     batches = [(m, d) for m, d in msgs if m.topic == "/tactile/index/frames"]
     assert len(batches) == report.batches
     seqs = [d.first_frame_sequence for _, d in batches]

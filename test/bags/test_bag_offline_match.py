@@ -29,7 +29,7 @@ def _offline(biotac_data_dir: Path):
     from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
     from tactile_descriptors_ros.core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
     from tactile_descriptors_ros.core.robot import load_robot
-    from tactile_descriptors_ros.datasets.biotac_slide import MATERIAL_NAMES, read_biotac_csv
+    from tactile_descriptors_ros.datasets.biotac_slide import read_biotac_csv
 
     robot = load_robot("shadow_hand")
     n_per_count = robot.cell_types["biotac"].force.n_per_count
@@ -44,7 +44,7 @@ def _offline(biotac_data_dir: Path):
             clf = OnlineClassifier(d.labels, update=RECOMMENDED_PA_UPDATE, average=RECOMMENDED_PA_AVERAGE)
         clf.observe(d.values)
         guess, _ = clf.predict(d.values)
-        truth = MATERIAL_NAMES[m]
+        truth = rec.class_name
         correct += int(guess == truth)
         predictions.append(guess)
         values.append(index)
@@ -55,7 +55,6 @@ def _offline(biotac_data_dir: Path):
 def test_imported_real_recording_through_live_graph_matches_offline(ros_context, tmp_path, biotac_data_dir,
                                                                    repo_dir):
     from tactile_descriptors_ros.bags.importer import ImportOptions, import_biotac_slide
-    from tactile_descriptors_ros.datasets.biotac_slide import MATERIAL_NAMES
 
     bag = tmp_path / "real"
     report = import_biotac_slide(biotac_data_dir, bag, trials=TRIALS, materials=MATERIALS,
@@ -66,7 +65,7 @@ def test_imported_real_recording_through_live_graph_matches_offline(ros_context,
     n = len(report.trials)
     assert n == len(TRIALS) * len(MATERIALS)
     assert len(desc) == n and len(pred) == n, "one exploration per trial"
-    truth = [MATERIAL_NAMES[m] for _ in TRIALS for m in MATERIALS]
+    truth = [t.material_name for t in report.trials]
     live_pred = [p[2] if p[1] else None for p in pred]
     live_acc = sum(a == b for a, b in zip(live_pred, truth)) / n
 

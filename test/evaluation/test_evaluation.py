@@ -166,15 +166,19 @@ def test_cli_rejects_overlapping_trials(biotac_data_dir, tmp_path, capsys):
     assert "share" in capsys.readouterr().err
 
 
-def test_default_trials_same_folder_is_the_dev_split_other_folder_is_everything(tmp_path):
-    from tactile_descriptors_ros.tools.cmd_evaluate import default_trials
+def test_one_source_splits_by_trial_two_thirds_to_training_by_default():
+    from tactile_descriptors_ros.tools.cmd_evaluate import default_trials, split_trials
 
-    a, b = tmp_path / "a", tmp_path / "b"
-    a.mkdir()
-    b.mkdir()
-    assert default_trials(str(a), str(a) + "/", None, None) == (list(range(1, 21)), list(range(21, 31)))
-    assert default_trials(str(a), str(b), None, None) == (None, None)
-    assert default_trials(str(a), str(b), "1-3", "all") == ([1, 2, 3], None)
+    thirty = list(range(1, 31))
+    assert split_trials(thirty, None, None, False, False) == (list(range(1, 21)), list(range(21, 31)))
+    assert split_trials([3, 5, 9], None, None, False, False) == ([3, 5], [9])
+    assert split_trials(thirty, [1, 2], None, True, False) == ([1, 2], list(range(3, 31)))
+    with pytest.raises(ConfigError, match="share trials 5"):
+        split_trials(thirty, [1, 5], [5, 6], True, True)
+    with pytest.raises(ConfigError, match="too few"):
+        split_trials([4], None, None, False, False)
+    assert default_trials("a", "b", None, None) == (None, None)
+    assert default_trials("a", "b", "1-3", "all") == ([1, 2, 3], None)
 
 
 @pytest.mark.realdata

@@ -1,0 +1,322 @@
+"""One reader for every recording ``tactile import`` and ``tactile evaluate`` accept.
+
+:func:`read_source` turns a folder or file (tables described by a mapping,
+or ROS 1/ROS 2 bags) into :class:`~.recording.BiotacRecording` objects:
+
+1. the mapping (a shipped name or a file; for a bag, the bag default) says
+   where trials are and which column is which channel;
+2. each trial's class and trial number come from the data (a folder, file
+   or group name by pattern, a label column, the bag's labels) or from an
+   option (``class_name``);
+3. a trial whose resting PDC is far from zero is tared (``tare: auto``),
+   and :class:`LoadReport` says which;
+4. a trial or class selection that names what the data do not hold is an
+   error listing what exists.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, DataFormatError
+from .bagfiles import find_bags, is_bag, read_bag_frames
+from .mapping import Mapping, NameRule, load_mapping, parse_mapping
+from .recording import UNTARED_REST_COUNTS, BiotacRecording, rest_level, spread_pac_stamps, tare_recording
+from .tables import Table, Unit, find_units, frame_stamps_ns, read_table, split_runs, table_channels
+
+__all__ = ["DEFAULT_MAPPING", "BAG_MAPPING", "LoadReport", "read_source", "resolve_mapping", "check_selection",
+           "format_numbers", "align_classes"]
+
+#: Mapping used for a folder of tables when none is given.
+DEFAULT_MAPPING = "biotac_slide_20_50"
+#: Mapping of bags when none is given: class from the bag's folder, trials numbered in order.
+BAG_MAPPING = {"format": "bag", "class": {"from": "folder"}, "trial": {"from": "order"}}
+_DIGITS = re.compile(r"^\d+$")
+
+
+@dataclass
+class LoadReport:
+    """What reading a source found: trials, classes, and which trials were tared."""
+
+    source: str
+    mapping: str
+    tared: list[tuple[str, int, float]] = field(default_factory=list)
+    untared_detected: bool = False
+
+    def tare_lines(self) -> list[str]:
+        if not self.tared:
+            return []
+        levels = [lvl for _, _, lvl in self.tared]
+        why = "resting PDC far from zero: untared" if self.untared_detected else "tare: per_trial"
+        return [f"tared {len(self.tared)} trials per trial ({why}; PDC rest {min(levels):.0f}..{max(levels):.0f} "
+                f"counts subtracted, electrodes by their resting medians)"]
+
+
+def resolve_mapping(source: Path, mapping: str | Path | Mapping | None) -> Mapping:
+    """The mapping to read ``source`` with (a bag's default, or :data:`DEFAULT_MAPPING`)."""
+    if isinstance(mapping, Mapping):
+        return mapping
+    if mapping is not None:
+        return load_mapping(mapping)
+    if is_bag(source) or (source.is_dir() and any(is_bag(p) for p in source.iterdir())):
+        return parse_mapping(BAG_MAPPING, source="<bag default>")
+    return load_mapping(DEFAULT_MAPPING)
+
+
+def format_numbers(values: Sequence[int]) -> str:
+    """``[1, 2, 3, 5]`` -> ``"1-3,5"``."""
+    v = sorted(set(int(x) for x in values))
+    if not v:
+        return "none"
+    parts, start, prev = [], v[0], v[0]
+    for x in v[1:] + [None]:
+        if x is not None and x == prev + 1:
+            prev = x
+            continue
+        parts.append(f"{start}-{prev}" if prev > start else f"{start}")
+        if x is not None:
+            start = prev = x
+    return ",".join(parts)
+
+
+def check_selection(recordings: Sequence[BiotacRecording], trials: Sequence[int] | None,
+                    classes: Sequence[str] | None, where: str) -> list[BiotacRecording]:
+    """Keep the selected trials and classes; selecting what the data do not hold is an error.
+
+    ``classes`` entries match a class name or its number.
+
+    Raises
+    ------
+    ConfigError
+        Naming the trials or classes asked for but absent, and what exists.
+    """
+    out = list(recordings)
+    if classes is not None:
+        want = [str(c) for c in classes]
+        have_names = {r.class_name for r in out} | {str(r.material) for r in out}
+        absent = [c for c in want if c not in have_names]
+        if absent:
+            names = sorted({(r.material, r.class_name) for r in out})
+            raise ConfigError(f"{where}: no class {', '.join(absent)}; the data hold "
+                              + ", ".join(f"{m} {n}" for m, n in names), key="materials")
+        out = [r for r in out if r.class_name in want or str(r.material) in want]
+    if trials is not None:
+        have = {r.trial for r in out}
+        absent = sorted(set(int(t) for t in trials) - have)
+        if absent:
+            raise ConfigError(f"{where}: no trial {format_numbers(absent)}; the data hold trials "
+                              f"{format_numbers(sorted(have))}", key="trials")
+        out = [r for r in out if r.trial in set(trials)]
+    if not out:
+        raise ConfigError(f"{where}: the selection holds no recordings")
+    return out
+
+
+def _value(rule: NameRule, unit_names: dict[str, str], what: str, where: str) -> str | None:
+    if rule.source == "option":
+        return rule.value
+    if rule.source in ("folder", "file", "group"):
+        return rule.extract(unit_names[rule.source], what, where)
+    return None  # column, order, message: later
+
+
+def _names(unit: Unit, rules: Sequence[NameRule]) -> dict[str, str]:
+    return {r.source: unit.name_of(r.source, "class") for r in rules if r.source in ("folder", "file", "group")}
+
+
+@dataclass
+class _Trial:
+    class_value: str
+    trial_value: str | None
+    order_key: str
+    frames: dict
+    where: str
+    source_file: str
+
+
+def _table_trials(unit: Unit, mapping: Mapping, class_value: str | None, trial_value: str | None) -> list[_Trial]:
+    table = read_table(unit, mapping.format)
+    if table.n_rows == 0:
+        raise DataFormatError(f"{unit.path}: no frames")
+    cr, tr = mapping.class_rule, mapping.trial_rule
+    keys, key_names = [], []
+    for rule, what in ((cr, "class"), (tr, "trial")):
+        if rule.source == "column":
+            col = table.column(rule.column, f"{what}.column")
+            keys.append(np.asarray(col).astype(str))
+            key_names.append(what)
+    runs = list(split_runs(keys)) if keys else [np.arange(table.n_rows)]
+    out = []
+    for sel in runs:
+        sub = table.rows(sel) if keys else table
+        cv, tv = class_value, trial_value
+        for what, k in zip(key_names, keys):
+            raw = str(k[sel[0]])
+            rule = cr if what == "class" else tr
+            v = rule.extract(raw, what, unit.path) if rule.pattern is not None else raw
+            if what == "class":
+                cv = v
+            else:
+                tv = v
+        ch = table_channels(sub, mapping)
+        ch["frame_t_ns"] = frame_stamps_ns(sub, mapping, sub.n_rows)
+        where = unit.path if not keys else f"{unit.path} rows {int(sel[0]) + 2}..{int(sel[-1]) + 2}"
+        out.append(_Trial(str(cv), tv, f"{unit.path}:{int(sel[0]):09d}", ch, where, str(unit.file)))
+    return out
+
+
+def read_source(source: str | Path, mapping: str | Path | Mapping | None = None, *,
+                trials: Sequence[int] | None = None, classes: Sequence[str] | None = None,
+                class_name: str | None = None, tare: str | None = None,
+                report: LoadReport | None = None) -> list[BiotacRecording]:
+    """Read every trial of ``source`` as recordings, sorted by class number then trial.
+
+    Parameters
+    ----------
+    source : path
+        A folder of tables or bags, one table file, or one bag.
+    mapping : str, path or Mapping, optional
+        A shipped mapping's name, a mapping file, or a parsed mapping
+        (default: :data:`BAG_MAPPING` for bags, else :data:`DEFAULT_MAPPING`).
+    trials : sequence of int, optional
+        Trials to keep (default all); absent ones are an error.
+    classes : sequence of str, optional
+        Classes to keep, by name or number (default all); absent ones are an error.
+    class_name : str, optional
+        Class of every trial (overrides the mapping's class rule).
+    tare : {"auto", "per_trial", "none"}, optional
+        Overrides the mapping's ``tare``.
+    report : LoadReport, optional
+        Filled with what was tared.
+
+    Raises
+    ------
+    DataFormatError
+        For a file that does not hold what the mapping says (the column or key is named).
+    ConfigError
+        For a bad mapping or a selection the data do not hold.
+    """
+    src = Path(source)
+    m = resolve_mapping(src, mapping)
+    if class_name is not None:
+        m = replace(m, class_rule=NameRule(source="option", value=str(class_name)))
+    tare_mode = tare or m.tare
+    if report is not None:
+        report.mapping = m.source
+    rules = [m.class_rule, m.trial_rule]
+    raw: list[_Trial] = []
+    if m.format == "bag":
+        for bag in find_bags(src, None if m.files == "**/*" else m.files):
+            unit = Unit(bag)
+            names = _names(unit, rules)
+            cv = _value(m.class_rule, names, "class", str(bag))
+            tv = _value(m.trial_rule, names, "trial", str(bag))
+            for i, fr in enumerate(read_bag_frames(bag, sensor=m.sensor, topic=m.topic)):
+                c = cv if cv is not None else fr["label"]
+                if c is None:
+                    raise ConfigError(f"{bag}: the bag names no class: give one (--class or mapping key class)",
+                                      key="class")
+                t = tv if tv is not None else (None if fr["trial"] is None else str(fr["trial"]))
+                raw.append(_Trial(str(c), t, f"{bag}:{i:09d}", fr, fr["where"], str(bag)))
+    else:
+        for unit in find_units(src, m):
+            names = _names(unit, rules)
+            cv = _value(m.class_rule, names, "class", unit.path)
+            tv = _value(m.trial_rule, names, "trial", unit.path)
+            if classes is not None and cv is not None and m.class_rule.source != "column":
+                label = m.class_rule.names.get(cv, cv)
+                if cv not in classes and label not in classes:
+                    continue  # not selected: not even read (absent selections are checked below)
+            if trials is not None and tv is not None and _DIGITS.match(tv) and int(tv) not in trials:
+                continue
+            raw.extend(_table_trials(unit, m, cv, tv))
+    if not raw:
+        where = str(src)
+        if classes is not None or trials is not None:
+            raise ConfigError(f"{where}: no trial of the selected classes/trials: classes {list(classes or [])}, "
+                              f"trials {format_numbers(trials or [])}", key="materials")
+        raise DataFormatError(f"{where}: no trials found")
+    recs = _build(raw, m, tare_mode, report)
+    return check_selection(recs, trials, classes, str(src))
+
+
+def _number_map(values: Sequence[str]) -> dict[str, int]:
+    uniq = sorted(set(values))
+    if all(_DIGITS.match(v) for v in uniq):
+        return {v: int(v) for v in uniq}
+    return {v: i + 1 for i, v in enumerate(uniq)}
+
+
+def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | None) -> list[BiotacRecording]:
+    cnum = _number_map([t.class_value for t in raw])
+    by_class: dict[str, list[_Trial]] = {}
+    for t in raw:
+        by_class.setdefault(t.class_value, []).append(t)
+    recs = []
+    for cv, ts in by_class.items():
+        ts.sort(key=lambda t: t.order_key)
+        if all(t.trial_value is not None for t in ts):
+            tnum = _number_map([t.trial_value for t in ts])
+            numbers = [tnum[t.trial_value] for t in ts]
+        else:
+            numbers = list(range(1, len(ts) + 1))
+        if len(set(numbers)) != len(numbers):
+            dup = sorted({n for n in numbers if numbers.count(n) > 1})
+            raise DataFormatError(f"class {cv}: trial {dup[0]} appears twice "
+                                  f"({[t.where for t, n in zip(ts, numbers) if n == dup[0]]}); "
+                                  "the trial rule must tell trials apart", )
+        name = m.class_rule.names.get(cv, cv)
+        if _DIGITS.match(name):
+            name = f"mat{name}"
+        for t, num in zip(ts, numbers):
+            recs.append(_recording(t, cnum[cv], num, name, m))
+    recs.sort(key=lambda r: (r.material, r.trial))
+    out = []
+    for r in recs:
+        untared = rest_level(r.pdc) > UNTARED_REST_COUNTS
+        if tare_mode == "per_trial" or (tare_mode == "auto" and untared):
+            r = tare_recording(r)
+            if report is not None:
+                report.tared.append((r.class_name, r.trial, r.tare_counts[0]))
+                report.untared_detected |= tare_mode == "auto"
+        out.append(r)
+    return out
+
+
+def _recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> BiotacRecording:
+    fr = t.frames
+    pac2 = np.asarray(fr["pac"], dtype=np.int64)
+    k = int(pac2.shape[1])
+    frame_t = np.asarray(fr["frame_t_ns"], dtype=np.int64)
+    pac_t = fr.get("pac_t_ns")
+    pac_t = spread_pac_stamps(frame_t, k, t.where) if pac_t is None else np.asarray(pac_t, dtype=np.int64)
+    if pac_t.shape[0] > 1 and np.any(np.diff(pac_t) <= 0):
+        raise DataFormatError(f"{t.where}: PAC sample times do not increase")
+    return BiotacRecording(material=material, trial=trial, frame_t_ns=frame_t, pac=pac2.ravel(), pac_t_ns=pac_t,
+                           pdc=np.asarray(fr["pdc"], dtype=np.int64), tac=np.asarray(fr["tac"], dtype=np.int64),
+                           tdc=np.asarray(fr["tdc"], dtype=np.int64),
+                           electrodes=np.asarray(fr["electrodes"], dtype=np.int64), path=t.where,
+                           class_name=name, pac_per_frame=k, source_file=t.source_file)
+
+
+def align_classes(*splits: Sequence[BiotacRecording]) -> list[list[BiotacRecording]]:
+    """Give every class the same number in all splits (by class name), when the splits disagree.
+
+    Two sources that name classes by words number them by their own sorted
+    names; evaluation compares numbers, so they are made to agree.
+    """
+    pairs = {(r.material, r.class_name) for s in splits for r in s}
+    by_num: dict[int, set[str]] = {}
+    by_name: dict[str, set[int]] = {}
+    for n, c in pairs:
+        by_num.setdefault(n, set()).add(c)
+        by_name.setdefault(c, set()).add(n)
+    if all(len(v) == 1 for v in by_num.values()) and all(len(v) == 1 for v in by_name.values()):
+        return [list(s) for s in splits]
+    number = {c: i + 1 for i, c in enumerate(sorted(by_name))}
+    return [[replace(r, material=number[r.class_name]) for r in s] for s in splits]
