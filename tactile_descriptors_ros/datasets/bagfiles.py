@@ -233,8 +233,9 @@ def _read_batches(reader, conns, label_conns, path: Path) -> list[dict[str, Any]
             if sel.size:
                 cuts.append((sel, name, None))
     out = []
-    for sel, name, trial in cuts:
+    for i, (sel, name, trial) in enumerate(cuts):
         out.append({"frame_t_ns": ft[sel], "pac": pc[sel], "pac_t_ns": pt.reshape(-1, k)[sel].ravel(),
                     "pdc": pd[sel], "tac": ta[sel], "tdc": td[sel], "electrodes": el[sel].T.copy(),
-                    "label": name, "trial": trial, "where": f"{path}#{conns[0].topic}"})
+                    "label": name, "trial": trial,
+                    "where": f"{path}#{conns[0].topic}@{i + 1}"})
     return out

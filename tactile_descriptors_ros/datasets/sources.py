@@ -85,10 +85,14 @@ def format_numbers(values: Sequence[int]) -> str:
 
 
 def check_selection(recordings: Sequence[BiotacRecording], trials: Sequence[int] | None,
-                    classes: Sequence[str] | None, where: str) -> list[BiotacRecording]:
+                    classes: Sequence[str] | None, where: str,
+                    unread_trials: Sequence[int] = (), unread_classes: Sequence[str] = ()
+                    ) -> list[BiotacRecording]:
     """Keep the selected trials and classes; selecting what the data do not hold is an error.
 
-    ``classes`` entries match a class name or its number.
+    ``classes`` entries match a class name or its number; ``unread_trials``
+    are trials the source holds that were skipped unread (they are named
+    among what exists).
 
     Raises
     ------
@@ -101,16 +105,17 @@ def check_selection(recordings: Sequence[BiotacRecording], trials: Sequence[int]
         have_names = {r.class_name for r in out} | {str(r.material) for r in out}
         absent = [c for c in want if c not in have_names]
         if absent:
-            names = sorted({(r.material, r.class_name) for r in out})
+            names = {f"{r.material} {r.class_name}" if str(r.material) != r.class_name else r.class_name
+                     for r in out} | set(unread_classes)
             raise ConfigError(f"{where}: no class {', '.join(absent)}; the data hold "
-                              + ", ".join(f"{m} {n}" for m, n in names), key="materials")
+                              + ", ".join(sorted(names, key=lambda x: (len(x.split()[0]), x))), key="materials")
         out = [r for r in out if r.class_name in want or str(r.material) in want]
     if trials is not None:
         have = {r.trial for r in out}
         absent = sorted(set(int(t) for t in trials) - have)
         if absent:
             raise ConfigError(f"{where}: no trial {format_numbers(absent)}; the data hold trials "
-                              f"{format_numbers(sorted(have))}", key="trials")
+                              f"{format_numbers(sorted(have | set(unread_trials)))}", key="trials")
         out = [r for r in out if r.trial in set(trials)]
     if not out:
         raise ConfigError(f"{where}: the selection holds no recordings")
@@ -210,6 +215,8 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
         report.mapping = m.source
     rules = [m.class_rule, m.trial_rule]
     raw: list[_Trial] = []
+    unread: list[int] = []
+    unread_classes: list[str] = []
     if m.format == "bag":
         for bag in find_bags(src, None if m.files == "**/*" else m.files):
             unit = Unit(bag)
@@ -217,11 +224,13 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
             cv = _value(m.class_rule, names, "class", str(bag))
             tv = _value(m.trial_rule, names, "trial", str(bag))
             for i, fr in enumerate(read_bag_frames(bag, sensor=m.sensor, topic=m.topic)):
-                c = cv if cv is not None else fr["label"]
+                # A bag that labels its frames (this package's) names its classes and trials itself;
+                # only an explicit option overrides its class.
+                c = fr["label"] if fr["label"] is not None and m.class_rule.source != "option" else cv
                 if c is None:
                     raise ConfigError(f"{bag}: the bag names no class: give one (--class or mapping key class)",
                                       key="class")
-                t = tv if tv is not None else (None if fr["trial"] is None else str(fr["trial"]))
+                t = str(fr["trial"]) if fr["trial"] is not None else (tv if fr["label"] is None else None)
                 raw.append(_Trial(str(c), t, f"{bag}:{i:09d}", fr, fr["where"], str(bag)))
     else:
         for unit in find_units(src, m):
@@ -231,18 +240,21 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
             if classes is not None and cv is not None and m.class_rule.source != "column":
                 label = m.class_rule.names.get(cv, cv)
                 if cv not in classes and label not in classes:
+                    unread_classes.append(f"{cv} {label}" if cv != label else cv)
                     continue  # not selected: not even read (absent selections are checked below)
             if trials is not None and tv is not None and _DIGITS.match(tv) and int(tv) not in trials:
+                unread.append(int(tv))
                 continue
             raw.extend(_table_trials(unit, m, cv, tv))
     if not raw:
         where = str(src)
         if classes is not None or trials is not None:
             raise ConfigError(f"{where}: no trial of the selected classes/trials: classes {list(classes or [])}, "
-                              f"trials {format_numbers(trials or [])}", key="materials")
+                              f"trials {format_numbers(trials or [])}; the data hold trials "
+                              f"{format_numbers(unread)}", key="materials")
         raise DataFormatError(f"{where}: no trials found")
     recs = _build(raw, m, tare_mode, report)
-    return check_selection(recs, trials, classes, str(src))
+    return check_selection(recs, trials, classes, str(src), unread, sorted(set(unread_classes)))
 
 
 def _number_map(values: Sequence[str]) -> dict[str, int]:
