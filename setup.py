@@ -10,7 +10,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),
-    package_data={PACKAGE: ["sim/models/*.json"]},
+    package_data={PACKAGE: ["sim/models/*.json", "datasets/mappings/*.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
@@ -20,6 +20,7 @@ setup(
     ],
     install_requires=["numpy", "scipy", "scikit-learn", "PyYAML", "python-can", "pyserial",
                       "rosbags", "matplotlib", "tqdm"],
+    extras_require={"import": ["h5py"]},  # HDF5 tables for tactile import/evaluate
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="tactile_descriptors_ros maintainers",
