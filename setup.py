@@ -18,9 +18,14 @@ setup(
         ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
     ],
-    install_requires=["numpy", "scipy", "scikit-learn", "PyYAML", "python-can", "pyserial",
-                      "rosbags", "matplotlib", "tqdm"],
-    extras_require={"import": ["h5py"]},  # HDF5 tables for tactile import/evaluate
+    # What the robot needs (drivers, window node, classifier, bags, the tactile CLI);
+    # the evaluation, report, bench and simulated protocols need the "eval" extra:
+    # pip install .[eval]
+    install_requires=["numpy", "scipy", "PyYAML", "python-can", "pyserial", "rosbags"],
+    extras_require={
+        "eval": ["scikit-learn", "matplotlib", "tqdm", "threadpoolctl"],
+        "import": ["h5py"],  # HDF5 tables for tactile import/evaluate
+    },
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="tactile_descriptors_ros maintainers",

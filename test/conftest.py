@@ -16,6 +16,13 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
 _REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault("ROS_LOG_DIR", str(_REPO / "build" / "ros_log"))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# The wheels set no ament prefix: the venv is the prefix this package is indexed in
+# (make setup), as a sourced .venv/setup.bash would say.
+import sys  # noqa: E402
+
+if sys.prefix not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+    os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(
+        p for p in (sys.prefix, os.environ.get("AMENT_PREFIX_PATH", "")) if p)
 
 import pytest  # noqa: E402
 
@@ -33,6 +40,19 @@ def _have_ros() -> bool:
 
 
 HAVE_ROS = _have_ros()
+ROS2_CLI_DIR = SHARED_DIR / "ros2-cli"
+
+
+def _have_ros2cli() -> bool:
+    try:
+        import launch_ros  # noqa: F401
+        import ros2cli  # noqa: F401
+    except ImportError:
+        return False
+    return (Path(sys.prefix) / "bin" / "ros2").exists()
+
+
+HAVE_ROS2CLI = _have_ros2cli()
 
 
 def pytest_collection_modifyitems(config, items):
@@ -44,8 +64,16 @@ def pytest_collection_modifyitems(config, items):
                 item.add_marker(pytest.mark.xfail(reason="rclpy missing in CI", strict=True, run=False))
             else:
                 item.add_marker(pytest.mark.skip(reason="rclpy or tactile_descriptors_msgs not installed"))
+        if "ros2cli" in item.keywords and not HAVE_ROS2CLI and not ROS2_CLI_DIR.is_dir():
+            item.add_marker(pytest.mark.skip(reason=f"no ros2 CLI / launch system: {ROS2_CLI_DIR} not found"))
         if "realdata" in item.keywords and not BIOTAC_DATA_DIR.is_dir():
             item.add_marker(pytest.mark.skip(reason=f"real recordings not found at {BIOTAC_DATA_DIR}"))
+
+
+def pytest_runtest_setup(item):
+    if "ros2cli" in item.keywords and not HAVE_ROS2CLI and ROS2_CLI_DIR.is_dir():
+        # make setup installs it from there: its absence is a set-up failure, not a skip.
+        pytest.fail(f"ros2 CLI not installed in {sys.prefix} though {ROS2_CLI_DIR} exists (run make setup)")
 
 
 @pytest.fixture

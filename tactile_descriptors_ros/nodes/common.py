@@ -172,6 +172,31 @@ def declare(node, name: str, default: Any, description: str, *, choices: Sequenc
     return value
 
 
+def _interrupt_once() -> None:
+    """Make SIGINT raise ``KeyboardInterrupt`` once; ignore the ones that follow.
+
+    A Ctrl-C in a terminal reaches a node twice: from the terminal (the whole
+    process group) and from ``ros2 launch``, which forwards it.  A second
+    ``KeyboardInterrupt`` would cut the clean-up short (a traceback from a
+    thread join or a service's destruction).  Installed before ``rclpy.init``,
+    whose handler shuts the context down and then calls this one.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return  # signal handlers can be set only from the main thread (tests run nodes in threads)
+    interrupted = False
+
+    def handler(signum, frame):
+        nonlocal interrupted
+        if not interrupted:
+            interrupted = True
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, handler)
+
+
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
     """Create a node, spin it until Ctrl-C or shutdown, then clean up.
 
@@ -184,6 +209,7 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+    _interrupt_once()
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
     code = 0

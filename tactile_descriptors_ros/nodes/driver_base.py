@@ -69,6 +69,9 @@ class DriverBase(LifecycleNode):
         self.faults: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        # Ctrl-C shuts the context down (rclpy's signal handler) before main() can stop
+        # the reader thread: it stops then, and a publish that raced the shutdown is dropped.
+        self.context.on_shutdown(self._stop.set)
         self._thread: threading.Thread | None = None
         self.last_error: str | None = None
         self._last_error_monotonic = float("-inf")
@@ -225,7 +228,7 @@ class DriverBase(LifecycleNode):
 
     # ---------------------------------------------------------------- reading
     def _run(self) -> None:
-        while not self._stop.is_set():
+        while not self._stop.is_set() and self.context.ok():
             link = self.link
             if link is not None and not link.connected:
                 if not link.poll_reopen():
@@ -257,6 +260,8 @@ class DriverBase(LifecycleNode):
             try:
                 self._consume(items)
             except Exception as exc:  # noqa: BLE001 - a bad batch is counted, the thread reads on
+                if not self.context.ok():
+                    return  # published after shutdown: the node is stopping, not faulty
                 self._count_error("consume_errors", f"handling a read: {exc!r}")
 
     def _count_error(self, counter: str, text: str) -> None:
