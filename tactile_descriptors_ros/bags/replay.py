@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -246,6 +246,29 @@ class Player:
         except KeyboardInterrupt:
             self.report.interrupted = True
             raise
+        finally:
+            self.report.wall_s = time.monotonic() - started
+        return self.report
+
+    def play_paced(self, before: Callable[[Any], bool]) -> PlayReport:
+        """Publish every message once, in bag order, paced by the caller instead of the clock.
+
+        ``before(message)`` is called with each :class:`~.io.BagMessage` before it is
+        published and may block until the graph has taken what came before (a
+        descriptor, a prediction); it returns False to stop.  No wall-clock
+        pacing, no ``/clock``: for replays whose consumers signal their progress
+        (``tactile evaluate --live``), so that a slow machine changes the wall
+        time, never what is received.
+        """
+        started = time.monotonic()
+        try:
+            for msg in self.reader.messages(list(self.publishers)):
+                if not before(msg):
+                    self.report.interrupted = True
+                    break
+                self.publishers[msg.topic].publish(msg.data)
+                self.report.published[msg.topic] += 1
+            self.report.loops += 1
         finally:
             self.report.wall_s = time.monotonic() - started
         return self.report

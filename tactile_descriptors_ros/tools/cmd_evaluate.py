@@ -13,6 +13,15 @@ and 21-30 of 30), and the two ranges must not share a trial; when they
 differ, every trial of each.  A range naming trials or classes the data do
 not hold is an error listing what they hold.  ``--windows contact`` draws
 windows wholly in contact instead of at random positions.
+
+``--live`` checks that the robot computes the same: the trials are imported
+into a bag and replayed through the window node and classifier node
+processes, a teacher publishing the labels of the training trials, and the
+live descriptors and predictions are compared with this evaluation's, one
+window per trial (its first ``--window`` seconds).  Example::
+
+    tactile evaluate --live --train ../shared/data/biotac_slide_20_50 --test ../shared/data/biotac_slide_20_50 \\
+        --channels per_channel --json
 """
 
 from __future__ import annotations
@@ -26,7 +35,7 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["register", "run", "default_trials", "split_trials"]
+__all__ = ["register", "run", "run_live", "default_trials", "split_trials"]
 
 
 def default_trials(train_dir: str, test_dir: str, train_text: str | None,
@@ -129,11 +138,18 @@ def register(subparsers) -> None:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cache", default="build/cache", help="descriptor cache folder ('' = off)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument("--live", action="store_true",
+                   help="replay the trials through the live window and classifier nodes (one window per trial, "
+                   "its first --window seconds) and check they give this evaluation's descriptors and predictions")
+    p.add_argument("--timeout", type=float, default=120.0,
+                   help="--live: longest wait for any one event of the live graph, in seconds")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation and print accuracy and confusion matrices (or JSON)."""
+    if args.live:
+        return run_live(args)
     from ..evaluation.experiments import CLASSIFIERS, EvalConfig, evaluate
     from ..evaluation.windows import load_split, parse_trials
 
@@ -203,3 +219,80 @@ def run(args: argparse.Namespace) -> int:
         for c, row in zip(result["classes"], cm):
             print(f"  {c:>3} " + " ".join(f"{v:3d}" for v in row))
     return 0
+
+
+#: Descriptor modes the window node computes, and its ``descriptor.channels`` value for each.
+_LIVE_CHANNELS = {"paper": "averaged", "averaged": "averaged", "per_channel": "per_channel"}
+
+
+def run_live(args: argparse.Namespace) -> int:
+    """``--live``: offline and live on the same windows; exit 1 unless descriptors and predictions agree."""
+    import tempfile
+
+    from ..bags.importer import ImportOptions, import_recordings
+    from ..bags.live_replay import run_live_replay
+    from ..evaluation.live import check_segmentable, compare, offline_replay, plan_steps
+    from ..evaluation.windows import common_length_frames, load_split, window_frames
+    from ..tools.cmd_import import parse_classes
+
+    if Path(args.train).resolve() != Path(args.test).resolve() or (args.test_mapping or args.mapping) != args.mapping:
+        raise ConfigError("--live replays one source: give the same source to --train and --test", key="test")
+    refusals = {"test-window": args.test_window not in (None, args.window), "gate": args.gate, "drop": args.drop,
+                "windows": args.windows != "random"}
+    bad = [k for k, v in refusals.items() if v]
+    if bad:
+        raise ConfigError(f"--live scores one window per trial (its first --window seconds) with the nodes' "
+                          f"descriptor, the contact gate off: leave out --{bad[0]}", key=bad[0])
+    channels = _LIVE_CHANNELS.get(args.channels)
+    if channels is None:
+        raise ConfigError(f"the window node does not compute descriptor mode {args.channels!r}; --live takes "
+                          f"{', '.join(sorted(_LIVE_CHANNELS))}", key="channels")
+    train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
+    materials = parse_classes(args.materials) if args.materials else None
+    both = None if train_trials is None or test_trials is None else sorted(set(train_trials) | set(test_trials))
+    every = load_split(args.train, both, materials, args.mapping)
+    train_trials, test_trials = split_trials(sorted({r.trial for r in every}), train_trials, test_trials,
+                                             args.train_trials is not None, args.test_trials is not None)
+    chosen = set(train_trials) | set(test_trials)
+    recs = [r for r in every if r.trial in chosen]
+    common = common_length_frames(recs)
+    n_frames = window_frames(args.window, 100.0, common)
+    steps = plan_steps(recs, train_trials, test_trials)
+    check_segmentable(recs, steps, n_frames)
+    offline = offline_replay(recs, steps, n_frames, args.channels, pa_update=args.pa_update,
+                             pa_average=args.pa_average, scaling=args.scaling, cache_dir=args.cache or None,
+                             jobs=args.jobs)
+    with tempfile.TemporaryDirectory(prefix="tactile_evaluate_live_") as tmp:
+        bag = Path(tmp) / "bag"
+        report = import_recordings(recs, bag, options=ImportOptions(max_frames=n_frames, order="trial"))
+        if [(t.material, t.trial) for t in report.trials] != [(s.material, s.trial) for s in steps]:
+            raise ConfigError("the bag's trial order differs from the replay plan")
+        run = run_live_replay(
+            bag, [t.start_ns for t in report.trials], [s.train for s in steps], [s.class_name for s in steps],
+            [t.end_ns for t in report.trials], window_parameters={"descriptor.channels": channels},
+            classifier_parameters={"pa_update": args.pa_update, "pa_average": bool(args.pa_average),
+                                   "log_activity": args.scaling == "log_standardize",
+                                   "standardize": args.scaling != "none"},
+            timeout_s=args.timeout)
+    out = compare(offline, run.values, run.labels, run.predictions)
+    out.update({"mode": args.channels, "window_frames": n_frames, "window_s": n_frames / 100.0,
+                "train_trials": sorted(train_trials), "test_trials": sorted(test_trials),
+                "classes": sorted({s.class_name for s in steps}), "labels_taught": run.labels_taught,
+                "n_features": len(run.labels), "window_node_faults": run.window_node_faults,
+                "live_wall_s": round(run.wall_s, 1), "pa_update": args.pa_update,
+                "pa_average": bool(args.pa_average), "scaling": args.scaling})
+    ok = out["descriptors_match"] and out["predictions_match"]
+    if args.json:
+        print(json.dumps(out))
+        return 0 if ok else 1
+    print(f"live replay: {out['windows']} windows ({out['train_windows']} taught, {out['test_windows']} scored) of "
+          f"{out['window_s']:.2f} s through window_node and classifier_node, descriptor mode {args.channels} "
+          f"({out['n_features']} values), {out['live_wall_s']:.0f} s")
+    print(f"live accuracy {100 * out['live_accuracy']:.2f} %, offline {100 * out['offline_accuracy']:.2f} %; "
+          f"predictions agree on {100 * out['prediction_agreement']:.1f} % of windows; largest relative "
+          f"descriptor difference {out['max_relative_descriptor_difference']:.2e}")
+    for m in out["mismatched_windows"]:
+        print(f"  mismatch: material {m['material']} trial {m['trial']}: live {m['live']}, offline {m['offline']}, "
+              f"relative difference {m['max_relative_difference']:.2e}")
+    print("live = offline" if ok else "live differs from offline")
+    return 0 if ok else 1
