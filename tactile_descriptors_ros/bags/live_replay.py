@@ -67,7 +67,7 @@ class _Teacher:
     def __init__(self, context: Any, window_name: str, classifier_name: str) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
 
@@ -75,14 +75,18 @@ class _Teacher:
         self.Label = Label
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self.label_pub = self.node.create_publisher(Label, "tactile/label", qos)
+        # Descriptors and predictions are kept for late joiners (see run_live_replay): discovery between
+        # processes may match a subscription only after the first message went out.
+        latched = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.cond = threading.Condition()
         self.descriptors: list[Any] = []
         self.predictions: list[Any] = []
         self.diag: dict[str, dict[str, str]] = {}
         self.diag_seq: dict[str, int] = {}
         self._names = {f"{window_name}: ": "window", f"{classifier_name}: ": "classifier"}
-        self.node.create_subscription(Descriptor, "tactile/descriptor", self._on_descriptor, qos)
-        self.node.create_subscription(Prediction, "tactile/prediction", self._on_prediction, qos)
+        self.node.create_subscription(Descriptor, "tactile/descriptor", self._on_descriptor, latched)
+        self.node.create_subscription(Prediction, "tactile/prediction", self._on_prediction, latched)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
 
     def _on_descriptor(self, msg: Any) -> None:
@@ -182,10 +186,14 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
             "contact.force_threshold_n": _ANY_FORCE_N, "contact.release_threshold_n": _ANY_FORCE_N,
             # Replay as a recorder would take it: every batch queued, none dropped.
             "qos.frames.reliability": "reliable", "qos.frames.depth": int(queue_depth),
+            # Discovery between processes can match the classifier's subscription after the first
+            # descriptor went out: descriptors and predictions are kept for late joiners.
+            "qos.descriptor.durability": "transient_local",
             "diagnostics_period_s": 0.05,
             **dict(window_parameters or {}),
         },
         c_name: {"load_model": False, "save_after_update": False, "diagnostics_period_s": 0.02,
+                 "qos.descriptor.durability": "transient_local", "qos.prediction.durability": "transient_local",
                  **dict(classifier_parameters or {})},
     }
     specs = [s for s in build_graph(rob, model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
