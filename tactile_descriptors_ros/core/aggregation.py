@@ -38,6 +38,16 @@ import numpy as np
 from ..errors import SignalError
 from .descriptors import Quality
 from .fast import cell_bounds, cell_quantities, cell_quantities_reference, exact_integer_ok
+from .features import (
+    KERNEL_GROUPS,
+    band_hjorth,
+    check_groups,
+    groups_of_channels,
+    level_values,
+    selection_labels,
+    selection_name,
+    statistics_values,
+)
 from .robot import BodyPart, Cell, CellType, RobotDescription
 
 __all__ = [
@@ -87,6 +97,15 @@ class CellSignals:
     invalid_samples : int
         Invalid samples already removed from this window's arrays: the body
         part is flagged ``INVALID`` but the cell still counts.
+    extra : numpy.ndarray, shape (n_extra_channels, n_slow), optional
+        The cell type's extra channels (:attr:`.robot.CellType.extra_channels`:
+        BioTac PDC, TDC, TAC; skin proximity, temperature), one value per
+        deformation sample (float, NaN where missing).  Only the feature
+        groups that use them read them (``levels``); ``None`` reads as all
+        missing.
+    deformation_tare : numpy.ndarray, shape (n_deformation_channels,), optional
+        Tare of each deformation channel in counts, subtracted by the
+        ``levels`` group only (the paper's quantities do not depend on it).
     """
 
     vibration: np.ndarray
@@ -97,6 +116,8 @@ class CellSignals:
     valid: bool = True
     gap: bool = False
     invalid_samples: int = 0
+    extra: np.ndarray | None = None
+    deformation_tare: np.ndarray | None = None
 
 
 @dataclass
@@ -135,7 +156,11 @@ class BodyPartDescriptor:
 
 @dataclass
 class RobotDescriptor:
-    """Whole-robot descriptor of one window (eq. 12, 18, 29, or pooled)."""
+    """Whole-robot descriptor of one window (eq. 12, 18, 29, or pooled).
+
+    ``channels`` names the feature-group selection (``"paper"``,
+    ``"per_channel+bands+levels+statistics"``; :func:`.features.selection_name`).
+    """
 
     robot: str
     layout: str
@@ -420,8 +445,8 @@ class _RobotPlan(NamedTuple):
     types: tuple[tuple[CellType, tuple[tuple[int, BodyPart], ...]], ...]
     # per cell type as in ``types``: the cell ids of each of its body parts
     part_ids: tuple[tuple[tuple[int, ...], ...], ...]
-    # concat labels per ``channels`` (filled on first use; descriptions are immutable)
-    concat_labels: dict[str, tuple[str, ...]]
+    # concat labels per group selection (filled on first use; descriptions are immutable)
+    concat_labels: dict[tuple[str, ...], tuple[str, ...]]
 
 
 _PLANS: dict[int, tuple[weakref.ref, _RobotPlan]] = {}
@@ -810,8 +835,142 @@ def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ..
     return np.concatenate(values), tuple(labels)
 
 
+def _selection(robot: RobotDescription, channels: str | None, groups) -> tuple[str, ...]:
+    if groups is not None:
+        return tuple(groups)
+    if channels is not None:
+        return groups_of_channels(channels)
+    return robot.descriptor.groups
+
+
+def _touching(part_ids: tuple[tuple[int, ...], ...], cells: Mapping[int, CellSignals],
+              threshold_n: float) -> list[list[int]]:
+    """Per body part, the ids of its valid cells in contact (eq. 13; the gate of :func:`_describe_type`)."""
+    out = []
+    for ids in part_ids:
+        usable = [cid for cid in ids if cid in cells and cells[cid].valid]
+        means = _force_means([cells[cid].force_n for cid in usable])
+        out.append([cid for cid, m in zip(usable, means.tolist()) if m >= threshold_n])
+    return out
+
+
+def _stack(arrays: list[np.ndarray]) -> np.ndarray:
+    return np.stack([np.asarray(a) for a in arrays])
+
+
+def _extra_of(sig: CellSignals, cell_type: CellType, cid: int) -> np.ndarray:
+    n_x, n_slow = len(cell_type.extra_channels), np.shape(sig.deformation)[1]
+    if sig.extra is None:
+        return np.full((n_x, n_slow), np.nan)
+    extra = np.asarray(sig.extra, dtype=np.float64)
+    if extra.shape != (n_x, n_slow):
+        raise SignalError(f"cell {cid}: expected extra channels of shape ({n_x}, {n_slow}) "
+                          f"({', '.join(cell_type.extra_channels) or 'none'}, one value per deformation sample) "
+                          f"for cell type {cell_type.name!r}, got {extra.shape}")
+    return extra
+
+
+def _tare_of(sig: CellSignals, n_v: int, cid: int) -> np.ndarray:
+    if sig.deformation_tare is None:
+        return np.zeros(n_v)
+    tare = np.asarray(sig.deformation_tare, dtype=np.float64)
+    if tare.shape != (n_v,):
+        raise SignalError(f"cell {cid}: deformation_tare must hold {n_v} values, got shape {tare.shape}")
+    return tare
+
+
+def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals], ids: list[int]
+                ) -> dict[str, np.ndarray]:
+    """Per-cell values of the non-kernel groups, cells of one window shape stacked and computed together."""
+    fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
+    n_v = len(cell_type.deformation.channels)
+    out: dict[str, list] = {g: [None] * len(sigs) for g in groups}
+    batches: dict[tuple, list[int]] = {}
+    for k, sig in enumerate(sigs):
+        batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
+    for rows in batches.values():
+        vib = _stack([sigs[k].vibration for k in rows])
+        dfm = _stack([sigs[k].deformation for k in rows])
+        for g in groups:
+            if g == "bands":
+                vals = band_hjorth(vib, fs_s)
+            elif g == "statistics":
+                vals = statistics_values(vib, fs_s, dfm, fs_v)
+            else:
+                vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
+                                    _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
+            for r, k in enumerate(rows):
+                out[g][k] = vals[r]
+    return {g: np.stack(v) for g, v in out.items()}
+
+
+def _cells_mean(rows: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Mean over cells (rows) of each column's finite values; a column without any is 0 (and reported)."""
+    ok = np.isfinite(rows)
+    if ok.all():
+        return _finite_mean(rows, axis=0), False
+    cnt = ok.sum(axis=0)
+    vals = np.sum(np.where(ok, rows, 0.0) / np.maximum(cnt, 1), axis=0)
+    return np.where(cnt > 0, vals, 0.0), bool((cnt == 0).any() or not ok.all())
+
+
+def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
+                     cells: Mapping[int, CellSignals], threshold_n: float, groups: tuple[str, ...],
+                     part_ids: tuple[tuple[int, ...], ...]) -> list[BodyPartDescriptor]:
+    """The body parts of one cell type described by a group selection (:mod:`.features`).
+
+    The kernel groups (``paper``, ``per_channel``) come from
+    :func:`_describe_type`, which also decides contact, cell counts, mean
+    force and quality; the other groups are computed per cell in contact
+    and averaged over a body part's cells.  Missing extra channels (no finite
+    sample in the window) give 0 and flag the body part ``INVALID``;
+    non-finite values of the other groups give 0 and flag ``NONFINITE``.
+    """
+    labels = selection_labels(cell_type, groups)
+    modes = [KERNEL_GROUPS[g] for g in groups if g in KERNEL_GROUPS] or ["averaged"]
+    base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids) for m in modes}
+    first = base[modes[0]]
+    if len(groups) == 1 and groups[0] in KERNEL_GROUPS:  # one kernel group: the kernel's values as they are
+        return [BodyPartDescriptor(bp.name, bp.cell_type, bp.values, labels, bp.contact, bp.cells_in_contact,
+                                   bp.cells_total, bp.mean_force_n, bp.quality) for bp in first]
+    others = [g for g in groups if g not in KERNEL_GROUPS]
+    per_part: list[dict[str, np.ndarray]] = [{} for _ in parts]
+    flags = [0] * len(parts)
+    if others and any(bp.contact for bp in first):
+        touching = _touching(part_ids, cells, threshold_n)
+        ids = [cid for t in touching for cid in t]
+        rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids)
+        start = 0
+        for p, t in enumerate(touching):
+            if len(t) != first[p].cells_in_contact:
+                raise SignalError(f"body part {first[p].name}: contact gate disagreement ({len(t)} vs "
+                                  f"{first[p].cells_in_contact} cells)")
+            for g in others:
+                if t:
+                    vals, bad = _cells_mean(rows[g][start:start + len(t)])
+                    per_part[p][g] = vals
+                    if bad:
+                        flags[p] |= _INVALID if g.startswith("levels") else int(Quality.NONFINITE)
+            start += len(t)
+    out = []
+    for p, bp in enumerate(first):
+        if not bp.contact:
+            out.append(BodyPartDescriptor(bp.name, bp.cell_type, np.zeros(len(labels)), labels, False, 0,
+                                          bp.cells_total, bp.mean_force_n, bp.quality))
+            continue
+        values = np.concatenate([base[KERNEL_GROUPS[g]][p].values if g in KERNEL_GROUPS else per_part[p][g]
+                                 for g in groups])
+        quality = bp.quality | flags[p]
+        for m in modes[1:]:
+            quality |= base[m][p].quality
+        out.append(BodyPartDescriptor(bp.name, bp.cell_type, values, labels, True, bp.cells_in_contact,
+                                      bp.cells_total, bp.mean_force_n, quality))
+    return out
+
+
 def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
                     layout: str | None = None, channels: str | None = None,
+                    groups: tuple[str, ...] | None = None,
                     force_threshold_n: float | None = None) -> RobotDescriptor:
     """Compute the robot's descriptor of one window.
 
@@ -825,22 +984,31 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     layout : {"concat", "pooled"}, optional
         Defaults to the robot description's.
     channels : {"averaged", "per_channel"}, optional
-        Defaults to the robot description's.
+        The legacy channel mode: ``averaged`` is the groups ``("paper",)``,
+        ``per_channel`` the groups ``("per_channel",)``.
+    groups : tuple of str, optional
+        Feature groups in descriptor order (:mod:`.features`); defaults to
+        ``channels``' groups when that is given, else the robot
+        description's ``descriptor.groups``.
     force_threshold_n : float, optional
         F_t; defaults to the robot description's contact threshold.
 
     Returns
     -------
     RobotDescriptor
+        Labels ``<body part>/<group>/<label>`` (``<cell type>/<group>/<label>``
+        when pooled); ``channels`` names the selection.
 
     Raises
     ------
     SignalError
         For a cell id not in the robot description, or channel counts that do
         not match the cell type.
+    ConfigError
+        For a group selection a cell type cannot feed (:func:`.features.check_groups`).
     """
     layout = layout or robot.descriptor.layout
-    channels = channels or robot.descriptor.channels
+    groups = _selection(robot, channels, groups)
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
     plan = _plan(robot)
     unknown = cells.keys() - plan.index.keys()
@@ -850,16 +1018,17 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     # One batch per cell type (gate, saturation, kernel), then the averages per body part.
     by_pos: dict[int, BodyPartDescriptor] = {}
     for (cell_type, parts_of_type), part_ids in zip(plan.types, plan.part_ids):
-        descs = _describe_type(cell_type, parts_of_type, cells, threshold, channels, part_ids)
+        check_groups(cell_type, groups)
+        descs = _describe_groups(cell_type, parts_of_type, cells, threshold, groups, part_ids)
         by_pos.update(zip((pos for pos, _ in parts_of_type), descs))
     parts = tuple(by_pos[pos] for pos in range(len(robot.body_parts)))
     if layout == "concat":
         values = np.concatenate([bp.values for bp in parts])
-        labels = plan.concat_labels.get(channels)
+        labels = plan.concat_labels.get(groups)
         if labels is None:
-            labels = plan.concat_labels[channels] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
+            labels = plan.concat_labels[groups] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
     elif layout == "pooled":
         values, labels = pool_body_parts(robot, parts)
     else:
         raise SignalError(f"layout must be 'concat' or 'pooled', got {layout!r}")
-    return RobotDescriptor(robot.name, layout, channels, parts, values, labels)
+    return RobotDescriptor(robot.name, layout, selection_name(groups), parts, values, labels)

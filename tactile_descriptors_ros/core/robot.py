@@ -9,6 +9,14 @@ of each, the BioTac's eq. 17 one PAC axis and one axis of 19 electrodes, the
 skin cell's eq. 28 three accelerometer axes and one axis of three force
 sensors.
 
+Besides S and V a cell type may declare *extra channels* (``extra_channels``):
+slow signals sampled with V (one value per V sample) that enter only the
+feature groups that use them -- the BioTac's PDC, TDC and TAC, the skin
+cell's proximity and temperature.  Which feature groups make up the
+descriptor is chosen in the ``descriptor`` section (``groups``;
+:mod:`.features`), and checked at load time against what every cell type
+can feed.
+
 Validation is strict and names the offending key: an unknown body part or
 cell type, a cell id listed twice, an impossible rate or threshold fails at
 load time with :class:`~tactile_descriptors_ros.errors.ConfigError`.
@@ -129,6 +137,12 @@ class CellType:
     deformation: Modality
     force: ForceSpec
     correlate: str  # "each_with_all" (S axis with every V axis) or "pairwise" (axis i with i)
+    extra_channels: tuple[str, ...] = ()  # slow channels sampled with V (levels only)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """Every channel the cell type declares: S, V, then the extra channels."""
+        return self.vibration.channels + self.deformation.channels + self.extra_channels
 
     def correlation_pairs(self) -> tuple[tuple[int, int], ...]:
         """(vibration axis, deformation axis) pairs whose correlations are averaged (eq. 9-10)."""
@@ -178,10 +192,22 @@ class WindowSpec:
 
 @dataclass(frozen=True)
 class DescriptorSpec:
-    """Descriptor layout: ``concat`` or ``pooled``; ``averaged`` or ``per_channel``."""
+    """Descriptor layout (``concat`` or ``pooled``) and feature groups.
+
+    Attributes
+    ----------
+    layout : str
+    channels : str
+        The legacy channel mode: ``averaged`` (= groups ``[paper]``),
+        ``per_channel`` (= ``[per_channel]``), or ``""`` when the file gives
+        ``groups``.
+    groups : tuple of str
+        Feature groups in descriptor order (:data:`.features.GROUPS`).
+    """
 
     layout: str = "concat"
     channels: str = "averaged"
+    groups: tuple[str, ...] = ("paper",)
 
 
 @dataclass(frozen=True)
@@ -346,8 +372,15 @@ def _parse_cell_type(name: str, r: YamlReader) -> CellType:
         raise r.error("correlate", "'pairwise' needs as many vibration axes as deformation axes")
     if vib.rate_hz < dfm.rate_hz:
         raise r.error("vibration", "the vibration modality must be the faster one (it is the time base for correlations)")
+    extra = r.get("extra_channels", [], list)
+    if not all(isinstance(c, str) and c for c in extra):
+        raise r.error("extra_channels", "needs a list of channel names")
+    known = set(vib.channels) | set(dfm.channels)
+    for i, ch in enumerate(extra):
+        if ch in known or ch in extra[:i]:
+            raise r.error("extra_channels", f"channel {ch!r} is already declared")
     r.check_unknown()
-    return CellType(name, vib, dfm, force, correlate)
+    return CellType(name, vib, dfm, force, correlate, tuple(extra))
 
 
 def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
@@ -424,18 +457,40 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
         raise wr.error("min_duration_s", "must not exceed max_duration_s")
 
     dr = root.child("descriptor", {})
-    desc = DescriptorSpec(layout=dr.get("layout", "concat", str), channels=dr.get("channels", "averaged", str))
-    dr.check_unknown()
-    if desc.layout not in LAYOUT_MODES:
-        raise dr.error("layout", f"must be one of {LAYOUT_MODES}, got {desc.layout!r}")
-    if desc.channels not in CHANNEL_MODES:
-        raise dr.error("channels", f"must be one of {CHANNEL_MODES}, got {desc.channels!r}")
+    desc = _parse_descriptor(dr, cell_types, parts)
 
     nodes = root.get("nodes", {}, dict)
     root.check_unknown()
     robot = RobotDescription(name, description, cell_types, tuple(parts), contact, window, desc, nodes, source)
     _validate_nodes(robot, source)
     return robot
+
+
+def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts: list[BodyPart]) -> DescriptorSpec:
+    """``descriptor``: layout and feature groups (``groups``, or the legacy ``channels`` alias)."""
+    from .features import check_groups, groups_of_channels
+
+    layout = dr.get("layout", "concat", str)
+    if layout not in LAYOUT_MODES:
+        raise dr.error("layout", f"must be one of {LAYOUT_MODES}, got {layout!r}")
+    has_groups, has_channels = "groups" in dr.data, "channels" in dr.data
+    if has_groups and has_channels:
+        raise dr.error("groups", "give either groups or the legacy channels mode, not both")
+    if has_groups:
+        raw = dr.get("groups", kind=list)
+        if not raw or not all(isinstance(g, str) and g for g in raw):
+            raise dr.error("groups", "needs a non-empty list of feature group names")
+        channels, groups = "", tuple(raw)
+    else:
+        channels = dr.get("channels", "averaged", str)
+        if channels not in CHANNEL_MODES:
+            raise dr.error("channels", f"must be one of {CHANNEL_MODES}, got {channels!r}")
+        groups = groups_of_channels(channels)
+    dr.check_unknown()
+    used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
+    for ct in used:  # every group must be computable from every cell type in use, at load time
+        check_groups(ct, groups, key=dr.path("groups"), source=dr.source)
+    return DescriptorSpec(layout=layout, channels=channels, groups=groups)
 
 
 def _validate_nodes(robot: RobotDescription, source: str) -> None:

@@ -1,56 +1,40 @@
-"""Descriptor modes for the evaluation, computed once per window as a *feature bank*.
+"""Descriptor modes for the evaluation: feature banks of recorded windows, cached.
 
-Every window of a BioTac recording (one finger: PAC at 2.2 kHz as the
-vibration signal S, the 19 electrodes at 100 Hz as the deformation signals V,
-PDC for the contact force) is turned into a bank of feature groups; a named
+This module computes no feature of its own.  A window of a BioTac recording
+(one finger: PAC at 2.2 kHz, the 19 electrodes and PDC, TDC, TAC at 100 Hz)
+becomes the core's :class:`~tactile_descriptors_ros.core.aggregation.CellSignals`
+(:func:`recording_cells`) and is described by
+:func:`~tactile_descriptors_ros.core.aggregation.describe_window` -- the
+function the window node calls -- once per feature group of
+:data:`~tactile_descriptors_ros.core.features.GROUPS` (``paper``,
+``per_channel``, ``bands``, ``levels``, ``statistics``; definitions, labels
+and equations in :mod:`tactile_descriptors_ros.core.features`).  The groups
+of every window are kept as a *feature bank* (cached on disk); a named
 *descriptor mode* is a list of groups, so ablations and modes are column
-selections of one computation.
+selections of one computation, and a mode's columns equal what the window
+node publishes for ``descriptor.groups`` set to the same list.
 
-Groups (all per window):
-
-``paper``
-    The paper's BioTac finger descriptor, eq. 17: ``[A_pac, A_E, M_pac, M_E,
-    C_pac, C_E, L(pac,E), N(pac,E)]``, electrodes averaged (8 values).
-``per_channel``
-    The same quantities kept per electrode (98 values: Hjorth of PAC and of
-    each electrode, Pearson and Spearman of PAC with each electrode).
-    ``paper`` and ``per_channel`` come from one call of the core's
-    :func:`~tactile_descriptors_ros.core.aggregation.cell_features` reduced by
-    :func:`~tactile_descriptors_ros.core.aggregation.reduce_body_part`.
-``bands``
-    Hjorth Activity, Mobility and Complexity (eq. 1-3, the core's
-    :func:`~tactile_descriptors_ros.core.descriptors.hjorth`) of PAC
-    band-passed into :data:`PAC_BANDS_HZ` (4th-order Butterworth, causal
-    ``sosfilt`` of the window with its mean removed): 18 values.
-``levels``
-    Mean level of each electrode, PDC, TDC and TAC over the window (22
-    values): static deformation, force and thermal state.
 ``subwindows``
     *Successive windows inside the window*: the window is cut into
-    :data:`N_SUBWINDOWS` equal consecutive pieces, each piece gets the
-    ``per_channel`` and ``bands`` values (Activity as ``log1p``), and the
-    group is their mean and standard deviation over the pieces (2 x 116
-    values, labelled ``mean_<label>`` and ``sd_<label>``).  The standard
-    deviation says how steady the texture is over the slide (stick-slip,
-    uneven weave), which one descriptor of the whole window averages away.
-    Derived from the banks of the pieces (cached like any bank), added by
-    :func:`compute_bank` with ``subwindows=True``.
-``baseline``
-    The related work's hand-made features (e.g. Fishel & Loeb 2012, Jamali &
-    Sammut 2011 -- statistics and spectra): log variance, skewness and
-    kurtosis of PAC and of each electrode, and log band powers (Welch) of PAC
-    in :data:`PAC_BANDS_HZ` and of each electrode in :data:`ELECTRODE_BANDS_HZ`.
+    :data:`N_SUBWINDOWS` equal consecutive pieces, each piece is described
+    with ``per_channel`` and ``bands``, and the group is their mean and
+    standard deviation over the pieces
+    (:func:`~tactile_descriptors_ros.core.features.piece_summary`, labelled
+    ``mean_<label>`` and ``sd_<label>``).  Added by :func:`compute_bank` with
+    ``subwindows=True``; an evaluation-only ablation (the window node does not
+    offer it).
 
-Named modes (:data:`DESCRIPTOR_MODES`): ``paper`` (= the core's ``averaged``
-mode), ``per_channel`` (the core's ``per_channel`` mode), ``multiband``
+Named modes (:data:`DESCRIPTOR_MODES`): ``paper`` (= the robot
+description's ``channels: averaged``), ``per_channel``, ``multiband``
 (``per_channel`` + ``bands``), ``multiband_levels`` (+ ``levels``),
-``baseline``, ``combined`` (``per_channel`` + ``bands`` + ``levels`` +
-``baseline``, 261 values: :data:`DEFAULT_MODE`) and ``combined_subwindows``
-(``combined`` + ``subwindows``, 493 values).  On cross-validation over
-blocks of trials (2 s windows) ``combined`` scored 97.3 % and
-``combined_subwindows`` 97.7 %, a gain inside the noise of 400 test windows
-per fold for twice the descriptor time, so the default stays ``combined``.
-``averaged`` is accepted as an alias of ``paper``.
+``baseline`` (``statistics``, the related work's features), ``combined``
+(``per_channel`` + ``bands`` + ``levels`` + ``statistics``, 261 values:
+:data:`DEFAULT_MODE`, what the shipped Shadow Hand configuration selects)
+and ``combined_subwindows`` (``combined`` + ``subwindows``, 493 values).
+On cross-validation over blocks of trials (2 s windows) ``combined`` scored
+97.3 % and ``combined_subwindows`` 97.7 %, a gain inside the noise of 400
+test windows per fold for twice the descriptor time, so the default stays
+``combined``.  ``averaged`` is accepted as an alias of ``paper``.
 
 The contact gate (eq. 16) is applied when a mode is selected: a window whose
 mean PDC force is below F_t yields zeros, like the core's body-part
@@ -59,6 +43,7 @@ descriptor; ``gate=False`` keeps the computed values.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
@@ -69,12 +54,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import signal, stats
 
-from ..core.aggregation import body_part_layout, cell_features, contact_gate, reduce_body_part
-from ..core.descriptors import hjorth
-from ..core.robot import CellType, RobotDescription, load_robot
-from ..core.scaling import activity_mask, log_activity
+from ..core.aggregation import CellSignals, contact_gate, describe_window
+from ..core.features import (
+    DEFORMATION_BANDS_HZ,
+    GROUPS,
+    VIBRATION_BANDS_HZ,
+    piece_summary,
+    selection_labels,
+)
+from ..core.robot import BodyPart, Cell, CellType, RobotDescription, load_robot
 from ..datasets.biotac_slide import PAC_PER_FRAME
 from ..datasets.recording import BiotacRecording
 from ..errors import ConfigError
@@ -89,6 +78,8 @@ __all__ = [
     "QUANTITIES",
     "FeatureBank",
     "biotac_cell_type",
+    "finger_robot",
+    "recording_cells",
     "bank_labels",
     "window_bank",
     "compute_bank",
@@ -99,17 +90,11 @@ __all__ = [
     "mode_groups",
 ]
 
-#: PAC frequency bands of the ``bands`` group and the baseline (Hz).  PAC is
-#: sampled at 2.2 kHz (Nyquist 1.1 kHz); the BioTac's PAC channel is
-#: AC-coupled, so nothing below 20 Hz is used.
-PAC_BANDS_HZ: tuple[tuple[float, float], ...] = (
-    (20.0, 50.0), (50.0, 100.0), (100.0, 200.0), (200.0, 400.0), (400.0, 800.0), (800.0, 1050.0))
+#: PAC frequency bands of ``bands`` and ``statistics`` (the core's vibration bands; Hz).
+PAC_BANDS_HZ: tuple[tuple[float, float], ...] = VIBRATION_BANDS_HZ
 
-#: Electrode frequency bands of the baseline (Hz; electrodes at 100 Hz).
-ELECTRODE_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.0, 2.0), (2.0, 10.0), (10.0, 50.0))
-
-#: Feature groups in bank order (computed per window and cached).
-GROUPS: tuple[str, ...] = ("paper", "per_channel", "bands", "levels", "baseline")
+#: Electrode frequency bands of ``statistics`` (the core's deformation bands; Hz).
+ELECTRODE_BANDS_HZ: tuple[tuple[float, float], ...] = DEFORMATION_BANDS_HZ
 
 #: Pieces of the ``subwindows`` group and the groups described per piece.
 N_SUBWINDOWS: int = 4
@@ -121,9 +106,9 @@ DESCRIPTOR_MODES: dict[str, tuple[str, ...]] = {
     "per_channel": ("per_channel",),
     "multiband": ("per_channel", "bands"),
     "multiband_levels": ("per_channel", "bands", "levels"),
-    "baseline": ("baseline",),
-    "combined": ("per_channel", "bands", "levels", "baseline"),
-    "combined_subwindows": ("per_channel", "bands", "levels", "baseline", "subwindows"),
+    "baseline": ("statistics",),
+    "combined": ("per_channel", "bands", "levels", "statistics"),
+    "combined_subwindows": ("per_channel", "bands", "levels", "statistics", "subwindows"),
 }
 
 #: The mode ``tactile evaluate`` uses unless told otherwise (the paper's own
@@ -134,7 +119,7 @@ DEFAULT_MODE = "combined"
 #: Complexity, linear and nonlinear correlation.
 QUANTITIES: tuple[str, ...] = ("A", "M", "C", "L", "N")
 
-_BANK_VERSION = 3  # bump when a group's definition changes
+_BANK_VERSION = 4  # bump when a group's definition changes
 
 
 def mode_groups(mode: str) -> tuple[str, ...]:
@@ -155,28 +140,58 @@ def mode_groups(mode: str) -> tuple[str, ...]:
 
 
 def biotac_cell_type(robot: RobotDescription | None = None) -> CellType:
-    """The BioTac cell type of the Shadow Hand description (PAC, 19 electrodes, PDC)."""
+    """The BioTac cell type of the Shadow Hand description (PAC, 19 electrodes, PDC TDC TAC)."""
     robot = robot or load_robot("shadow_hand")
     return robot.cell_types["biotac"]
 
 
-def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
-    """Labels of every group, prefixed ``<group>/`` (the quantity follows the slash)."""
+_FINGERS: dict[CellType, RobotDescription] = {}
+
+
+def finger_robot(cell_type: CellType | None = None) -> RobotDescription:
+    """A robot of one body part (``finger``) holding one cell (id 0) of ``cell_type``.
+
+    The Shadow Hand description with its five fingers replaced by one:
+    the recordings are one BioTac each.  Cached per cell type (the core
+    caches its plan per robot object).
+    """
     ct = cell_type or biotac_cell_type()
-    pac = ct.vibration.channels[0]
-    elec = ct.deformation.channels
-    band_names = [f"{int(lo)}-{int(hi)}Hz" for lo, hi in PAC_BANDS_HZ]
-    out = {
-        "paper": body_part_layout(ct, "averaged"),
-        "per_channel": body_part_layout(ct, "per_channel"),
-        "bands": tuple(f"{q}_{pac}_{b}" for q in ("A", "M", "C") for b in band_names),
-        "levels": tuple([f"level_{e}" for e in elec] + ["level_pdc", "level_tdc", "level_tac"]),
-        "baseline": tuple(
-            [f"logvar_{c}" for c in (pac, *elec)] + [f"skew_{c}" for c in (pac, *elec)]
-            + [f"kurt_{c}" for c in (pac, *elec)] + [f"logbp_{pac}_{b}" for b in band_names]
-            + [f"logbp_{e}_{int(lo)}-{int(hi)}Hz" for e in elec for lo, hi in ELECTRODE_BANDS_HZ]),
-    }
-    return {g: tuple(f"{g}/{lab}" for lab in labs) for g, labs in out.items()}
+    robot = _FINGERS.get(ct)
+    if robot is None:
+        hand = load_robot("shadow_hand")
+        robot = _FINGERS[ct] = dataclasses.replace(
+            hand, cell_types={ct.name: ct}, body_parts=(BodyPart("finger", ct.name, (Cell(0, "finger"),)),),
+            nodes={})
+    return robot
+
+
+def recording_cells(rec: BiotacRecording, cell_type: CellType | None = None) -> dict[int, CellSignals]:
+    """The core's cell signals of a recording (or a window of it: :meth:`BiotacRecording.crop_frames`).
+
+    Vibration PAC (counts), deformation the electrodes (counts, tared by the
+    recording setup), force ``PDC * n_per_count`` (eq. 16), extra channels
+    by name from PDC, TDC and TAC.
+
+    Raises
+    ------
+    ConfigError
+        When the cell type declares an extra channel the recordings do not hold.
+    """
+    ct = cell_type or biotac_cell_type()
+    columns = {"pdc": rec.pdc, "tdc": rec.tdc, "tac": rec.tac}
+    missing = [c for c in ct.extra_channels if c not in columns]
+    if missing:
+        raise ConfigError(f"cell type {ct.name!r} declares extra channel {missing[0]!r}, which BioTac recordings "
+                          f"do not hold (they have {', '.join(columns)})", key="extra_channels")
+    extra = np.array([columns[c] for c in ct.extra_channels], dtype=np.float64).reshape(-1, rec.n_frames)
+    force_n = rec.pdc.astype(np.float64) * ct.force.n_per_count
+    return {0: CellSignals(rec.pac[None, :], rec.pac_t_ns, rec.electrodes, rec.frame_t_ns, force_n, extra=extra)}
+
+
+def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
+    """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.features.selection_labels`)."""
+    ct = cell_type or biotac_cell_type()
+    return {g: selection_labels(ct, (g,)) for g in GROUPS}
 
 
 @dataclass
@@ -192,8 +207,8 @@ class FeatureBank:
         The contact gate (mean PDC force >= F_t).
     mean_force_n : numpy.ndarray, shape (n_windows,)
     seconds : dict of str to numpy.ndarray, shape (n_windows,)
-        Compute time per window of ``core`` (the paper and per-channel
-        descriptor), ``bands``, ``levels`` and ``baseline``.
+        Compute time per window of each group (``describe_window`` with that
+        group alone).
     """
 
     windows: list[Window]
@@ -219,56 +234,13 @@ class FeatureBank:
         return self.y * 10000 + self.trials
 
 
-def _bandpass_sos(fs_hz: float) -> list[np.ndarray]:
-    nyq = fs_hz / 2.0
-    out = []
-    for lo, hi in PAC_BANDS_HZ:
-        hi = min(hi, 0.98 * nyq)
-        out.append(signal.butter(4, [lo, hi], btype="bandpass", fs=fs_hz, output="sos"))
-    return out
-
-
-_SOS_CACHE: dict[float, list[tuple[np.ndarray, np.ndarray]]] = {}
-
-
-def _bands(pac: np.ndarray, fs_hz: float) -> np.ndarray:
-    if fs_hz not in _SOS_CACHE:
-        _SOS_CACHE[fs_hz] = [(sos, signal.sosfilt_zi(sos)) for sos in _bandpass_sos(fs_hz)]
-    x = pac.astype(np.float64) - pac.mean()
-    filtered = np.stack([signal.sosfilt(sos, x, zi=zi * x[0])[0] for sos, zi in _SOS_CACHE[fs_hz]])
-    h = hjorth(filtered, fs_hz)
-    return np.concatenate([h.activity, h.mobility, h.complexity])
-
-
-def _band_powers(x: np.ndarray, fs_hz: float, bands: Sequence[tuple[float, float]]) -> np.ndarray:
-    """Log band powers of the rows of ``x`` (Welch, 1 s segments or shorter)."""
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    nper = int(min(x.shape[-1], max(8, round(fs_hz))))
-    f, p = signal.welch(x, fs=fs_hz, nperseg=nper, axis=-1)
-    df = f[1] - f[0] if f.size > 1 else 1.0
-    out = np.empty((x.shape[0], len(bands)))
-    for k, (lo, hi) in enumerate(bands):
-        sel = (f >= lo) & (f < hi) if hi < fs_hz / 2 else (f >= lo)
-        out[:, k] = np.log1p(p[:, sel].sum(axis=-1) * df) if sel.any() else 0.0
-    return out
-
-
-def _moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-    var = x.var(axis=-1)
-    flat = var <= 1e-12 * np.maximum(1.0, np.abs(x).max(axis=-1)) ** 2
-    with np.errstate(all="ignore"):
-        sk = stats.skew(x, axis=-1)
-        ku = stats.kurtosis(x, axis=-1)
-    # A flat signal has no defined shape: 0 (documented), never NaN.
-    sk = np.where(flat | ~np.isfinite(sk), 0.0, sk)
-    ku = np.where(flat | ~np.isfinite(ku), 0.0, ku)
-    return np.log1p(var), sk, ku
-
-
 def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: CellType,
                 force_threshold_n: float) -> tuple[dict[str, np.ndarray], bool, float, dict[str, float]]:
     """Every feature group of frames ``start:start + n_frames`` of one recording.
+
+    Each group is the core's :func:`~.core.aggregation.describe_window` of
+    the window with that group alone, every window described whatever its
+    force (the gate is applied at selection, :func:`select_features`).
 
     Returns
     -------
@@ -277,43 +249,21 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
         Contact gate (eq. 16): mean PDC force over the window >= F_t.
     mean_force_n : float
     seconds : dict of str to float
-        Compute time of each part.
+        Compute time of each group.
     """
     w = rec.crop_frames(start, start + n_frames)
     if w.n_frames != n_frames:
         raise ConfigError(f"{rec.path}: window {start}:{start + n_frames} runs past the end ({rec.n_frames})")
-    fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
-    force_n = w.pdc.astype(np.float64) * cell_type.force.n_per_count
+    robot = finger_robot(cell_type)
+    cells = recording_cells(w, cell_type)
+    groups: dict[str, np.ndarray] = {}
     seconds: dict[str, float] = {}
-
-    t0 = time.perf_counter()
-    feats = cell_features(w.pac[None, None, :], w.pac_t_ns, w.electrodes[None], w.frame_t_ns, fs_s, fs_v)
+    for g in GROUPS:
+        t0 = time.perf_counter()
+        groups[g] = describe_window(robot, cells, layout="concat", groups=(g,), force_threshold_n=-np.inf).values
+        seconds[g] = time.perf_counter() - t0
+    force_n = cells[0].force_n
     gate = contact_gate([force_n], force_threshold_n)
-    everyone = np.ones(1, dtype=bool)  # the gate is applied at selection (select_features)
-    paper = reduce_body_part(feats, everyone, cell_type, "averaged")
-    per_channel = reduce_body_part(feats, everyone, cell_type, "per_channel")
-    seconds["core"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    bands = _bands(w.pac, fs_s)
-    seconds["bands"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    levels = np.concatenate([w.electrodes.mean(axis=1), [w.pdc.mean(), w.tdc.mean(), w.tac.mean()]])
-    seconds["levels"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    sigs_v = w.electrodes.astype(np.float64)
-    lv_s, sk_s, ku_s = _moments(w.pac)
-    lv_v, sk_v, ku_v = _moments(sigs_v)
-    baseline = np.concatenate([
-        lv_s, lv_v, sk_s, sk_v, ku_s, ku_v,
-        _band_powers(w.pac - w.pac.mean(), fs_s, PAC_BANDS_HZ).ravel(),
-        _band_powers(sigs_v - sigs_v.mean(axis=1, keepdims=True), fs_v, ELECTRODE_BANDS_HZ).ravel(),
-    ])
-    seconds["baseline"] = time.perf_counter() - t0
-    groups = {"paper": paper, "per_channel": per_channel, "bands": bands, "levels": levels,
-              "baseline": baseline}
     return groups, bool(gate[0]), float(force_n.mean()), seconds
 
 
@@ -325,9 +275,11 @@ def _file_stamp(path: str) -> tuple[int, int]:
     return int(st.st_size), int(st.st_mtime_ns)
 
 
-def _cache_path(cache_dir: Path, n_frames: int, force_threshold_n: float, n_per_count: float) -> Path:
+def _cache_path(cache_dir: Path, n_frames: int, force_threshold_n: float, n_per_count: float,
+                cell_type: CellType) -> Path:
     key = json.dumps({"v": _BANK_VERSION, "n_frames": n_frames, "ft": force_threshold_n, "npc": n_per_count,
-                      "bands": PAC_BANDS_HZ, "ebands": ELECTRODE_BANDS_HZ, "ppf": PAC_PER_FRAME})
+                      "bands": PAC_BANDS_HZ, "ebands": ELECTRODE_BANDS_HZ, "ppf": PAC_PER_FRAME,
+                      "cell_type": repr(cell_type)})
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return cache_dir / f"bank_{n_frames}f_{digest}.npz"
 
@@ -340,7 +292,7 @@ def _load_cache(path: Path) -> dict[tuple, tuple]:
             keys = [tuple(k) for k in z["keys"].tolist()]
             paths = z["paths"].tolist()
             rows = {g: z[f"g_{g}"] for g in GROUPS}
-            sec = {s: z[f"s_{s}"] for s in ("core", "bands", "levels", "baseline")}
+            sec = {g: z[f"s_{g}"] for g in GROUPS}
             contact, force = z["contact"], z["force"]
     except (OSError, KeyError, ValueError):
         return {}  # a damaged cache is recomputed, never trusted
@@ -360,8 +312,8 @@ def _save_cache(path: Path, entries: dict[tuple, tuple]) -> None:
               "contact": np.array([e[2] for _, e in items]), "force": np.array([e[3] for _, e in items])}
     for g in GROUPS:
         arrays[f"g_{g}"] = np.stack([e[1][g] for _, e in items])
-    for s in ("core", "bands", "levels", "baseline"):
-        arrays[f"s_{s}"] = np.array([e[4][s] for _, e in items])
+    for g in GROUPS:
+        arrays[f"s_{g}"] = np.array([e[4][g] for _, e in items])
     tmp = path.with_name(path.name + f".{os.getpid()}.tmp.npz")
     np.savez(tmp, **arrays)
     os.replace(tmp, path)
@@ -393,11 +345,10 @@ def _add_subwindows(bank: FeatureBank, recordings: Sequence[BiotacRecording], **
     sub = compute_bank(recordings, pieces, **kwargs)
     values = np.concatenate([sub.groups[g] for g in _SUBWINDOW_SOURCE], axis=1)
     labels = [lab.split("/", 1)[1] for g in _SUBWINDOW_SOURCE for lab in sub.labels[g]]
-    values = log_activity(values, activity_mask(labels)).reshape(len(bank.windows), N_SUBWINDOWS, -1)
-    bank.groups["subwindows"] = np.concatenate([values.mean(axis=1), values.std(axis=1)], axis=1)
-    bank.labels["subwindows"] = tuple([f"subwindows/mean_{lab}" for lab in labels]
-                                      + [f"subwindows/sd_{lab}" for lab in labels])
-    per_piece = sub.seconds["core"] + sub.seconds["bands"]
+    summary, names = piece_summary(values.reshape(len(bank.windows), N_SUBWINDOWS, -1), labels)
+    bank.groups["subwindows"] = summary
+    bank.labels["subwindows"] = tuple(f"subwindows/{lab}" for lab in names)
+    per_piece = sum(sub.seconds[g] for g in _SUBWINDOW_SOURCE)
     bank.seconds["subwindows"] = per_piece.reshape(len(bank.windows), N_SUBWINDOWS).sum(axis=1)
 
 
@@ -440,7 +391,7 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
     if len(by_key) != len(recordings):
         raise ConfigError("recordings hold the same material and trial twice (two folders?): describe each "
                           "folder's windows with its own recordings")
-    cpath = (_cache_path(Path(cache_dir), n_frames, threshold, cell_type.force.n_per_count)
+    cpath = (_cache_path(Path(cache_dir), n_frames, threshold, cell_type.force.n_per_count, cell_type)
              if cache_dir else None)
     cache = _load_cache(cpath) if cpath else {}
     stamps = {r.path: _file_stamp(r.source_file) for r in recordings}
@@ -494,7 +445,7 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
         windows=list(windows), groups=groups, labels=labels,
         in_contact=np.array([r[2] for r in rows], dtype=bool),
         mean_force_n=np.array([r[3] for r in rows]),
-        seconds={s: np.array([r[4][s] for r in rows]) for s in ("core", "bands", "levels", "baseline")},
+        seconds={g: np.array([r[4][g] for r in rows]) for g in GROUPS},
     )
     if subwindows:
         _add_subwindows(bank, recordings, cell_type=cell_type, force_threshold_n=threshold, cache_dir=cache_dir,

@@ -76,10 +76,11 @@ def test_biotac_finger_eq17_eight_values_by_hand():
     robot = load_robot("shadow_hand")
     rng = np.random.default_rng(1)
     cell = _biotac_cell(rng)
-    d = describe_window(robot, {1: cell})
+    d = describe_window(robot, {1: cell}, channels="averaged")
     index = d.body_parts[1]
     assert index.name == "index" and index.contact and index.cells_in_contact == 1
-    assert index.labels == ("A_pac", "A_E", "M_pac", "M_E", "C_pac", "C_E", "L_pac_E", "N_pac_E")
+    assert index.labels == tuple(f"paper/{q}" for q in ("A_pac", "A_E", "M_pac", "M_E", "C_pac", "C_E", "L_pac_E",
+                                                          "N_pac_E"))
     hp = hjorth(cell.vibration[0], 2200.0)
     he = hjorth(cell.deformation, 100.0)
     held, _ = zero_order_hold(cell.deformation_t_ns, cell.deformation, cell.vibration_t_ns)
@@ -93,7 +94,7 @@ def test_biotac_finger_eq17_eight_values_by_hand():
     np.testing.assert_array_equal(d.values[8:16], index.values)
     assert not d.body_parts[0].contact and np.all(d.values[:8] == 0)
     assert d.body_parts[0].quality & Quality.NO_CONTACT
-    assert d.labels[8] == "index/A_pac"
+    assert d.labels[8] == "index/paper/A_pac"
 
 
 def test_skin_body_part_eq28_eighteen_values_by_hand_with_gate():
@@ -102,11 +103,11 @@ def test_skin_body_part_eq28_eighteen_values_by_hand_with_gate():
     hand = robot.body_part("left_hand")
     cells = {c.id: _skin_cell(rng) for c in hand.cells[:3]}
     cells[hand.cells[3].id] = _skin_cell(rng, force=0.1)  # below F_t = 0.2 N: gated out
-    d = describe_window(robot, cells)
+    d = describe_window(robot, cells, channels="averaged")
     bp = d.body_parts[0]
-    assert bp.labels == ("A_a_x", "A_a_y", "A_a_z", "A_F", "M_a_x", "M_a_y", "M_a_z", "M_F",
-                         "C_a_x", "C_a_y", "C_a_z", "C_F", "L_a_F_x", "L_a_F_y", "L_a_F_z",
-                         "N_a_F_x", "N_a_F_y", "N_a_F_z")
+    assert bp.labels == tuple("paper/" + q for q in (
+        "A_a_x", "A_a_y", "A_a_z", "A_F", "M_a_x", "M_a_y", "M_a_z", "M_F", "C_a_x", "C_a_y", "C_a_z", "C_F",
+        "L_a_F_x", "L_a_F_y", "L_a_F_z", "N_a_F_x", "N_a_F_y", "N_a_F_z"))
     assert bp.cells_in_contact == 3 and bp.cells_total == 14
     touching = [cells[c.id] for c in hand.cells[:3]]
     acc = np.array([hjorth(c.vibration, 1000.0) for c in touching])  # (cell, quantity, axis)
@@ -148,7 +149,7 @@ def test_per_channel_mode_keeps_98_values_per_biotac():
     d = describe_window(robot, {1: _biotac_cell(np.random.default_rng(4))}, channels="per_channel")
     assert d.values.shape == (5 * 98,)
     bp = d.body_parts[1]
-    averaged = describe_window(robot, {1: _biotac_cell(np.random.default_rng(4))}).body_parts[1]
+    averaged = describe_window(robot, {1: _biotac_cell(np.random.default_rng(4))}, channels="averaged").body_parts[1]
     # the averaged descriptor is the mean of the per-channel one (electrode blocks)
     assert averaged.values[1] == pytest.approx(bp.values[1:20].mean())
     assert averaged.values[6] == pytest.approx(bp.values[60:79].mean())
@@ -158,16 +159,16 @@ def test_pooled_mode_is_the_mean_over_parts_in_contact():
     robot = load_robot("shadow_hand")
     rng = np.random.default_rng(5)
     cells = {0: _biotac_cell(rng), 2: _biotac_cell(rng), 4: _biotac_cell(rng, force=0.0)}
-    concat = describe_window(robot, cells)
-    pooled = describe_window(robot, cells, layout="pooled")
+    concat = describe_window(robot, cells, channels="averaged")
+    pooled = describe_window(robot, cells, layout="pooled", channels="averaged")
     assert pooled.values.shape == (8,)
     np.testing.assert_allclose(pooled.values, (concat.values[0:8] + concat.values[16:24]) / 2)
-    assert pooled.labels[0] == "biotac/A_pac"
+    assert pooled.labels[0] == "biotac/paper/A_pac"
 
 
 def test_no_contact_anywhere_gives_zeros_and_flags():
     robot = load_robot("shadow_hand")
-    d = describe_window(robot, {1: _biotac_cell(np.random.default_rng(6), force=0.05)})
+    d = describe_window(robot, {1: _biotac_cell(np.random.default_rng(6), force=0.05)}, channels="averaged")
     assert not d.contact and np.all(d.values == 0)
     assert all(bp.quality & Quality.NO_CONTACT for bp in d.body_parts)
 
@@ -179,8 +180,8 @@ def test_invalid_cell_is_left_out_and_flagged():
     good = _skin_cell(rng)
     bad = _skin_cell(rng)
     bad.valid = False
-    d1 = describe_window(robot, {part.cells[0].id: good})
-    d2 = describe_window(robot, {part.cells[0].id: good, part.cells[1].id: bad})
+    d1 = describe_window(robot, {part.cells[0].id: good}, channels="averaged")
+    d2 = describe_window(robot, {part.cells[0].id: good, part.cells[1].id: bad}, channels="averaged")
     chest1, chest2 = d1.body_parts[-1], d2.body_parts[-1]
     np.testing.assert_allclose(chest2.values, chest1.values)
     assert chest2.quality & Quality.INVALID and chest2.cells_in_contact == 1
@@ -205,7 +206,7 @@ def test_descriptor_is_finite_for_flat_and_nan_signals():
     nan = _biotac_cell(rng)
     nan.vibration = nan.vibration.astype(float)
     nan.vibration[0, 10] = np.nan
-    d = describe_window(robot, {1: flat, 2: nan})
+    d = describe_window(robot, {1: flat, 2: nan}, channels="averaged")
     assert np.all(np.isfinite(d.values))
     assert d.body_parts[1].quality & Quality.FLAT
     assert d.body_parts[2].quality & Quality.NONFINITE

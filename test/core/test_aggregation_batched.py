@@ -122,8 +122,10 @@ def _assert_same(robot, cells, layout: str, channels: str) -> None:
     parts, values = _per_body_part(robot, cells, layout, channels)
     assert np.array_equal(got.values, values, equal_nan=True)
     for a, b in zip(got.body_parts, parts):
+        group = {"averaged": "paper", "per_channel": "per_channel"}[channels]  # labels carry the group
         assert (a.name, a.contact, a.cells_in_contact, a.cells_total, a.quality, a.labels) == \
-               (b.name, b.contact, b.cells_in_contact, b.cells_total, b.quality, b.labels)
+               (b.name, b.contact, b.cells_in_contact, b.cells_total, b.quality,
+                tuple(f"{group}/{lab}" for lab in b.labels))
         assert a.mean_force_n == b.mean_force_n
         assert np.array_equal(a.values, b.values, equal_nan=True)
 
