@@ -57,7 +57,7 @@ def test_predict_then_learn_online(graph):
     assert first.exploration_id == 1 and not first.has_model and first.class_name == ""
     d = g["out"]["desc"][-1]
     assert d.body_parts == ["index"] and d.contact == [True] and len(d.values) == 8
-    assert d.window_mode == "exploration" and d.labels[0] == "index/A_pac"
+    assert d.window_mode == "exploration" and d.labels[0] == "index/paper/A_pac"
     g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
     assert spin_until(g["ex"], lambda: g["classifier"].model is not None and g["classifier"].model.pa.updates == 1)
     second = _explore(g, stream, 300.0)
