@@ -63,7 +63,7 @@ def resolve_mapping(source: Path, mapping: str | Path | Mapping | None) -> Mappi
         return mapping
     if mapping is not None:
         return load_mapping(mapping)
-    if is_bag(source) or (source.is_dir() and any(is_bag(p) for p in source.iterdir())):
+    if is_bag(source) or (source.is_dir() and any(is_bag(p) for pattern in ("*", "*/*") for p in source.glob(pattern))):
         return parse_mapping(BAG_MAPPING, source="<bag default>")
     return load_mapping(DEFAULT_MAPPING)
 
@@ -217,6 +217,7 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
     raw: list[_Trial] = []
     unread: list[int] = []
     unread_classes: list[str] = []
+    selected: set[str] = set()  # class values and names of the selected classes met
     if m.format == "bag":
         for bag in find_bags(src, None if m.files == "**/*" else m.files):
             unit = Unit(bag)
@@ -242,16 +243,22 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
                 if cv not in classes and label not in classes:
                     unread_classes.append(f"{cv} {label}" if cv != label else cv)
                     continue  # not selected: not even read (absent selections are checked below)
+            if cv is not None:
+                selected.update((cv, m.class_rule.names.get(cv, cv)))
             if trials is not None and tv is not None and _DIGITS.match(tv) and int(tv) not in trials:
                 unread.append(int(tv))
                 continue
             raw.extend(_table_trials(unit, m, cv, tv))
     if not raw:
         where = str(src)
-        if classes is not None or trials is not None:
-            raise ConfigError(f"{where}: no trial of the selected classes/trials: classes {list(classes or [])}, "
-                              f"trials {format_numbers(trials or [])}; the data hold trials "
-                              f"{format_numbers(unread)}", key="materials")
+        seen = {part for c in unread_classes for part in c.split(" ", 1)} | selected
+        if classes is not None and any(c not in seen for c in classes):
+            raise ConfigError(f"{where}: no class {', '.join(classes)}; the data hold "
+                              + ", ".join(sorted(set(unread_classes), key=lambda x: (len(x.split()[0]), x))),
+                              key="materials")
+        if trials is not None and unread:
+            raise ConfigError(f"{where}: no trial {format_numbers(trials)}; the data hold trials "
+                              f"{format_numbers(unread)}", key="trials")
         raise DataFormatError(f"{where}: no trials found")
     recs = _build(raw, m, tare_mode, report)
     return check_selection(recs, trials, classes, str(src), unread, sorted(set(unread_classes)))

@@ -181,6 +181,12 @@ def test_missing_column_is_named(biotac_data_dir, tmp_path):
 
 
 def test_binary_and_undecodable_files_are_one_line_errors(tmp_path, capsys):
+    bags = tmp_path / "bags" / "felt"
+    bags.mkdir(parents=True)
+    (bags / "trial_1.bag").write_bytes(np.random.default_rng(1).integers(0, 256, 3000, dtype=np.uint8).tobytes())
+    assert main(["import", str(tmp_path / "bags"), "-o", str(tmp_path / "bag")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "trial_1.bag: not a readable bag" in err
     d = tmp_path / "raw_data" / "mat1"
     d.mkdir(parents=True)
     rng = np.random.default_rng(0)
@@ -225,6 +231,10 @@ def test_selections_larger_than_the_data_name_what_exists(biotac_data_dir):
         load_recordings(biotac_data_dir, trials=range(25, 41), materials=[3])
     with pytest.raises(ConfigError, match=r"no class 21; the data hold 1 carpet_net, 2 cotton, .*, 20 steel"):
         load_recordings(biotac_data_dir, trials=[1], materials=[20, 21])
+    with pytest.raises(ConfigError, match=r"no class 25; the data hold 1 carpet_net, .*, 20 steel"):
+        load_recordings(biotac_data_dir, materials=[25])
+    with pytest.raises(ConfigError, match=r"no trial 40; the data hold trials 1-30"):
+        load_recordings(biotac_data_dir, trials=[40], materials=[2])
 
 
 @pytest.mark.realdata
