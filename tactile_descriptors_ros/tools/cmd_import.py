@@ -73,8 +73,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..bags.importer import (
         DEFAULT_BIOTAC_TOPIC,
         DEFAULT_LABEL_TOPIC,
@@ -93,6 +91,10 @@ def run(args: argparse.Namespace) -> int:
     classes = parse_classes(args.materials) if args.materials else None
 
     def progress(recs):
+        try:  # tqdm comes with the [eval] extra; a robot install imports without a progress bar
+            from tqdm import tqdm
+        except ImportError:
+            return recs
         return tqdm(recs, desc="import", unit="trial", file=sys.stderr, disable=None)
 
     report = import_source(args.data_dir, args.output, mapping=args.mapping, trials=trials, classes=classes,
