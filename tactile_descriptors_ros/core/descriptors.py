@@ -372,11 +372,19 @@ def average_ranks(x: np.ndarray, axis: int = -1) -> np.ndarray:
     arr = np.asarray(x)
     if _is_integral(arr) and arr.size:
         moved = np.moveaxis(arr, axis, -1)
-        rows = moved.reshape(-1, moved.shape[-1]).astype(np.int64)
+        rows = moved.reshape(-1, moved.shape[-1])
+        if rows.dtype == bool:
+            rows = rows.astype(np.int64)
         lo = rows.min(axis=1, keepdims=True)
-        span = int((rows - lo).max()) + 1
-        if rows.shape[0] * span <= COUNTING_RANK_MAX_BINS:
-            return np.moveaxis(_counting_ranks(rows - lo, span).reshape(moved.shape), -1, axis)
+        # The span in float64 first: int64 data spanning more than 2^63 (or uint64
+        # above it) would overflow ``rows - lo``.  Off by at most a few thousand
+        # near 2^63, so a small float span means a small exact one.
+        span_f = float(np.max(rows.max(axis=1, keepdims=True).astype(np.float64) - lo.astype(np.float64)))
+        if rows.shape[0] * (span_f + 1.0) <= COUNTING_RANK_MAX_BINS / 2:
+            v = (rows - lo).astype(np.int64)  # exact: the span is small, in rows' own dtype
+            span = int(v.max()) + 1
+            if rows.shape[0] * span <= COUNTING_RANK_MAX_BINS:
+                return np.moveaxis(_counting_ranks(v, span).reshape(moved.shape), -1, axis)
     if arr.size == 0:
         return np.zeros(arr.shape)
     return stats.rankdata(arr, method="average", axis=axis).astype(np.float64)

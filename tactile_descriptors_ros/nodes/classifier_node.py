@@ -5,18 +5,24 @@
 * A ``Label`` names an exploration id (0 = the most recent descriptor) and a
   class name; the kept descriptor of that exploration is learned (predict
   first, then update).  A new class name adds a class at run time.
-* Late labels are matched among the last ``label_horizon`` kept descriptors;
-  a label that arrives *before* its descriptor is held (at most
-  ``label_horizon`` of them) and applied right after that descriptor's
-  prediction, so the prediction stays honest.  A label for an exploration
-  that is unknown (never described, or older than the horizon) is counted
-  and reported (``/diagnostics`` and a log warning), never applied to another
-  descriptor.
-* The model is saved atomically after every update (``model_path``; default
-  ``$ROS_HOME/tactile_descriptors_ros/<node name>.json``, ``ROS_HOME``
-  defaulting to ``~/.ros``) and reloaded at start.  A model trained on
+* Which descriptor a label teaches, and when, is
+  :class:`~tactile_descriptors_ros.core.labels.LabelProtocol`: late labels
+  match the last ``label_horizon`` kept descriptors; a label that arrives
+  *before* its descriptor is held and learned right after that descriptor's
+  prediction, and expires (counted, warned) once a descriptor
+  ``label_expiry_explorations`` ids past it arrived; the first label of an
+  exploration wins (a second one is refused, counted, warned); class names
+  longer than ``max_class_name_chars`` are refused.  Every label is learned,
+  held, or counted in ``/diagnostics``.
+* Every update is made durable before it is reported ("learned exploration
+  N"): one entry appended and synced to ``<model_path>.journal``
+  (:class:`~tactile_descriptors_ros.core.learning.ModelStore`), compacted into
+  ``model_path`` as it grows and at shutdown.  ``model_path`` defaults to
+  ``$ROS_HOME/tactile_descriptors_ros/<node name>.json`` (``ROS_HOME``
+  defaulting to ``~/.ros``) and is reloaded at start.  A model trained on
   another descriptor layout is refused (an error in ``/diagnostics``; call
-  ``~/reset`` or choose another path), never silently overwritten.
+  ``~/reset`` or choose another path), never silently overwritten; a corrupt
+  model file stops the node with an error naming the file and the key.
 * Services ``~/save`` and ``~/reset`` (``std_srvs/Trigger``).
 
 The running accuracy of predictions made *before* their label arrived (the
@@ -26,14 +32,16 @@ online learning curve) is reported in diagnostics as ``online_accuracy``.
 from __future__ import annotations
 
 import os
-from collections import Counter, OrderedDict
+from collections import Counter
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from rclpy.node import Node
 
-from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
+from ..core.labels import DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED, LabelProtocol
+from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
 from ..errors import ModelError, SignalError
 from .common import Diagnostics, Status, declare, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
@@ -50,6 +58,14 @@ def default_model_path(node_name: str) -> Path:
     """``$ROS_HOME/tactile_descriptors_ros/<node_name>.json`` (``ROS_HOME`` defaults to ``~/.ros``)."""
     home = Path(os.environ.get("ROS_HOME") or Path.home() / ".ros")
     return home / "tactile_descriptors_ros" / f"{node_name}.json"
+
+
+@dataclass(frozen=True)
+class _Predicted:
+    """A descriptor the protocol keeps for its label, with the class predicted before the label came."""
+
+    sample: DescriptorSample
+    prediction: str | None
 
 
 class ClassifierNode(Node):
@@ -71,28 +87,31 @@ class ClassifierNode(Node):
                                   "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,
                                "descriptors kept for late labels (and early labels held)", minimum=1)
+        expiry = declare(self, "label_expiry_explorations", 10,
+                         "a held label expires when a descriptor this many ids past it arrives", minimum=1)
+        max_name = declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
+                           "longest class name accepted [characters]", minimum=1)
+        self.labels = LabelProtocol(self.horizon, expiry, max_name)
         self.save_after_update = declare(self, "save_after_update", True, "save the model after every update")
         self.load_on_start = declare(self, "load_model", True, "load model_path at start if it exists")
         self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions")
 
         self.model: OnlineClassifier | None = None
+        self.store = ModelStore(self.model_path)
         self.layout_error: str | None = None
         if self.load_on_start and self.model_path.is_file():
-            self.model = OnlineClassifier.load(self.model_path)  # ModelError: corrupt file -> refuse to start
+            self.model = self.store.load()  # ModelError: corrupt file -> refuse to start
             self.get_logger().info(f"loaded model {self.model_path}: {len(self.model.classes)} classes "
                                    f"({', '.join(self.model.classes)}), {self.model.pa.updates} updates")
-        self.kept: OrderedDict[int, DescriptorSample] = OrderedDict()
         self.latest: DescriptorSample | None = None
-        self.latest_id_seen = 0
-        self.pending: OrderedDict[int, str] = OrderedDict()
-        self.predicted: dict[int, str | None] = {}
         self.counts: Counter[str] = Counter()
         self.correct_before_label = 0
         self.scored_labels = 0
         self.last_save_error: str | None = None
 
         qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 50))
-        qos_label = declare_qos(self, "label", QosDefaults("reliable", "volatile", 50))
+        # A burst of labels must not overflow the history: each lost label is a lost update (docs/nodes.md).
+        qos_label = declare_qos(self, "label", QosDefaults("reliable", "volatile", 1000))
         qos_pred = declare_qos(self, "prediction", QosDefaults("reliable", "volatile", 50))
         self.pub = self.create_publisher(Prediction, PREDICTION_TOPIC, qos_pred)
         self.sub_desc = self.create_subscription(Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, qos_desc)
@@ -142,66 +161,57 @@ class ClassifierNode(Node):
                                            model_version=self.model.version, updates=self.model.pa.updates,
                                            frame_id=self.frame_id))
         self.counts["predictions"] += 1
-        eid = sample.exploration_id
-        self.predicted[eid] = name
         self.latest = sample
-        if eid:
-            self.latest_id_seen = max(self.latest_id_seen, eid)
-            self.kept[eid] = sample
-            self.kept.move_to_end(eid)
-            while len(self.kept) > self.horizon:
-                old, _ = self.kept.popitem(last=False)
-                self.predicted.pop(old, None)
-        if eid in self.pending:
-            self._learn(sample, self.pending.pop(eid))
+        for decision in self.labels.add_descriptor(sample.exploration_id, _Predicted(sample, name)):
+            self._apply(decision)
 
     # ----------------------------------------------------------------- labels
     def _on_label(self, msg) -> None:
-        eid = int(msg.exploration_id)
-        name = str(msg.class_name).strip()
-        if not name:
-            self.counts["empty_label"] += 1
-            self.get_logger().warning(f"label for exploration {eid} has an empty class name; ignored")
-            return
-        if eid == 0:
-            sample = self.latest
-        else:
-            sample = self.kept.get(eid)
-        if sample is None:
-            if eid > self.latest_id_seen and len(self.pending) < self.horizon:
-                self.pending[eid] = name  # its descriptor has not arrived yet
-                self.counts["early_labels"] += 1
-                return
-            self.counts["unknown_exploration"] += 1
-            self.get_logger().warning(
-                f"label {name!r} for exploration {eid or '(most recent)'}: no such descriptor with contact among "
-                f"the last {self.horizon} kept; ignored")
-            return
-        self._learn(sample, name)
+        self.counts["labels_received"] += 1
+        self._apply(self.labels.add_label(int(msg.exploration_id), str(msg.class_name)))
 
-    def _learn(self, sample: DescriptorSample, name: str) -> None:
-        if self.model is None or sample.labels != self.model.labels:  # reset meanwhile  # the model was reset to another layout meanwhile
+    def _apply(self, decision) -> None:
+        """Carry out a :class:`~..core.labels.LabelDecision`: learn, or warn about a refusal or expiry."""
+        if decision.action == LEARN:
+            self._learn(decision.item, decision.class_name)
+        elif decision.action in (REFUSED, EXPIRED):
+            self.get_logger().warning(decision.message, throttle_duration_sec=1.0)
+
+    def _learn(self, kept: _Predicted, name: str) -> None:
+        sample = kept.sample
+        if self.model is None or sample.labels != self.model.labels:  # the model was reset to another layout meanwhile
             self.counts["layout_mismatch"] += 1
             return
-        key = sample.exploration_id
-        if key in self.predicted:  # first label of this prediction: score it
-            guess = self.predicted.pop(key, None)
-            self.scored_labels += 1
-            self.correct_before_label += int(guess == name)
+        self.scored_labels += 1
+        self.correct_before_label += int(kept.prediction == name)
         new_class = name not in self.model.classes
         loss = self.model.learn(sample.values, name)
         self.counts["updates"] += 1
-        self.get_logger().info(f"learned exploration {key}: {name!r}{' (new class)' if new_class else ''}, "
-                               f"loss {loss:.3f}, {len(self.model.classes)} classes")
-        if self.save_after_update:
-            self._save()
+        saved = self._record() if self.save_after_update else None
+        if saved is False:
+            return  # _record logged the error: the update is in memory only, never reported as saved
+        self.get_logger().info(f"learned exploration {sample.exploration_id}: {name!r}"
+                               f"{' (new class)' if new_class else ''}, loss {loss:.3f}, "
+                               f"{len(self.model.classes)} classes{', saved' if saved else ''}")
+
+    def _record(self) -> bool:
+        """Make the last update durable (journal entry, synced); False and an error when it failed."""
+        try:
+            self.store.record(self.model)
+        except ModelError as exc:
+            self.counts["save_failed"] += 1
+            self.last_save_error = str(exc)
+            self.get_logger().error(f"update learned in memory but not saved: {exc}")
+            return False
+        self.last_save_error = None
+        return True
 
     # --------------------------------------------------------------- services
     def _save(self) -> bool:
         if self.model is None:
             return False
         try:
-            self.model.save(self.model_path)
+            self.store.save(self.model)
         except ModelError as exc:
             self.counts["save_failed"] += 1
             self.last_save_error = str(exc)
@@ -223,17 +233,18 @@ class ClassifierNode(Node):
         labels = self.latest.labels if self.latest is not None else None
         self.model = None
         self.layout_error = None
-        self.kept.clear()
-        self.pending.clear()
-        self.predicted.clear()
+        self.labels.reset()
         self.latest = None
         self.correct_before_label = self.scored_labels = 0
         try:
             if labels is not None:
                 self.model = self._new_model(labels)
-                self.model.save(self.model_path)
-            elif self.model_path.exists():
-                self.model_path.unlink()
+                self.store.save(self.model)
+            else:
+                self.store.close()
+                for path in (self.model_path, self.store.journal):
+                    if path.exists():
+                        path.unlink()
         except (ModelError, OSError) as exc:
             response.success, response.message = False, f"model reset in memory, but {exc}"
             return response
@@ -241,6 +252,12 @@ class ClassifierNode(Node):
         response.success, response.message = True, f"model reset ({self.model_path})"
         self.get_logger().info(response.message)
         return response
+
+    def close(self) -> None:
+        """At shutdown: compact the journal into the model file (a clean stop leaves one file)."""
+        if self.model is not None and self.save_after_update and self.store.journal.exists():
+            self._save()
+        self.store.close()
 
     # ------------------------------------------------------------ diagnostics
     @property
@@ -254,14 +271,17 @@ class ClassifierNode(Node):
                   "updates": self.model.pa.updates if self.model else 0,
                   "model_version": self.model.version if self.model else 0,
                   "labelled_predictions": self.scored_labels, "online_accuracy": self.online_accuracy,
-                  "kept_descriptors": len(self.kept), "pending_labels": len(self.pending)}
-        values.update({k: v for k, v in sorted(self.counts.items())})
+                  "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held}
+        values.update({k: v for k, v in sorted((self.counts + self.labels.counts).items())})
         if self.layout_error:
             return Status("error", self.layout_error, values)
         if self.last_save_error:
             return Status("error", self.last_save_error, values)
-        if self.counts["unknown_exploration"] or self.counts["malformed_descriptor"]:
-            return Status("warn", f"{self.counts['unknown_exploration']} labels for unknown explorations, "
+        refused = {k: v for k, v in sorted(self.labels.counts.items()) if v and k not in ("labels_learned",
+                                                                                          "early_labels")}
+        if refused or self.counts["malformed_descriptor"]:
+            what = ", ".join(f"{k}={v}" for k, v in refused.items())
+            return Status("warn", f"labels not learned: {what or 'none'}; "
                                   f"{self.counts['malformed_descriptor']} malformed descriptors", values)
         return Status("ok", f"{values['classes']} classes, {values['updates']} updates", values)
 

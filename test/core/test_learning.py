@@ -161,3 +161,147 @@ def test_failed_save_keeps_previous_model(tmp_path, monkeypatch):
         clf.save(path)
     assert path.read_text() == before and json.loads(before)["version"] == 0
     assert [p.name for p in tmp_path.iterdir()] == ["model.json"]  # no temp file left behind
+
+
+# ------------------------------------------------------------ corrupt but parseable model files
+
+
+def _valid_state() -> dict:
+    clf = OnlineClassifier(["A_x", "M_x", "C_x"])
+    rng = np.random.default_rng(5)
+    for i in range(12):
+        v = rng.uniform(0.5, 3.0, 3)
+        clf.observe(v)
+        clf.learn(v, f"c{i % 3}")
+    return json.loads(json.dumps(clf.state()))
+
+
+def _set(state: dict, dotted: str, value) -> dict:
+    *head, last = dotted.split(".")
+    node = state
+    for key in head:
+        node = node[key]
+    node[last] = value
+    return state
+
+
+@pytest.mark.parametrize("mutate, match", [
+    (lambda s: _set(s, "pa.weights", [[float("nan")] * 4] + s["pa"]["weights"][1:]), "pa.weights.*non-finite"),
+    (lambda s: _set(s, "pa.weighted_sum", [[float("inf")] * 4] * 3), "pa.weighted_sum.*non-finite"),
+    (lambda s: _set(s, "pa.classes", ["c0", "c1", "c0"]), "'c0' more than once"),
+    (lambda s: _set(s, "pa.updates", -3), "pa.updates.*at least 0"),
+    (lambda s: _set(s, "pa.mistakes", 99), "pa.mistakes.*exceeds"),
+    (lambda s: _set(s, "version", -1), "version.*at least 0"),
+    (lambda s: _set(s, "scaler.standardizer.n", -2), "standardizer.n.*at least 0"),
+    (lambda s: _set(s, "scaler.standardizer.mean", [0.0, 0.0]), r"standardizer.mean.*shape \(2,\), expected \(3,\)"),
+    (lambda s: _set(s, "scaler.standardizer.m2", [1.0, -1.0, 1.0]), "negative sums of squares"),
+    (lambda s: _set(s, "pa.weights", np.zeros((4, 3)).tolist()), r"pa.weights.*shape \(4, 3\), expected \(3, 4\)"),
+    (lambda s: _set(s, "pa.classes", ["c0", 1, "c2"]), "pa.classes"),
+    (lambda s: _set(s, "pa.eta", float("nan")), "pa.eta"),
+    (lambda s: _set(s, "scaler.log_activity", "yes"), "scaler.log_activity"),
+    (lambda s: {}, "not a model of this package"),
+    (lambda s: [], "not a model of this package"),
+    (lambda s: {k: v for k, v in s.items() if k != "pa"}, "'pa' is missing"),
+])
+def test_corrupt_but_parseable_model_is_refused_naming_path_and_key(tmp_path, mutate, match):
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(mutate(_valid_state())))  # json writes NaN/Infinity: parseable by json.loads
+    with pytest.raises(ModelError, match=match) as info:
+        OnlineClassifier.load(path)
+    assert str(path) in str(info.value)
+
+
+def test_the_valid_state_of_those_cases_loads(tmp_path):
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(_valid_state()))
+    assert OnlineClassifier.load(path).classes == ["c0", "c1", "c2"]
+
+
+# ------------------------------------------------------------ journal
+
+
+def _learn_some(clf: OnlineClassifier, store, n: int, rng, classes: int = 5, offset: int = 0) -> None:
+    for i in range(n):
+        v = rng.uniform(0.5, 3.0, len(clf.labels))
+        clf.observe(v)
+        clf.learn(v, f"c{(i + offset) % classes}")
+        store.record(clf)
+
+
+def test_journal_replays_to_the_same_bits_and_survives_a_torn_last_line(tmp_path):
+    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+
+    path = tmp_path / "model.json"
+    clf = OnlineClassifier(["A_x", "M_x", "C_x"], update="max_loss", average=True)
+    store = ModelStore(path)
+    _learn_some(clf, store, 30, np.random.default_rng(1), classes=7)
+    assert journal_path(path).exists() and store.compactions == 0
+    back = OnlineClassifier.load(path)
+    assert json.dumps(back.state()) == json.dumps(clf.state())          # bit-identical, counters included
+    # a crash in the middle of an append: the last, unreported entry is absent, never half applied
+    with open(journal_path(path), "ab") as fh:
+        fh.write(b'{"version": 31, "new_classes": [')
+    assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
+    # a store opened on it compacts: one file, the same model, and learning goes on
+    store2 = ModelStore(path)
+    again = store2.load()
+    assert not journal_path(path).exists() and json.dumps(again.state()) == json.dumps(clf.state())
+    _learn_some(again, store2, 3, np.random.default_rng(2))
+    assert OnlineClassifier.load(path).version == 33
+
+
+def test_journal_entry_size_does_not_grow_with_the_classes(tmp_path):
+    """Saving one label writes the changed rows only: its bytes are the same for 10 and 1,000 classes."""
+    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+
+    sizes = {}
+    for n_classes in (10, 1000):
+        path = tmp_path / f"m{n_classes}.json"
+        clf = OnlineClassifier([f"A_{i}" for i in range(8)])
+        for c in range(n_classes):
+            clf.pa.add_class(f"class_{c}")
+        store = ModelStore(path)
+        store.save(clf)
+        _learn_some(clf, store, 1, np.random.default_rng(3))
+        before = journal_path(path).stat().st_size
+        _learn_some(clf, store, 1, np.random.default_rng(4), offset=1)
+        sizes[n_classes] = journal_path(path).stat().st_size - before
+    assert (tmp_path / "m1000.json").stat().st_size > 50 * sizes[1000]  # a whole rewrite would be 50x more
+    assert abs(sizes[1000] - sizes[10]) < 0.1 * sizes[10]
+
+
+def test_stale_or_corrupt_journal(tmp_path):
+    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+
+    path = tmp_path / "model.json"
+    clf = OnlineClassifier(["A_x", "M_x"])
+    store = ModelStore(path)
+    _learn_some(clf, store, 4, np.random.default_rng(0))
+    journal = journal_path(path).read_bytes()
+    # a rewrite of the file (e.g. a reset) followed by a crash before the journal was dropped: stale, skipped
+    fresh = OnlineClassifier(["A_x", "M_x"])
+    fresh.save(path)
+    journal_path(path).write_bytes(journal)
+    assert OnlineClassifier.load(path).version == 0
+    # a corrupt entry in the middle is an error naming the journal and its line
+    _learn_some(fresh, ModelStore(path), 3, np.random.default_rng(0))
+    lines = journal_path(path).read_bytes().split(b"\n")
+    entry = json.loads(lines[2])
+    entry["weights"][0][0] = float("nan")
+    lines[2] = json.dumps(entry).encode()
+    journal_path(path).write_bytes(b"\n".join(lines))
+    with pytest.raises(ModelError, match=r"model.json.journal: line 3: 'weights' holds 1 non-finite"):
+        OnlineClassifier.load(path)
+
+
+def test_journal_compacts_once_it_outgrows_the_file(tmp_path):
+    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+
+    path = tmp_path / "model.json"
+    clf = OnlineClassifier(["A_x", "M_x"])
+    store = ModelStore(path, min_compact_bytes=0)
+    _learn_some(clf, store, 40, np.random.default_rng(0))
+    assert store.compactions >= 1
+    assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
+    size = journal_path(path).stat().st_size if journal_path(path).exists() else 0
+    assert size <= path.stat().st_size + 2_000

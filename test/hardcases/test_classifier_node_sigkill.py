@@ -1,11 +1,12 @@
 """The ``classifier_node`` PROCESS killed with SIGKILL right after a label, then restarted.
 
 Guarantee under test (the same as the library-level test in ``test_hard_faults.py``, now through the
-real node, DDS and its save-after-every-update path): every label whose update completed and whose
-save returned before the kill -- observed here as the model file's ``version`` reaching the number of
-labels sent -- is in the model the restarted node loads; the file is never torn (it always loads, and
-its classes, ``version`` and ``updates`` agree); the label sent just before the kill is either fully in
-the file or fully absent; and the restarted node predicts with the reloaded model and keeps learning.
+real node, DDS and its save-after-every-update path): every label the node reported ("learned
+exploration N" in its log) and every label seen saved (the model's ``version``, file and journal, reaching
+the number of labels sent) is in the model the restarted node loads; the model is never torn (it always
+loads, and its classes, ``version`` and ``updates`` agree); the label sent just before the kill is either
+fully in the model or fully absent; and the restarted node predicts with the reloaded model and keeps
+learning.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -150,8 +152,10 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         time.sleep(1.0)  # let the node's side of discovery settle too (machine may be loaded)
 
     def version() -> int:
-        state = _file_state(model_path)
-        return -1 if state is None else int(state["version"])
+        """The saved model's version: the file with its journal replayed (-1 before the first save)."""
+        if _file_state(model_path) is None:
+            return -1
+        return OnlineClassifier.load(model_path).version
 
     first = _Node(ns, model_path, env, tmp_path / "first.log", load_model=False)
     second: _Node | None = None
@@ -172,8 +176,12 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         last = _N_CONFIRMED + 1
         pub_desc.publish(_descriptor(last, rng))
         pub_label.publish(Label(exploration_id=last, class_name=_class(last)))
+        # the report races the kill: wait for the node to log it, or give up after a moment (it may be unlearned)
+        spin_until(lambda: f"learned exploration {last}" in first.log.read_text(errors="replace"), 0.5, first)
         code = first.kill()
         assert code == -signal.SIGKILL, f"exit code {code}:\n{first.tail()}"
+        reported = {int(m) for m in re.findall(r"learned exploration (\d+)", first.log.read_text(errors="replace"))}
+        assert reported >= set(range(1, _N_CONFIRMED + 1)), reported
 
         # ---- the file after the kill: valid JSON, loads, self-consistent, holds every confirmed label
         state = _file_state(model_path)
@@ -183,6 +191,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         assert v in (_N_CONFIRMED, last), v                      # nothing saved was lost, nothing invented
         assert model.pa.updates == v and len(model.classes) == v
         assert model.classes == [_class(e) for e in range(1, v + 1)]  # all confirmed; the last fully or not at all
+        assert {_class(e) for e in reported} <= set(model.classes)  # no reported label lost
         assert model.labels == tuple(_LABELS)
 
         # ---- second life: loads that model, predicts with it, keeps learning and saving

@@ -257,6 +257,33 @@ def test_heavy_ties_spearman_matches_scipy(seed, n, levels, dtype):
     assert int(q) == 0
 
 
+@SETTINGS
+@given(st.integers(0, 2**32 - 1), st.integers(3, 200), st.integers(0, 2**62), st.booleans())
+def test_spearman_on_64bit_integers_across_2_63_matches_scipy(seed, n, small_span, wide):
+    """int64 spanning -2^63..2^63-1 and uint64 at and above 2^63: the exact rank correlation.
+
+    scipy ranks int64 exactly; uint64 above 2^63 it converts to float64 (ties
+    that are not ties), so the uint64 reference is scipy on the same data
+    shifted down by 2^63 into int64, which keeps every rank.
+    """
+    rng = np.random.default_rng(seed)
+    info = np.iinfo(np.int64)
+    span = info.max if wide else small_span % 5000
+    offset = rng.integers(info.min, info.max - span, endpoint=True) if not wide else info.min
+    a = (offset + rng.integers(0, span, n, endpoint=True)).astype(np.int64) if not wide else \
+        rng.integers(info.min, info.max, n, endpoint=True, dtype=np.int64)
+    if wide:
+        a[:2] = info.min, info.max                  # really spans 2^64 - 1
+    b = rng.integers(0, 7, n)
+    u = (a.view(np.uint64) ^ np.uint64(1 << 63))    # the same order, now 0..2^64-1 (>= 2^63 for a >= 0)
+    rho_i, q_i = spearman(a, b, return_quality=True)
+    rho_u, q_u = spearman(u, b, return_quality=True)
+    assume(np.ptp(b) > 0 and len(np.unique(a)) > 1)
+    ref = stats.spearmanr(a, b).statistic
+    assert float(rho_i) == pytest.approx(float(ref), abs=1e-12) and int(q_i) == 0
+    assert float(rho_u) == pytest.approx(float(ref), abs=1e-12) and int(q_u) == 0
+
+
 # ------------------------------------------------------------------ shapes
 
 

@@ -6,6 +6,8 @@ import json
 
 import pytest
 
+from tactile_descriptors_ros.core.learning import OnlineClassifier
+
 from helpers import BiotacStream, spin_until
 
 pytestmark = pytest.mark.ros
@@ -65,24 +67,22 @@ def test_predict_then_learn_online(graph):
     assert list(second.class_names) == ["cork"] and len(second.scores) == 1
     g["labels"].publish(g["Label"](exploration_id=0, class_name="felt"))  # 0 = the most recent
     assert spin_until(g["ex"], lambda: g["classifier"].model.classes == ["cork", "felt"])
-    state = json.loads(g["model"].read_text())  # saved atomically after the update
-    assert state["pa"]["classes"] == ["cork", "felt"] and state["pa"]["updates"] == 2
+    saved = OnlineClassifier.load(g["model"])  # durable after the update (file and journal)
+    assert saved.classes == ["cork", "felt"] and saved.pa.updates == 2
     third = _explore(g, stream, 40.0)
     assert list(third.class_names) == ["cork", "felt"] and third.model_version == 2
 
 
-def test_unknown_exploration_label_is_counted_and_reported(graph):
+def test_refused_label_is_counted_and_reported(graph):
     g = graph
     _explore(g, BiotacStream(), 40.0)
     g["labels"].publish(g["Label"](exploration_id=0, class_name="cork"))
-    g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
-    # an old id that never had a descriptor with contact
-    g["classifier"].latest_id_seen = 5
-    g["labels"].publish(g["Label"](exploration_id=3, class_name="felt"))
-    assert spin_until(g["ex"], lambda: g["classifier"].counts["unknown_exploration"] == 1)
+    g["labels"].publish(g["Label"](exploration_id=1, class_name="felt"))  # exploration 1 again: the first wins
+    assert spin_until(g["ex"], lambda: g["classifier"].labels.counts["conflicting_label"] == 1)
     st = next(s for s in g["classifier"].diagnostics.statuses() if s.name.endswith("classifier"))
-    assert st.level == b"\x01" and "unknown explorations" in st.message
-    assert g["classifier"].model.classes == ["cork"]  # never applied to another descriptor
+    values = {kv.key: kv.value for kv in st.values}
+    assert st.level == b"\x01" and "conflicting_label=1" in st.message and values["conflicting_label"] == "1"
+    assert g["classifier"].model.classes == ["cork"]  # never learned twice
 
 
 def test_save_reset_and_reload(graph, ros_context):
@@ -105,6 +105,7 @@ def test_save_reset_and_reload(graph, ros_context):
     resp = c._srv_reset(Trigger.Request(), Trigger.Response())
     assert resp.success and c.model.classes == []
     assert json.loads(g["model"].read_text())["pa"]["classes"] == []
+    assert OnlineClassifier.load(g["model"]).classes == []
 
 
 def test_layout_mismatch_refused(graph, tmp_path, ros_context):
@@ -112,8 +113,6 @@ def test_layout_mismatch_refused(graph, tmp_path, ros_context):
     g = graph
     _explore(g, BiotacStream(), 40.0)
     c = g["classifier"]
-    from tactile_descriptors_ros.core.learning import OnlineClassifier
-
     c.model = OnlineClassifier(["a", "b"])
     n = len(g["out"]["pred"])
     stream = BiotacStream(seed=3)
