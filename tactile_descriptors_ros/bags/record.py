@@ -148,6 +148,10 @@ class Recorder:
              max_messages: int | None = None) -> RecordReport:
         """Record until ``duration_s`` passed, ``stop`` is set, ``max_messages`` arrived, or shutdown.
 
+        On a stop (not Ctrl-C's exception) the messages already received are
+        written before returning, so a message acknowledged to a reliable
+        publisher before the stop is in the bag.
+
         Ctrl-C (``KeyboardInterrupt``) propagates after the report is updated;
         the caller's ``BagWriter`` context then closes the bag cleanly.
         """
@@ -166,11 +170,20 @@ class Recorder:
                 if max_messages is not None and self.report.message_count >= max_messages:
                     break
                 executor.spin_once(timeout_sec=0.05)
+            self._drain(executor)
         finally:
             self.report.duration_s = time.monotonic() - start
             executor.remove_node(self.node)
             executor.shutdown(timeout_sec=0.5)
         return self.report
+
+    def _drain(self, executor) -> None:
+        """On stop: write the messages already received, until a spin brings no new one."""
+        while self.node.context.ok():
+            before = self.report.message_count
+            executor.spin_once(timeout_sec=0.05)
+            if self.report.message_count == before:
+                return
 
     def destroy(self) -> None:
         """Destroy the node (the writer stays open: the caller closes it)."""

@@ -88,7 +88,8 @@ class NodeSpec:
         return f"{ns}/{self.name}"
 
 
-def flatten_parameters(params: Mapping[str, Any], prefix: str = "", key: str = "parameters") -> dict[str, Any]:
+def flatten_parameters(params: Mapping[str, Any], prefix: str = "", key: str = "parameters",
+                       source: str | None = None) -> dict[str, Any]:
     """Nested mappings to dotted names: ``{"qos": {"frames": {"depth": 5}}}`` -> ``{"qos.frames.depth": 5}``.
 
     Raises
@@ -100,17 +101,17 @@ def flatten_parameters(params: Mapping[str, Any], prefix: str = "", key: str = "
     for name, value in params.items():
         full = f"{prefix}.{name}" if prefix else str(name)
         if isinstance(value, Mapping):
-            out.update(flatten_parameters(value, full, key))
+            out.update(flatten_parameters(value, full, key, source))
             continue
         if value is None:
-            raise ConfigError("a ROS parameter cannot be null", key=f"{key}.{full}")
+            raise ConfigError("a ROS parameter cannot be null", key=f"{key}.{full}", source=source)
         if isinstance(value, (list, tuple)):
             if not value:
                 raise ConfigError("a ROS parameter cannot be an empty list (its type is unknown)",
-                                  key=f"{key}.{full}")
+                                  key=f"{key}.{full}", source=source)
             value = _homogeneous_list(list(value), f"{key}.{full}")
         elif not isinstance(value, (bool, int, float, str)):
-            raise ConfigError(f"unsupported parameter value {value!r}", key=f"{key}.{full}")
+            raise ConfigError(f"unsupported parameter value {value!r}", key=f"{key}.{full}", source=source)
         out[full] = value
     return out
 
@@ -156,8 +157,10 @@ def _entry(robot: RobotDescription, name: str, raw: Any) -> dict[str, Any]:
         "executable": exe,
         "body_parts": list(parts) if parts else None,
         "namespace": ns,
-        "parameters": flatten_parameters(raw.get("parameters") or {}, key=f"{key}.parameters"),
-        "sim_parameters": flatten_parameters(raw.get("sim_parameters") or {}, key=f"{key}.sim_parameters"),
+        "parameters": flatten_parameters(raw.get("parameters") or {}, key=f"{key}.parameters",
+                                         source=robot.source),
+        "sim_parameters": flatten_parameters(raw.get("sim_parameters") or {}, key=f"{key}.sim_parameters",
+                                             source=robot.source),
         "remappings": tuple((str(a), str(b)) for a, b in (raw.get("remappings") or {}).items()),
     }
 

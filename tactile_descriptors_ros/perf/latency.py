@@ -357,6 +357,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float = 0.05, lateness_
         "messages": n_messages, "predictions": len(received),
         "e2e": e2e_summary, "wait": _summary(wait), "processing": _summary(proc),
         "e2e_ms": [round(v, 2) for v in e2e],  # in arrival order: a slow start shows here
+        "wait_ms": [round(v, 2) for v in wait], "processing_ms": [round(v, 2) for v in proc],
         "complete": _summary([(arr - end) / 1e6 for end, arr in complete.items()]),
         "publish_lag": _summary(lag),
         "publish_lag_last_ms": float(lag[-1]) if lag else None,

@@ -10,8 +10,8 @@ import pytest
 pytestmark = [pytest.mark.ros, pytest.mark.realdata]
 
 
-def _run_graph(ros_context, bag, model_path, rate=8.0):
-    """Replay ``bag`` into fresh window + classifier nodes; return (descriptors, predictions) as plain data."""
+def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0):
+    """Replay ``bag`` into fresh window + classifier nodes; return (descriptors, predictions, model file bytes)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -25,12 +25,13 @@ def _run_graph(ros_context, bag, model_path, rate=8.0):
         Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
         Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=200)])
     c = ClassifierNode(context=ros_context, parameter_overrides=[
-        Parameter("model_path", value=str(model_path)), Parameter("load_model", value=False),
-        Parameter("save_after_update", value=False)])
+        Parameter("model_path", value=str(model_path)), Parameter("load_model", value=False)])
     io = rclpy.create_node("graph_probe", context=ros_context)
     desc, pred = [], []
     io.create_subscription(Descriptor, "tactile/descriptor",
-                           lambda m: desc.append((m.exploration_id, list(m.values), list(m.contact))), 50)
+                           lambda m: desc.append((m.exploration_id, m.window_start.sec, m.window_start.nanosec,
+                                                  m.window_end.sec, m.window_end.nanosec, list(m.values),
+                                                  list(m.contact))), 50)
     io.create_subscription(Prediction, "tactile/prediction",
                            lambda m: pred.append((m.exploration_id, m.has_model, m.class_name, list(m.class_names),
                                                   list(m.scores), m.updates)), 50)
@@ -55,20 +56,24 @@ def _run_graph(ros_context, bag, model_path, rate=8.0):
         player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=10), context=ros_context)
         report = player.play()
         player.destroy()
-        end = time.monotonic() + 5
-        while len(pred) < report.published["/tactile/label"] and time.monotonic() < end:
-            time.sleep(0.05)
-        time.sleep(0.3)
+        labels = report.published["/tactile/label"]
+        # every exploration described and predicted, and every label received (learned in the same callback)
+        end = time.monotonic() + 60
+        while time.monotonic() < end and not (len(desc) == len(pred) == n_explorations
+                                              and c.counts["labels_received"] == labels):
+            stop.wait(0.05)
+        assert (len(desc), len(pred), c.counts["labels_received"]) == (n_explorations, n_explorations, labels)
     finally:
         stop.set()
         for t in spins:
-            t.join()
+            t.join()  # the callback in progress (the last label) completes before the join returns
+        c.close()     # compact the journal: the final model is the one file
         for ex, nodes in zip(executors, ((w,), (c, io))):
             for n in nodes:
                 ex.remove_node(n)
                 n.destroy_node()
             ex.shutdown(timeout_sec=0.5)
-    return desc, pred
+    return desc, pred, model_path.read_bytes()
 
 
 def test_replaying_one_bag_twice_gives_identical_predictions(ros_context, tmp_path, biotac_data_dir):
@@ -77,10 +82,13 @@ def test_replaying_one_bag_twice_gives_identical_predictions(ros_context, tmp_pa
     bag = tmp_path / "real"
     report = import_biotac_slide(biotac_data_dir, bag, trials=[1, 2], materials=[2, 12, 20],
                                  options=ImportOptions(max_frames=300))
-    first = _run_graph(ros_context, bag, tmp_path / "m1.json")
-    second = _run_graph(ros_context, bag, tmp_path / "m2.json")
-    desc, pred = first
+    first = _run_graph(ros_context, bag, tmp_path / "m1.json", len(report.trials))
+    second = _run_graph(ros_context, bag, tmp_path / "m2.json", len(report.trials))
+    desc, pred, model = first
     assert len(desc) == len(report.trials), "one descriptor per trial (exploration)"
-    assert len(pred) == len(report.trials) and all(d[2] == [True] for d in desc)
+    assert len(pred) == len(report.trials) and all(d[-1] == [True] for d in desc)
     assert pred[0][1] is False and pred[-1][1] is True and pred[-1][5] == len(report.trials) - 1
-    assert first == second  # descriptors and scores bit-identical
+    assert first[0] == second[0]  # descriptors (cuts to the nanosecond and values) bit-identical
+    assert first[1] == second[1]  # predictions and scores bit-identical
+    assert first[2] == second[2]  # the final model file, byte for byte
+    assert not (tmp_path / "m1.json.journal").exists()

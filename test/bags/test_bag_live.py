@@ -103,14 +103,16 @@ def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path, ros_mes
                               kwargs=dict(context=ros_context, stop=stop, on_start=holder.append))
     thread.start()
     assert _wait(lambda: holder and len(holder[0].topics) == 5), "recorder did not subscribe"
-    time.sleep(0.3)  # let the matching settle on both sides
+    # matched on both sides: each publisher sees the recorder and each recorder subscription its publisher
+    recorder_subs = holder[0]._subscriptions
+    assert _wait(lambda: all(p.get_subscription_count() >= 1 for p in pubs)
+                 and all(sub.get_publisher_count() >= 1 for sub in recorder_subs.values()), 20.0), "not matched"
     sent = []
-    for k in range(4):
+    for k in range(4):   # 4 per topic: within every publisher's depth
         for i, (p, m) in enumerate(zip(pubs, examples)):
             m.header.stamp.sec = 100 + k
             p.publish(m)
             sent.append((f"/rec_{i}", serialize_message(m)))
-        time.sleep(0.02)
     assert _wait(lambda: holder[0].report.message_count == len(sent))
     stop.set()
     thread.join()
@@ -158,6 +160,7 @@ def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path, ros_mes
 def test_record_command_stops_cleanly_on_sigint(ros_context, tmp_path):
     """`tactile record` in a subprocess: SIGINT closes the bag with metadata and what arrived."""
     import rclpy
+    from rclpy.duration import Duration
     from std_msgs.msg import String
 
     node = rclpy.create_node("sigint_source", context=ros_context)
@@ -170,11 +173,10 @@ def test_record_command_stops_cleanly_on_sigint(ros_context, tmp_path):
         line = proc.stderr.readline()  # printed once the signal handlers are in place
         assert "recording to" in line, line + proc.stderr.read()
         assert _wait(lambda: pub.get_subscription_count() > 0, 15.0)
-        time.sleep(0.3)
         for k in range(5):
             pub.publish(String(data=f"m{k}"))
-            time.sleep(0.02)
-        time.sleep(0.5)
+        # reliable: acknowledged means the recorder's reader holds all five; Ctrl-C then writes what it holds
+        assert pub.wait_for_all_acked(Duration(seconds=20)), "the recorder did not acknowledge the messages"
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=20)
     finally:

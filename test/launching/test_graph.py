@@ -50,20 +50,21 @@ def test_split_with_concat_is_refused():
         build_graph(dataclasses.replace(robot, nodes=nodes), split_window_nodes=True)
 
 
-@pytest.mark.parametrize("change, match", [
-    ({"executable": "nonsense"}, "executable"),
-    ({"body_parts": ["elbow"]}, "unknown body part"),
-    ({"colour": "red"}, "unknown key"),
-    ({"parameters": {"x": []}}, "empty list"),
+@pytest.mark.parametrize("change, key, match", [
+    ({"executable": "nonsense"}, "nodes.window_node.executable", "executable must be one of"),
+    ({"body_parts": ["elbow"]}, "nodes.window_node.body_parts", "unknown body part 'elbow'"),
+    ({"colour": "red"}, "nodes.window_node", "unknown key 'colour'"),
+    ({"parameters": {"x": []}}, "nodes.window_node.parameters.x", "empty list"),
 ])
-def test_bad_nodes_section_names_the_key(tmp_path, change, match):
+def test_bad_nodes_section_names_the_file_and_key(tmp_path, change, key, match):
     data = yaml.safe_load(robot_config_path("shadow_hand").read_text())
     data["nodes"]["window_node"].update(change)
     path = tmp_path / "hand.yaml"
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=match) as info:
         build_graph(path)
-    assert "nodes" in str(info.value) or "body part" in str(info.value)
+    assert info.value.key == key
+    assert str(info.value).startswith(f"{path}: '{key}': ")
 
 
 def test_overrides_and_unknown_target():
