@@ -33,7 +33,13 @@ from ..errors import ConfigError, SignalError
 from .aggregation import CellSignals
 from .robot import RobotDescription
 
-__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS"]
+__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S"]
+
+#: Exploration mode judges contact only up to the time every cell has sent
+#: force data for (the watermark), so the order in which cells' messages
+#: arrive cannot change onset or release; a cell silent for longer than this
+#: behind the most recent one (unplugged, dead) no longer holds it back.
+WATERMARK_STALL_S = 0.5
 
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
@@ -244,7 +250,9 @@ class Windower:
         self._onset_ns: int | None = None
         self._emitted_current = False
         self._released_since: int | None = None
-        self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + 1_000_000_000
+        self._now_ns = 0  # the watermark of the current exploration poll
+        self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
+        self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
     # ------------------------------------------------------------------ input
     def add(self, cell_id: int, chunk: CellChunk) -> bool:
@@ -428,17 +436,56 @@ class Windower:
             self._next_start_ns += self.hop_ns
         return out
 
-    def _contact_now(self) -> tuple[bool, bool]:
-        """(any cell at or above onset, all cells below release) from the latest force."""
-        forces = [st.last_force_n for st in self._cells.values()]
+    def _watermark(self) -> int | None:
+        """The latest time every live cell has force data for (None before any force).
+
+        Decisions made on data up to here do not depend on how the cells'
+        messages interleaved or were batched.  A cell more than
+        :data:`WATERMARK_STALL_S` behind the most recent one is not waited for.
+        """
+        lasts = [st.force.last_t_ns for st in self._cells.values() if len(st.force)]
+        if not lasts:
+            return None
+        newest = max(lasts)
+        return min(t for t in lasts if t >= newest - self._stall_ns)
+
+    def _force_at(self, st: _CellState, t_ns: int) -> float:
+        """The cell's mean finite force over the ``smooth_s`` up to ``t_ns`` (its latest when it ends there)."""
+        fs = st.force
+        last = fs.last_t_ns
+        if last is None or last <= t_ns:
+            return st.last_force_n
+        t, lo = fs._t, fs._lo
+        j = fs._hi
+        while j > lo and t[j - 1] > t_ns:  # a cell is ahead of the watermark by a few samples: walk back
+            j -= 1
+        i = lo + int(t[lo:j].searchsorted(t_ns - self.smooth_ns, side="left"))
+        recent = fs._v[0, i:j]
+        if recent.size:
+            total = np.add.reduce(recent)
+            if math.isfinite(total):
+                return float(total / recent.size)
+            finite = recent[np.isfinite(recent)]
+            if finite.size:
+                return float(finite.mean())
+        before = fs._v[0, lo:j]  # none finite in the last smooth_s: the last finite one
+        finite = before[np.isfinite(before)]
+        return float(finite[-1]) if finite.size else 0.0
+
+    def _contact_at(self, t_ns: int) -> tuple[bool, bool]:
+        """(any cell at or above onset, all cells below release) at ``t_ns``."""
+        forces = [self._force_at(st, t_ns) for st in self._cells.values()]
         if not forces:
             return False, True
         return max(forces) >= self.onset_n, max(forces) < self.release_n
 
     def _poll_exploration(self) -> list[Window]:
         out: list[Window] = []
-        now = self._latest_ns
-        touching, released = self._contact_now()
+        now = self._watermark()
+        if now is None:
+            return out
+        self._now_ns = now
+        touching, released = self._contact_at(now)
         if self._onset_ns is None:
             if touching:
                 self._onset_ns = self._onset_time()
@@ -467,7 +514,7 @@ class Windower:
 
     def _smoothed_force(self, st: _CellState, start_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Force stamps since ``start_ns``, the mean force over the ``smooth_s`` before each, and the raw force."""
-        t, f, _ = st.force.between(start_ns - self.smooth_ns, self._latest_ns + 1)
+        t, f, _ = st.force.between(start_ns - self.smooth_ns, self._now_ns + 1)
         f = np.where(np.isfinite(f[0]), f[0], 0.0)
         csum = np.concatenate(([0.0], np.cumsum(f)))
         first = np.searchsorted(t, t - self.smooth_ns, side="right")
@@ -478,11 +525,11 @@ class Windower:
 
     def _onset_time(self) -> int:
         """Start of the current run of smoothed force at or above onset, over cells touching now."""
-        best = self._latest_ns
+        best = self._now_ns
         for st in self._cells.values():
-            if st.last_force_n < self.onset_n:
+            if self._force_at(st, self._now_ns) < self.onset_n:
                 continue  # an older touch of a cell that has since let go is not this onset
-            t, f, raw = self._smoothed_force(st, self._latest_ns - self._retain_ns)
+            t, f, raw = self._smoothed_force(st, self._now_ns - self._retain_ns)
             below = np.nonzero(f < self.onset_n)[0]
             run_start = below[-1] + 1 if below.size else 0
             if run_start >= t.size:

@@ -143,3 +143,48 @@ def test_release_is_judged_on_smoothed_force_not_single_noisy_samples():
         wins += w.poll()
         t += 100 * MS
     assert len(wins) == 1 and wins[0].end_ns == pytest.approx(3000 * MS, abs=20 * MS)
+
+
+def _touches(rng) -> dict[int, list]:
+    """Three fingers' 100 ms chunks over 6 s; each finger's touch starts and ends 10..70 ms apart."""
+    onsets = {0: (1000, 3500), 1: (1010, 3560), 2: (1040, 3470)}  # ms: touch from, to
+    out: dict[int, list] = {}
+    for cid, (on, off) in onsets.items():
+        chunks = []
+        for k in range(60):
+            t0 = k * 100 * MS
+            frame_t = t0 + np.arange(10, dtype=np.int64) * 10 * MS
+            force = np.where((frame_t >= on * MS) & (frame_t < off * MS), 1.5, 0.0)
+            c = _chunk(t0, 0.0, rng)
+            c.force_n = force
+            chunks.append(c)
+        out[cid] = chunks
+    return out
+
+
+def test_exploration_cut_does_not_depend_on_arrival_order_or_batching():
+    """The same data, cells interleaved with different lags and batched differently: the same windows.
+
+    A late finger that touched first moved the onset only when its data had arrived before the poll
+    that saw contact (one frame, 10 ms, apart between runs); contact is now judged at the time every
+    cell has reached.
+    """
+    robot = load_robot("shadow_hand")
+    results = []
+    for seed in range(6):
+        order_rng = np.random.default_rng(seed)
+        chunks = _touches(np.random.default_rng(99))
+        lag = {cid: int(order_rng.integers(0, 300)) for cid in chunks}  # ms each finger's messages lag
+        arrivals = sorted(((k * 100 + lag[cid] + int(order_rng.integers(0, 20)), cid, c)
+                           for cid, cs in chunks.items() for k, c in enumerate(cs)), key=lambda a: (a[0], a[1]))
+        w = Windower(robot, mode="exploration")
+        wins, i = [], 0
+        while i < len(arrivals):
+            n = int(order_rng.integers(1, 1 + 8 * (seed % 3)) if seed % 3 else 1)
+            w.add_many([(cid, c) for _, cid, c in arrivals[i:i + n]])
+            wins += w.poll()
+            i += n
+        wins += w.flush()
+        results.append([(x.exploration_id, x.start_ns, x.end_ns, sorted(x.cells)) for x in wins])
+    assert results[0] == [(1, 1000 * MS, 3560 * MS, [0, 1, 2])]  # first touch to last release, every finger
+    assert all(r == results[0] for r in results[1:]), results
