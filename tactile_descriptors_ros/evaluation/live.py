@@ -157,8 +157,8 @@ def compare(offline: OfflineReplay, live_values: Sequence[np.ndarray] | np.ndarr
             live_predictions: Sequence[str | None]) -> dict:
     """Live run against the offline replay: descriptor difference, prediction agreement, accuracies.
 
-    ``live_labels`` are the live descriptor's layout labels (``<body part>/<quantity>``); they must name
-    the offline labels' quantities in the same order (``<group>/<quantity>``).
+    ``live_labels`` are the live descriptor's layout labels; their quantities (the text after the last
+    ``/``) must be the offline labels' in the same order.
 
     Returns
     -------
@@ -172,8 +172,9 @@ def compare(offline: OfflineReplay, live_values: Sequence[np.ndarray] | np.ndarr
     if len(live_values) != n or len(live_predictions) != n:
         raise ConfigError(f"the live run produced {len(live_values)} descriptors and {len(live_predictions)} "
                           f"predictions for {n} windows")
-    off_q = [lab.split("/", 1)[-1] for lab in offline.labels]
-    live_q = [lab.split("/", 1)[-1] for lab in live_labels]
+    # Only the quantities are compared: the prefixes (body part, feature group) differ by source.
+    off_q = [lab.rsplit("/", 1)[-1] for lab in offline.labels]
+    live_q = [lab.rsplit("/", 1)[-1] for lab in live_labels]
     if off_q != live_q:
         diff = next((i for i, (a, b) in enumerate(zip(off_q, live_q)) if a != b), min(len(off_q), len(live_q)))
         raise ConfigError(f"live descriptor layout ({len(live_q)} values) differs from the offline mode's "
