@@ -531,7 +531,9 @@ def _write(recs: list[BiotacRecording], path: Path, storage: str, store: Any, cu
                 bag.write(biotac_topic, int(frame_t[e - 1]) + period_ns, msg)
                 seq += e - s
                 report.batches += 1
-            end_ns = int(frame_t[-1]) + period_ns
+            # The trial ends after its last sample: a frame's PAC samples can run past the median frame
+            # period, and release frames stamped before them would reach a window node out of order.
+            end_ns = max(int(frame_t[-1]) + period_ns, int(pac_t[-1]) + 1)
             force = rec.force_n(force_scale)
             report.trials.append(TrialStats(
                 material=rec.material, material_name=rec.class_name, trial=rec.trial, frames=n,

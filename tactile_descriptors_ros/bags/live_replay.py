@@ -313,9 +313,10 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
         faults = {k[len("fault_"):]: int(float(v)) for k, v in teacher.diag["window"].items() if k.startswith("fault_")}
         run.window_node_faults = faults
         run.classifier_updates = int(teacher.diag["classifier"].get("updates", "0"))
-        lost = faults.get("lost_frames", 0)
-        if lost:
-            raise BagError(f"the window node lost {lost} frames during the replay")
+        bad = {k: v for k, v in faults.items() if v}
+        if bad:
+            raise BagError("the window node counted faults during the replay: "
+                           + ", ".join(f"{k} {v}" for k, v in sorted(bad.items())))
     except BagError as exc:
         tails = "\n".join(f"[{node.spec.name}] {line}" for node in procs.nodes for line in node.lines[-12:])
         raise BagError(f"{exc}\nlast lines of the nodes:\n{tails}\nlast diagnostics: {teacher.diag}") from None

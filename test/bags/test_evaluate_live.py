@@ -80,6 +80,27 @@ def test_windows_force_cannot_delimit_are_refused():
         check_segmentable([Rec(np.array([3, 2]))], steps, 4)
 
 
+@pytest.mark.realdata
+def test_imported_stream_stays_in_order_into_the_release_gap(biotac_data_dir, tmp_path):
+    """Bath towel trial 13: its 200th frame's PAC samples run 1.7 ms past the median frame period."""
+    from tactile_descriptors_ros.bags.importer import ImportOptions, import_recordings
+    from tactile_descriptors_ros.bags.io import BagReader
+    from tactile_descriptors_ros.evaluation.windows import load_split
+
+    rec = load_split(biotac_data_dir, [13], [3])[0]
+    report = import_recordings([rec], tmp_path / "bag", options=ImportOptions(max_frames=200))
+    stamps = []
+    with BagReader(tmp_path / "bag") as reader:
+        for m in reader.messages(["/tactile/index/frames"]):
+            msg = reader.deserialize(m)
+            t0 = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            stamps.append(t0 + np.asarray(msg.pac_offset_ns))
+    pac_t = np.concatenate(stamps)
+    assert np.all(np.diff(pac_t) > 0)
+    last_trial_sample = int(rec.crop_frames(0, 200).pac_t_ns[-1] - rec.frame_t_ns[0] + report.trials[0].start_ns)
+    assert report.trials[0].end_ns == last_trial_sample + 1
+
+
 @pytest.mark.ros
 @pytest.mark.realdata
 @pytest.mark.slow
