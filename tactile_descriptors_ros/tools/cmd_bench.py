@@ -71,6 +71,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="skip the per-message cost micro benchmark of --latency")
     p.add_argument("--latency-in-process", action="store_true",
                    help="run window_node and classifier_node in the bench process (default: own processes)")
+    p.add_argument("--model-save", action="store_true",
+                   help="only measure the classifier's durable save per label: journal vs whole-file rewrite")
+    p.add_argument("--model-save-classes", type=int, default=1000,
+                   help="classes in the model for --model-save (default 1000)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -81,6 +85,16 @@ def run(args: argparse.Namespace) -> int:
     from ..core import fast
     from ..perf.bench import BenchMismatch, format_report, run_bench
 
+    if args.model_save:
+        from ..perf.model_save import format_model_save, measure_model_save
+
+        try:
+            res = measure_model_save(classes=args.model_save_classes)
+        except ValueError as exc:
+            print(f"tactile bench: error: {exc}", file=sys.stderr)
+            return 2
+        print(json.dumps(res) if args.json else format_model_save(res))
+        return 0
     if args.repeat < 1 or args.baseline_cells < 1:
         print("tactile bench: error: --repeat and --baseline-cells must be at least 1", file=sys.stderr)
         return 2

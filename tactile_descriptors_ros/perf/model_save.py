@@ -1,0 +1,123 @@
+"""``tactile bench --model-save``: what saving one label costs, journal against whole-file rewrite.
+
+The classifier node makes every update durable before it reports it.  This
+measures, on a model of ``classes`` classes, the wall time per label of
+
+* the journal (:class:`~tactile_descriptors_ros.core.learning.ModelStore`:
+  one synced line per update, compaction included when it happens), and
+* the whole-file atomic rewrite (:meth:`OnlineClassifier.save`, what every
+  label cost before the journal),
+
+in the same run and the same folder, so the ratio holds on a loaded machine
+even when the absolute times do not; and the floor of any durable save there
+(one line appended and ``fdatasync`` ed), which the journal cannot beat.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
+
+__all__ = ["measure_model_save", "format_model_save"]
+
+
+def _model(classes: int, features: int, rng: np.random.Generator) -> OnlineClassifier:
+    clf = OnlineClassifier([f"index/A_{i}" for i in range(features)], update=RECOMMENDED_PA_UPDATE,
+                           average=RECOMMENDED_PA_AVERAGE)
+    for c in range(classes):  # every class learned once: non-zero rows, as a used model has
+        v = rng.uniform(0.5, 5.0, features)
+        clf.observe(v)
+        clf.learn(v, f"material_{c}")
+    return clf
+
+
+def _summary(seconds: list[float]) -> dict:
+    ms = np.asarray(seconds) * 1e3
+    return {"n": int(ms.size), "median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+            "max_ms": float(ms.max()), "mean_ms": float(ms.mean())}
+
+
+def measure_model_save(classes: int = 1000, labels: int = 50, features: int = 8, seed: int = 0,
+                       folder: str | None = None) -> dict:
+    """Time ``labels`` durable saves each way on a model of ``classes`` classes.
+
+    Parameters
+    ----------
+    classes : int
+        Classes in the model (1,000: the target case).
+    labels : int
+        Labels timed per method.
+    features : int
+        Descriptor values (8: one BioTac finger).
+    folder : str, optional
+        Where to write (default: a temporary folder; the disk matters).
+
+    Returns
+    -------
+    dict
+        ``journal`` and ``rewrite`` summaries (ms per label), ``ratio`` (rewrite
+        median / journal median), the model file's size and the settings.
+    """
+    if classes < 2 or labels < 1 or features < 1:
+        raise ValueError("classes must be at least 2, labels and features at least 1")
+    rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory(prefix="tactile_model_save_", dir=folder) as tmp:
+        results: dict[str, list[float]] = {"journal": [], "rewrite": [], "sync": []}
+        sizes = {}
+        floor = open(Path(tmp) / "floor", "wb")  # noqa: SIM115 - closed below
+        for method in ("journal", "rewrite"):
+            clf = _model(classes, features, rng)
+            path = Path(tmp) / f"{method}.json"
+            store = ModelStore(path)
+            store.save(clf)
+            for k in range(labels):
+                v = rng.uniform(0.5, 5.0, features)
+                clf.observe(v)
+                clf.learn(v, f"material_{k % classes}")
+                start = time.perf_counter()
+                if method == "journal":
+                    store.record(clf)
+                else:
+                    clf.save(path)
+                results[method].append(time.perf_counter() - start)
+                if method == "journal":
+                    # the floor of any durable save here, in the same conditions: one line appended and synced
+                    start = time.perf_counter()
+                    floor.write(b"x" * 64 + b"\n")
+                    floor.flush()
+                    os.fdatasync(floor.fileno()) if hasattr(os, "fdatasync") else os.fsync(floor.fileno())
+                    results["sync"].append(time.perf_counter() - start)
+            store.close()
+            if method == "journal":
+                floor.close()
+            sizes[method] = path.stat().st_size
+            if OnlineClassifier.load(path).version != clf.version:
+                raise RuntimeError(f"{method}: the saved model lacks labels")
+        journal, rewrite = _summary(results["journal"]), _summary(results["rewrite"])
+    return {"classes": classes, "labels": labels, "features": features, "model_file_bytes": sizes["rewrite"],
+            "journal": journal, "rewrite": rewrite, "sync_floor": _summary(results["sync"]),
+            "ratio": rewrite["median_ms"] / journal["median_ms"],
+            "target_ms": 5.0, "target_met": journal["median_ms"] <= 5.0}
+
+
+def format_model_save(res: dict) -> str:
+    """The measurement as a few lines of text."""
+    j, r = res["journal"], res["rewrite"]
+    return "\n".join([
+        f"model save per label: {res['classes']} classes x {res['features']} values "
+        f"(file {res['model_file_bytes'] / 1e3:.0f} kB), {res['labels']} labels each, durable (synced) saves",
+        f"  journal (ModelStore.record): median {j['median_ms']:.2f} ms, p95 {j['p95_ms']:.2f} ms, "
+        f"max {j['max_ms']:.2f} ms",
+        f"  whole-file rewrite (save):   median {r['median_ms']:.2f} ms, p95 {r['p95_ms']:.2f} ms, "
+        f"max {r['max_ms']:.2f} ms",
+        f"  one-line append + fdatasync (the floor of any durable save here): median "
+        f"{res['sync_floor']['median_ms']:.2f} ms",
+        f"  rewrite / journal: {res['ratio']:.1f}x; target <= {res['target_ms']:.0f} ms per label: "
+        f"{'met' if res['target_met'] else 'NOT met'}",
+    ])
