@@ -176,8 +176,12 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         last = _N_CONFIRMED + 1
         pub_desc.publish(_descriptor(last, rng))
         pub_label.publish(Label(exploration_id=last, class_name=_class(last)))
-        # the report races the kill: wait for the node to log it, or give up after a moment (it may be unlearned)
-        spin_until(lambda: f"learned exploration {last}" in first.log.read_text(errors="replace"), 0.5, first)
+        # kill the moment the node reports the label (or after 5 s without a report): a node that logged before
+        # its save finished would lose a reported label here
+        marker = f"learned exploration {last}"
+        deadline = time.monotonic() + 5.0
+        while marker not in first.log.read_text(errors="replace") and time.monotonic() < deadline:
+            time.sleep(0.0005)  # polling the log file as fast as it can be read; no ROS spinning needed
         code = first.kill()
         assert code == -signal.SIGKILL, f"exit code {code}:\n{first.tail()}"
         reported = {int(m) for m in re.findall(r"learned exploration (\d+)", first.log.read_text(errors="replace"))}
