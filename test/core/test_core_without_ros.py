@@ -20,12 +20,13 @@ def test_core_imports_and_runs_with_rclpy_blocked():
         sys.meta_path.insert(0, Block())
         import numpy as np
         import tactile_descriptors_ros.core as core
-        from tactile_descriptors_ros.core import (aggregation, alignment, descriptors, learning,
+        from tactile_descriptors_ros.core import (aggregation, alignment, descriptors, labels, learning,
                                                   robot, scaling, windowing)
         from tactile_descriptors_ros import errors
         r = robot.load_robot('shadow_hand')
         h = descriptors.hjorth(np.sin(np.arange(100) / 3.0), 100.0)
         assert h.quality == 0
+        assert labels.LabelProtocol().add_label(0, 'cork').reason == 'unknown_exploration'
         assert not [m for m in sys.modules if m.split('.')[0] in ('rclpy', 'std_msgs')]
         print('ok')
         """
