@@ -143,3 +143,13 @@ def test_protocol_scenes_follow_the_paper():
 def test_demo_scenes_last_about_a_minute():
     for name in ("demo_shadow_hand", "demo_nao"):
         assert 55 <= load_scene(name).duration_s <= 95
+
+
+def test_nao_demo_scene_scores_twenty_explorations_with_several_per_class():
+    """The demo scores every exploration but the first of its class: 20 of them, 5 per material."""
+    from collections import Counter
+
+    counts = Counter(e.label for e in load_scene("demo_nao").explorations)
+    scored = {label: n - 1 for label, n in counts.items()}
+    assert sum(scored.values()) >= 20
+    assert sorted(n for n in scored.values() if n)[0] >= 5 and sum(1 for n in scored.values() if n) >= 4
