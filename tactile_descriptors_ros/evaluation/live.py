@@ -11,8 +11,9 @@ nodes must produce, with the evaluation's own code and no ROS:
 * predictions: the classifier node's online protocol over the windows in
   replay order -- every descriptor updates the running feature statistics and
   is predicted (:meth:`~..core.learning.OnlineClassifier.observe`, then
-  ``predict``); a training window's label is then learned (predict first,
-  then update, paper section VI-A); a test window is only predicted.
+  ``predict``); a training window's label is then matched by the node's
+  :class:`~..core.labels.LabelProtocol` and learned (predict first, then
+  update, paper section VI-A); a test window is only predicted.
 
 :func:`compare` checks the live run against it: the same descriptor values
 (relative tolerance), the same predicted class for every window.
@@ -25,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.labels import LEARN, LabelProtocol
 from ..core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
 from ..datasets.biotac_slide import BiotacRecording
 from ..errors import ConfigError
@@ -140,16 +142,22 @@ def offline_replay(recordings: Sequence[BiotacRecording], steps: Sequence[LiveSt
     bank = compute_bank(recordings, windows, cache_dir=cache_dir, jobs=jobs,
                         subwindows="subwindows" in mode_groups(mode))
     X, labels = select_features(bank, mode, gate=False)
-    # The classifier node's model (eta 1, its default).
+    # The classifier node's model (eta 1, its default) and its label protocol: each window is exploration
+    # k + 1, as the window node numbers them, and a training window's label names it.
     clf = OnlineClassifier(labels, log_activity=scaling == "log_standardize", standardize=scaling != "none",
                            update=pa_update, average=pa_average)
+    protocol: LabelProtocol[np.ndarray] = LabelProtocol()
     out = OfflineReplay(list(steps), X, labels)
-    for x, s in zip(X, steps):
+    for k, (x, s) in enumerate(zip(X, steps)):
         clf.observe(x)
         guess, _ = clf.predict(x)
         out.predictions.append(guess)
+        protocol.add_descriptor(k + 1, x)
         if s.train:
-            clf.learn(x, s.class_name)
+            decision = protocol.add_label(k + 1, s.class_name)
+            if decision.action != LEARN:
+                raise ConfigError(f"the label protocol did not learn window {k + 1}: {decision.message}")
+            clf.learn(decision.item, decision.class_name)
     return out
 
 
