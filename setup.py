@@ -23,7 +23,7 @@ setup(
     # pip install .[eval]
     install_requires=["numpy", "scipy", "PyYAML", "python-can", "pyserial", "rosbags"],
     extras_require={
-        "eval": ["scikit-learn", "matplotlib", "tqdm", "threadpoolctl"],
+        "eval": ["scikit-learn", "matplotlib", "tqdm", "threadpoolctl", "psutil"],
         "import": ["h5py"],  # HDF5 tables for tactile import/evaluate
     },
     python_requires=">=3.10",

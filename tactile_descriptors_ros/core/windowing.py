@@ -602,7 +602,12 @@ class Windower:
         horizon = self._latest_ns - self._retain_ns
         if self.mode == "fixed" and self._next_start_ns is not None:
             horizon = min(horizon, self._next_start_ns)
-        if self.mode == "exploration" and self._onset_ns is not None:
+        if self.mode == "exploration" and self._onset_ns is not None and not self._emitted_current:
+            # The open exploration's samples are kept until its window is cut.  Once it
+            # was cut at max_duration_s only the release is still awaited, which needs
+            # no more than the retained time: a contact held for minutes (an object
+            # carried, a cell that never lets go) must not keep every sample since
+            # its onset (memory and the release scan would grow without bound).
             horizon = min(horizon, self._onset_ns)
         for st in self._cells.values():
             for stream in (st.vib, st.dfm, st.force):

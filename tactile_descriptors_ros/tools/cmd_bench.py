@@ -75,12 +75,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="only measure the classifier's durable save per label: journal vs whole-file rewrite")
     p.add_argument("--model-save-classes", type=int, default=1000,
                    help="classes in the model for --model-save (default 1000)")
+    p.add_argument("--soak", type=float, default=None, metavar="SECONDS",
+                   help="instead of timing: run the NAO graph at full rate for SECONDS and report per-node RSS "
+                        "over time, CPU, lost and late frames (docs/hardcases.md)")
+    p.add_argument("--soak-robot", default="nao", help="robot whose graph --soak runs (default nao)")
+    p.add_argument("--soak-sample-s", type=float, default=5.0, help="sampling period of --soak [s] (default 5)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
+
+    if args.soak is not None:
+        return _soak(args)
 
     from ..core import fast
     from ..perf.bench import BenchMismatch, format_report, run_bench
@@ -132,4 +140,30 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(report.to_dict(), default=float))
     else:
         print(format_report(report))
+    return 0
+
+
+def _soak(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..perf.soak import format_soak, run_soak
+
+    if not args.soak > 0 or not args.soak_sample_s > 0:
+        print("tactile bench: error: --soak and --soak-sample-s must be positive", file=sys.stderr)
+        return 2
+    bar = tqdm(total=round(args.soak), desc="soak", unit="s", file=sys.stderr, leave=False)
+
+    def progress(elapsed_s: float, text: str) -> None:
+        bar.n = min(round(elapsed_s), bar.total)
+        bar.set_postfix_str(text)
+        bar.refresh()
+
+    try:
+        report = run_soak(args.soak, robot=args.soak_robot, sample_s=args.soak_sample_s, progress=progress)
+    except (RuntimeError, ImportError) as exc:
+        bar.close()
+        print(f"tactile bench: error: soak failed: {exc}", file=sys.stderr)
+        return 1
+    bar.close()
+    print(json.dumps(report.to_dict(), default=float) if args.json else format_soak(report))
     return 0

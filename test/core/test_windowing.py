@@ -188,3 +188,40 @@ def test_exploration_cut_does_not_depend_on_arrival_order_or_batching():
         results.append([(x.exploration_id, x.start_ns, x.end_ns, sorted(x.cells)) for x in wins])
     assert results[0] == [(1, 1000 * MS, 3560 * MS, [0, 1, 2])]  # first touch to last release, every finger
     assert all(r == results[0] for r in results[1:]), results
+
+
+def test_contact_held_past_max_duration_keeps_bounded_buffers():
+    """A contact held for a minute (an object carried): after the window is cut at max_duration_s the
+    buffers hold only the retained time, not every sample since the onset, and the release still ends
+    the exploration."""
+    rng = np.random.default_rng(5)
+    w = Windower(load_robot("shadow_hand"), mode="exploration", max_duration_s=2.0)
+    sizes = []
+    t = 0
+    wins = []
+    for k in range(600):  # 60 s at 2 N
+        w.add(1, _chunk(t, 2.0, rng))
+        wins += w.poll()
+        t += 100 * MS
+        if k % 50 == 49:
+            sizes.append(len(w._cells[1].vib))
+    retained_s = (w._retain_ns + 100 * MS) / 1e9
+    assert max(sizes) <= retained_s * 2200 + 22 * 10, sizes  # bounded by the retained time, not growing
+    assert sizes[-1] == sizes[-3]
+    assert len(wins) == 1 and (wins[0].end_ns - wins[0].start_ns) == 2000 * MS
+    for _ in range(10):  # release: the exploration ends and the next touch is a new one
+        w.add(1, _chunk(t, 0.0, rng))
+        wins += w.poll()
+        t += 100 * MS
+    wins += _feed_from(w, t, [(3.0, 2.0), (1.0, 0.0)], rng)
+    assert [x.exploration_id for x in wins] == [1, 2]
+
+
+def _feed_from(w: Windower, t: int, schedule, rng, cell_id: int = 1):
+    out = []
+    for duration_s, force in schedule:
+        for _ in range(int(round(duration_s * 10))):
+            w.add(cell_id, _chunk(t, force, rng))
+            out += w.poll()
+            t += 100 * MS
+    return out + w.flush()
