@@ -125,7 +125,7 @@ def test_serial_biotac_comes_back_after_unplug_and_replug(ros_context, tmp_path)
         before = len(got["index"])
         back = time.monotonic()
         bridge.replug()
-        assert spin_until(ex, lambda: len(got["index"]) > before + 2)
+        assert spin_until(ex, lambda: len(got["index"]) > before + 2, timeout_s=30.0)
         recovered_s = time.monotonic() - back
         link = drv.link
         assert link.connected and link.reconnects == 1 and link.disconnects == 1
@@ -272,7 +272,8 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
     ex.add_node(sink)
     try:
         accel_true = t0 + ms[batch.modality == int(Modality.ACCEL)] * ms_ns
-        assert spin_until(ex, lambda: can.done.is_set() and sum(len(m.accel_offset_ns) for m in got) >= 750)
+        assert spin_until(ex, lambda: can.done.is_set() and sum(len(m.accel_offset_ns) for m in got) >= 750,
+                          timeout_s=60.0)
         mine = [m for m in got if m.cell_id == cell]
         stamps = np.concatenate([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
                                  + np.frombuffer(m.accel_offset_ns, np.int64) for m in mine])
