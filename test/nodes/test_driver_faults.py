@@ -35,6 +35,8 @@ def _make_biotac(ros_context, params, factory=None):
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(drv)
     ex.add_node(sink)
+    # the sink must be matched before data flows (a message published before is not delivered)
+    assert spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in drv.publishers_by_cs.values()))
     return drv, ex, got
 
 
@@ -205,6 +207,7 @@ class _CanQueue:
 
     def __init__(self, reads) -> None:
         self.reads = list(reads)
+        self.go = threading.Event()
         self.done = threading.Event()
         self.is_open = False
 
@@ -220,8 +223,11 @@ class _CanQueue:
     def recv_batch(self, max_frames=65536, timeout_s=None):
         from tactile_descriptors_ros.codecs.can_frames import empty_frames
 
-        if self.reads:
+        if self.reads and self.go.is_set():
             return self.reads.pop(0)
+        if self.reads:
+            self.go.wait(timeout_s or 0.0)
+            return empty_frames(0)
         self.done.set()
         time.sleep(timeout_s or 0.0)  # an idle bus: the read times out
         return empty_frames(0)
@@ -272,6 +278,8 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
     ex.add_node(sink)
     try:
         accel_true = t0 + ms[batch.modality == int(Modality.ACCEL)] * ms_ns
+        assert spin_until(ex, lambda: drv.part_publishers["left_hand"].get_subscription_count() > 0)
+        can.go.set()
         assert spin_until(ex, lambda: can.done.is_set() and sum(len(m.accel_offset_ns) for m in got) >= 750,
                           timeout_s=60.0)
         mine = [m for m in got if m.cell_id == cell]
