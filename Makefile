@@ -7,6 +7,7 @@
 #   make test     set everything up, then run the tests
 #   make demo     set everything up, then run a simulated robot through the live graph
 #   make report   regenerate docs/results.md and its plots from the real recordings
+#   make report-length  only its touch-length sections (minutes, not an hour)
 #   make protocols  the paper's protocols on simulated robots (docs/simulated.md)
 #   make bench    time the descriptor path against a naive baseline
 #   make clean    remove the venv and build products
@@ -40,7 +41,7 @@ export AMENT_PREFIX_PATH := $(VIRTUAL_ENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PRE
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
-.PHONY: setup test demo demo-nao report protocols bench fuzz clean
+.PHONY: setup test demo demo-nao report report-length protocols bench fuzz clean
 
 setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli
 
@@ -120,7 +121,10 @@ demo-nao: setup
 	$(VENV)/bin/tactile demo nao $(DEMO_ARGS)
 
 report: setup
-	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs --readme README.md
+
+report-length: setup
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs --only length --readme README.md
 
 protocols: setup
 	$(VENV)/bin/tactile protocols --out docs

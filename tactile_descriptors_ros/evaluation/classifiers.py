@@ -178,6 +178,12 @@ class PaCurve:
     update_s, predict_s : float
         Median time of one ``learn`` (scaling + PA-I update) and of one ``predict``.
     orders : int
+    final_confusion, final_predictions
+        Of the first presentation order after the last round.
+    hits : numpy.ndarray of bool, shape (orders, rounds, n_test)
+        Whether each test window was predicted right after each round of
+        each order (the curve is its mean over windows, then orders; a
+        subset's curve is the same mean over the subset).
     """
 
     n_per_class: np.ndarray
@@ -188,6 +194,7 @@ class PaCurve:
     orders: int
     final_confusion: np.ndarray | None = None
     final_predictions: np.ndarray | None = None
+    hits: np.ndarray | None = None
 
 
 def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, X_test: np.ndarray,
@@ -214,7 +221,7 @@ def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, 
     if n < 1:
         raise ConfigError("PA curve needs at least one training trial per class")
     rng = np.random.default_rng(seed)
-    acc = np.zeros((orders, n))
+    hits = np.zeros((orders, n, len(y_test)), dtype=bool)
     upd_times: list[float] = []
     pred_times: list[float] = []
     final_pred = None
@@ -237,12 +244,13 @@ def pa_curve(X_train: np.ndarray, y_train: np.ndarray, trial_train: np.ndarray, 
                 pred_times.append(time.perf_counter() - t0)
                 preds.append(p)
             pred = np.array([int(p) for p in preds])
-            acc[o, k] = float(np.mean(pred == y_test))
+            hits[o, k] = pred == y_test
         if o == 0:
             final_pred = pred
+    acc = hits.mean(axis=2)
     cm = confusion_matrix(y_test, final_pred, labels=classes)
     return PaCurve(np.arange(1, n + 1), acc.mean(axis=0), acc.std(axis=0), float(np.median(upd_times)),
-                   float(np.median(pred_times)), orders, cm, final_pred)
+                   float(np.median(pred_times)), orders, cm, final_pred, hits)
 
 
 @dataclass
@@ -254,6 +262,7 @@ class GmmResult:
     accuracy: float
     predictions: np.ndarray
     fit_s: float
+    clusters: np.ndarray | None = None
 
 
 def gmm_nmi(X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray,
@@ -289,4 +298,4 @@ def gmm_nmi(X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test
     return GmmResult(
         nmi_test=float(normalized_mutual_info_score(y_test, cte, average_method="arithmetic")),
         nmi_train=float(normalized_mutual_info_score(y_train, ctr, average_method="arithmetic")),
-        accuracy=float(np.mean(pred == y_test)), predictions=pred, fit_s=fit_s)
+        accuracy=float(np.mean(pred == y_test)), predictions=pred, fit_s=fit_s, clusters=cte)

@@ -18,6 +18,14 @@ positions are drawn among the starts where that holds, anywhere in the
 trial (recordings from a gripper that opens and closes hold long stretches
 out of contact, where random windows would describe nothing).  A trial
 without such a stretch gives no window, and is reported.
+
+A touch on a robot lasts what it lasts, so a window may also be a *range*
+of lengths (``"1-6"``): every window then draws its length from the grid
+``A, A + 0.5 s, ..., B`` (:data:`MIXED_STEP_S`; a length past the crop
+becomes the crop) and its position inside the crop, both from a generator
+seeded by ``(seed, material, trial, grid)``.  Length and position are drawn
+independently of the class, so the crop rule still holds: no window's
+length or position carries class information.
 """
 
 from __future__ import annotations
@@ -38,10 +46,15 @@ __all__ = [
     "format_trials",
     "common_length_frames",
     "window_frames",
+    "MIXED_STEP_S",
+    "is_length_range",
+    "window_lengths",
     "Window",
     "draw_windows",
     "draw_contact_windows",
     "WINDOW_PLACEMENTS",
+    "draw_mixed_windows",
+    "block_windows",
     "load_split",
 ]
 
@@ -131,6 +144,43 @@ def window_frames(window: str | float, frame_rate_hz: float, common_frames: int)
     return n
 
 
+#: Step of the length grid of a window range such as ``"1-6"`` (seconds).
+MIXED_STEP_S: float = 0.5
+
+_LENGTH_RANGE = re.compile(r"^\s*(\d+(?:\.\d*)?)\s*-\s*(\d+(?:\.\d*)?)\s*$")
+
+
+def is_length_range(window: str | float) -> bool:
+    """True for a window given as a range of lengths in seconds (``"1-6"``)."""
+    return isinstance(window, str) and _LENGTH_RANGE.match(window) is not None
+
+
+def window_lengths(window: str | float, frame_rate_hz: float, common_frames: int) -> tuple[int, ...]:
+    """Frame counts a window specification allows, shortest first.
+
+    ``"2"`` or ``"whole"`` give one length (:func:`window_frames`); a range
+    ``"A-B"`` gives the grid ``A, A + MIXED_STEP_S, ..., B`` seconds, each
+    rounded to frames, a length longer than the crop replaced by the crop
+    (so ``"1-6"`` on 5.99 s trials ends with the whole crop).
+
+    Raises
+    ------
+    ConfigError
+        For a range that runs backwards, starts below 3 frames or starts past the crop.
+    """
+    m = _LENGTH_RANGE.match(window) if isinstance(window, str) else None
+    if m is None:
+        return (window_frames(window, frame_rate_hz, common_frames),)
+    lo_s, hi_s = float(m.group(1)), float(m.group(2))
+    if hi_s <= lo_s:
+        raise ConfigError(f"window range {window!r} must run from a shorter to a longer length", key="window")
+    first = window_frames(lo_s, frame_rate_hz, common_frames)  # checks >= 3 frames and inside the crop
+    n_steps = int(np.floor((hi_s - lo_s) / MIXED_STEP_S + 1e-9))
+    grid = [min(int(round((lo_s + k * MIXED_STEP_S) * frame_rate_hz)), int(common_frames))
+            for k in range(n_steps + 1)]
+    return tuple(sorted({first, *grid}))
+
+
 @dataclass(frozen=True)
 class Window:
     """One window: frames ``start:start + n_frames`` of one recording."""
@@ -218,6 +268,54 @@ def draw_contact_windows(recordings: Sequence[BiotacRecording], n_frames: int, p
         chosen = np.sort(rng.choice(starts, size=min(per_trial, starts.size), replace=False))
         out.extend(Window(r.material, r.trial, int(s), n_frames) for s in chosen)
     return out, without
+def draw_mixed_windows(recordings: Sequence[BiotacRecording], lengths_frames: Sequence[int],
+                       common_frames: int, per_trial: int = 1, seed: int = 0) -> list[Window]:
+    """Seeded random windows whose lengths are drawn uniformly from ``lengths_frames``.
+
+    Each window draws its length, then its start inside the crop, from a
+    generator seeded by ``(seed, material, trial, lengths)``; class and
+    length are independent.
+
+    Returns
+    -------
+    list of Window, ordered as the recordings (``per_trial`` per recording).
+    """
+    lengths = sorted({int(n) for n in lengths_frames})
+    if not lengths or lengths[-1] > common_frames or lengths[0] < 3:
+        raise ConfigError(f"window lengths {lengths} must lie in 3..{common_frames} frames (the crop)")
+    out = []
+    for r in recordings:
+        if r.n_frames < common_frames:
+            raise ConfigError(f"{r.path}: {r.n_frames} frames, shorter than the crop ({common_frames})")
+        rng = np.random.default_rng([int(seed), int(r.material), int(r.trial), *lengths])
+        for _ in range(per_trial):
+            n = int(lengths[int(rng.integers(len(lengths)))])
+            out.append(Window(r.material, r.trial, int(rng.integers(0, common_frames - n + 1)), n))
+    return out
+
+
+def block_windows(window: Window, block_frames: int, hop_frames: int) -> list[Window]:
+    """The equal-length blocks a window is described by (block averaging).
+
+    A window no longer than a block is its own single block.  A longer one
+    gets ``ceil((n - block) / hop) + 1`` blocks whose starts are spread
+    evenly from its first to its last possible start (so consecutive blocks
+    are at most ``hop_frames`` apart and the first and last frames are
+    covered).
+
+    Raises
+    ------
+    ConfigError
+        For a block shorter than 3 frames or a hop that is not in ``1..block_frames``.
+    """
+    if block_frames < 3 or not 1 <= hop_frames <= block_frames:
+        raise ConfigError(f"blocks of {block_frames} frames every {hop_frames} frames: need a block of >= 3 "
+                          "frames and a hop between 1 frame and the block", key="block")
+    if window.n_frames <= block_frames:
+        return [window]
+    n = int(np.ceil((window.n_frames - block_frames) / hop_frames)) + 1
+    starts = np.round(np.linspace(0, window.n_frames - block_frames, n)).astype(int)
+    return [Window(window.material, window.trial, window.start + int(s), block_frames) for s in starts]
 
 
 def load_split(data_dir: str | Path, trials: Sequence[int] | None,

@@ -90,6 +90,7 @@ def split_trials(trials: list[int], train: list[int] | None, test: list[int] | N
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
+    from ..evaluation.experiments import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
     from ..evaluation.features import DEFAULT_MODE, DESCRIPTOR_MODES
     from ..evaluation.modes import SCALINGS
 
@@ -114,8 +115,18 @@ def register(subparsers) -> None:
                    help="window placement: random positions in the common crop (default), or random positions "
                    "wholly in contact (force >= F_t in every frame)")
     p.add_argument("--classifier", default="svm", choices=["svm", "pa", "gmm", "all"])
-    p.add_argument("--window", default="2", help="window in seconds, or 'whole' (the common length)")
-    p.add_argument("--test-window", default=None, help="test window if different (exploration-time protocol)")
+    p.add_argument("--window", default="2",
+                   help="window in seconds, 'whole' (the common length) or a range such as 1-6 (each window "
+                   "draws its length from 1, 1.5, ..., 6 s)")
+    p.add_argument("--test-window", default=None,
+                   help="test window if different, e.g. 1-6 for touches of random length (touch-length protocol)")
+    p.add_argument("--block", type=float, default=None,
+                   help="describe a window by the mean over its blocks of this many seconds, at most "
+                   f"--block-hop apart (default {DEFAULT_BLOCK_S:g}; keeps a model trained on one touch length "
+                   "right on others, docs/evaluation.md); 0 = one descriptor of the whole window (what the window "
+                   "node computes, and what --live compares)")
+    p.add_argument("--block-hop", type=float, default=DEFAULT_BLOCK_HOP_S,
+                   help=f"largest step between blocks in seconds (default {DEFAULT_BLOCK_HOP_S:g})")
     p.add_argument("--channels", "--mode", dest="channels", default=DEFAULT_MODE,
                    choices=["averaged", *DESCRIPTOR_MODES],
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
@@ -160,6 +171,13 @@ def run(args: argparse.Namespace) -> int:
     materials = parse_classes(args.materials) if args.materials else None
     if args.train_windows < 1 or args.test_windows < 1 or args.cv_repeats < 1:
         raise ConfigError("--train-windows, --test-windows and --cv-repeats must be >= 1")
+    if args.block is None:
+        from ..evaluation.experiments import DEFAULT_BLOCK_S
+
+        args.block = DEFAULT_BLOCK_S
+    if args.block < 0 or not args.block_hop > 0 or (args.block and args.block_hop > args.block):
+        raise ConfigError(f"--block {args.block:g} / --block-hop {args.block_hop:g}: need a block >= 0 "
+                          "(0 = off) and a hop > 0 no longer than the block", key="block")
     classifiers = CLASSIFIERS if args.classifier == "all" else (args.classifier,)
     drop = tuple(q.strip() for q in args.drop.split(",") if q.strip())
     test_mapping = args.test_mapping or args.mapping
@@ -187,6 +205,7 @@ def run(args: argparse.Namespace) -> int:
                      pa_update=args.pa_update, pa_average=args.pa_average,
                      cv_repeats=args.cv_repeats, windows=args.windows, jobs=args.jobs,
                      cache_dir=args.cache or None,
+                     block_s=args.block or None, block_hop_s=args.block_hop if args.block else None,
                      progress=True)
     result = evaluate(train, test, cfg)
     if args.json:
@@ -195,7 +214,8 @@ def run(args: argparse.Namespace) -> int:
             out["accuracy"] = result["classifiers"][args.classifier]["accuracy"]
         print(json.dumps(out))
         return 0
-    print(f"descriptor mode {args.channels} ({result['n_features']} values), window {args.window} s "
+    blocks = f"mean over {args.block:g} s blocks" if args.block else "one descriptor per window"
+    print(f"descriptor mode {args.channels} ({result['n_features']} values, {blocks}), window {args.window} s "
           f"(test {args.test_window or args.window}), crop {result['common_length_s']:.2f} s; "
           f"{result['n_train']} training and {result['n_test']} test windows ({args.windows} positions); "
           f"contact gate {'on' if args.gate else 'off'}")
@@ -238,7 +258,7 @@ def run_live(args: argparse.Namespace) -> int:
     if Path(args.train).resolve() != Path(args.test).resolve() or (args.test_mapping or args.mapping) != args.mapping:
         raise ConfigError("--live replays one source: give the same source to --train and --test", key="test")
     refusals = {"test-window": args.test_window not in (None, args.window), "gate": args.gate, "drop": args.drop,
-                "windows": args.windows != "random"}
+                "windows": args.windows != "random", "block": bool(args.block)}
     bad = [k for k, v in refusals.items() if v]
     if bad:
         raise ConfigError(f"--live scores one window per trial (its first --window seconds) with the nodes' "
