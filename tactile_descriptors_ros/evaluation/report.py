@@ -45,10 +45,12 @@ class ReportPlan:
     the headline and for the sweeps, the number of trial-CV folds, and the
     touch-length section: its variants ``(label, mode, block_s)`` (the first
     is the default, also scored by trial CV and on short windows;
-    ``block_s`` None = one descriptor of the whole window), the test windows of a model trained on
+    ``block_s`` None = one descriptor of the whole window; C chosen by
+    ``length_repeats`` repeats of the 5-fold CV), the test windows of a model trained on
     ``ablation_window`` windows (a range such as ``"1-6"`` draws random
     lengths), the test windows of its trial CV, and the short windows
-    scored with train and test of the same length.
+    scored with train and test of the same length (the training length
+    itself is read from the touch-length table: the same model).
     """
 
     def __init__(self, *, headline_modes: Sequence[str], headline_windows: Sequence[str],
@@ -57,7 +59,7 @@ class ReportPlan:
                  length_tests: Sequence[str], length_cv_tests: Sequence[str], short_windows: Sequence[str],
                  ablation_modes: Sequence[str], ablation_window: str, headline_repeats: int,
                  sweep_repeats: int, cv_folds: int, train_per_trial: int, test_per_trial: int,
-                 pa_orders: int) -> None:
+                 pa_orders: int, length_repeats: int = 1) -> None:
         self.headline_modes = tuple(headline_modes)
         self.headline_windows = tuple(headline_windows)
         self.sweep_modes = tuple(sweep_modes)
@@ -66,6 +68,7 @@ class ReportPlan:
         self.length_tests = tuple(length_tests)
         self.length_cv_tests = tuple(length_cv_tests)
         self.short_windows = tuple(short_windows)
+        self.length_repeats = length_repeats
         self.ablation_modes = tuple(ablation_modes)
         self.ablation_window = ablation_window
         self.headline_repeats = headline_repeats
@@ -85,7 +88,7 @@ FULL_PLAN = ReportPlan(
                      (f"{DEFAULT_MODE}, whole-window descriptor", DEFAULT_MODE, None),
                      ("paper", "paper", DEFAULT_BLOCK_S)),
     length_tests=("1", "2", "4", "whole", "1-6"),
-    length_cv_tests=("2", "1-6"), short_windows=("0.5", "1", "2"),
+    length_cv_tests=("2", "1-6"), short_windows=("0.5", "1"), length_repeats=1,
     ablation_modes=("paper", "combined"), ablation_window="2",
     headline_repeats=10, sweep_repeats=2, cv_folds=3, train_per_trial=8, test_per_trial=2, pa_orders=5)
 
@@ -186,13 +189,15 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     train_w = plan.ablation_window
     for label, m, block in plan.length_variants:
         todo.append(("length", (label, plan.length_tests),
-                     replace(base, mode=m, window=train_w, block_s=block, classifiers=("svm", "pa")), "many"))
+                     replace(base, mode=m, window=train_w, block_s=block, classifiers=("svm", "pa"),
+                             cv_repeats=plan.length_repeats), "many"))
     if plan.length_variants:
         label, m, block = plan.length_variants[0]
-        first = replace(base, mode=m, block_s=block, classifiers=("svm", "pa"))
+        first = replace(base, mode=m, block_s=block, classifiers=("svm", "pa"), cv_repeats=plan.length_repeats)
         todo.append(("length_cv", (label, plan.length_cv_tests), replace(first, window=train_w), "cv_many"))
         for w in plan.short_windows:
-            todo.append(("short", (label, w), replace(first, window=w), "split"))
+            if w != train_w:  # the training length's row is the touch-length table's (same model)
+                todo.append(("short", (label, w), replace(first, window=w), "split"))
     abl = replace(base, window=plan.ablation_window, classifiers=("svm", "pa"))
     ablations = [("full descriptor", {})] + [(f"without {q}", {"drop": (q,)}) for q in ("A", "M", "C", "L", "N")] + [
         ("with the contact gate (F_t on tared PDC)", {"gate": True}), ("scaling: none", {"scaling": "none"}),
@@ -264,7 +269,8 @@ def _plan_record(plan: ReportPlan, sections: Sequence[str]) -> dict:
            "pa_orders": plan.pa_orders, "cv_folds": plan.cv_folds, "ablation_window": plan.ablation_window}
     if any(s in LENGTH_SECTIONS for s in sections):
         rec.update(length_train=plan.ablation_window, length_tests=list(plan.length_tests),
-                   length_cv_tests=list(plan.length_cv_tests), short_windows=list(plan.short_windows))
+                   length_cv_tests=list(plan.length_cv_tests), short_windows=list(plan.short_windows),
+                   length_repeats=plan.length_repeats)
     return rec
 
 
@@ -540,7 +546,9 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
     a(f"A model trained on {_wlabel(train_w, common_s)} windows (what `tactile evaluate --window {train_w}` "
       "trains) is scored on test windows of other lengths; *random a-b s* draws every test window's length "
       "uniformly from a, a + 0.5 s, ..., b (a length past the crop is the crop) and its position at random, "
-      "as a robot's touches last what they last. Regenerate these sections alone with "
+      "as a robot's touches last what they last. "
+      + (f"SVM C chosen by 5-fold CV repeated {plan['length_repeats']} time(s). " if plan.get("length_repeats") else "")
+      + "Regenerate these sections alone with "
       "`tactile report --data DIR --out docs --only length`"
       + (f" ({minutes / 60:.1f} min in this run)." if minutes else ".")
       + " Why accuracy used to fall with the length and what changed: [evaluation.md](evaluation.md).")
@@ -584,13 +592,19 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
         a(f"![touch length]({figs['length_robustness']})")
         a("")
     if serial.get("short"):
+        short = _keyed(serial["short"])
+        label = next(iter(short))[0]
+        if (label, train_w) in length:
+            short[(label, train_w)] = length[(label, train_w)]
+        short = dict(sorted(short.items(), key=lambda kv: float(kv[0][1])))
         a("## Short windows (default mode)")
         a("")
-        a("Train and test on windows of the same length (development split).")
+        a(f"Train and test on windows of the same length (development split; the {_wlabel(train_w, common_s)} "
+          "row is the touch-length table's model).")
         a("")
         a("| mode | window | values | SVM acc % | SVM C | PA-I acc % |")
         a("|---|---|---|---|---|---|")
-        for (m, w), r in _keyed(serial["short"]).items():
+        for (m, w), r in short.items():
             c = r["classifiers"]
             a(f"| {m} | {_wlabel(w, common_s)} | {r['n_features']} | {_pct(c['svm']['accuracy'])} | "
               f"{c['svm']['best_c']:g} | {_pct(c['pa']['accuracy'])} |")
@@ -617,7 +631,7 @@ def what_to_expect(serial: dict) -> str:
             raise ConfigError(f"results.json has no {section!r} result {key!r}; run the report", key=section) from None
 
     split = serial["split"]
-    head = get("short", f"{DEFAULT_MODE} | 2")
+    head = get("length", f"{DEFAULT_MODE} | 2")
     paper2, paper_whole = get("length", "paper | 2"), get("length", "paper | whole")
     cv = get("length_cv", f"{DEFAULT_MODE} | 2")
     cv_mixed = get("length_cv", f"{DEFAULT_MODE} | 1-6")
