@@ -87,6 +87,25 @@ def split_trials(trials: list[int], train: list[int] | None, test: list[int] | N
     return train, test
 
 
+def check_pac_rate(recordings) -> None:
+    """The descriptors take PAC at the BioTac's rate (the robot description's); refuse another.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first recording whose PAC rate (samples per frame x frame rate) is more than 5 % off.
+    """
+    from ..core.robot import load_robot
+
+    fs_hz = float(load_robot("shadow_hand").cell_types["biotac"].vibration.rate_hz)
+    for r in recordings:
+        rate_hz = r.pac_per_frame * r.frame_rate_hz
+        if abs(rate_hz / fs_hz - 1.0) > 0.05:
+            raise ConfigError(f"{r.path}: PAC at {rate_hz:.0f} Hz ({r.pac_per_frame} samples a frame at "
+                              f"{r.frame_rate_hz:.1f} Hz); the descriptors take the BioTac's {fs_hz:.0f} Hz "
+                              "(check samples_per_frame and the stamps of the mapping)", key="samples_per_frame")
+
+
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
@@ -196,6 +215,7 @@ def run(args: argparse.Namespace) -> int:
         train = load_split(args.train, train_trials, materials, args.mapping, report=reports[0])
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
+    check_pac_rate(list(train) + list(test))
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)

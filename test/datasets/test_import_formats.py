@@ -296,3 +296,20 @@ def test_evaluate_scores_an_hdf5_table_and_its_imported_bag_alike(csv_recs, tmp_
     # ranges larger than the data are refused, naming what exists
     assert main(["evaluate", "--train", str(bag), "--test", str(bag), "--train-trials", "1-5", *common[2:]]) == 2
     assert "no trial 3-5; the data hold trials 1-2" in capsys.readouterr().err
+
+
+def test_evaluate_refuses_pac_at_another_rate():
+    from tactile_descriptors_ros.datasets.recording import BiotacRecording
+    from tactile_descriptors_ros.tools.cmd_evaluate import check_pac_rate
+
+    n = 100
+    t = np.arange(n, dtype=np.int64) * 10_000_000
+    two = BiotacRecording(material=1, trial=1, frame_t_ns=t, pac=np.zeros(2 * n, np.int64),
+                          pac_t_ns=np.arange(2 * n, dtype=np.int64) * 5_000_000, pdc=np.zeros(n, np.int64),
+                          tac=np.zeros(n, np.int64), tdc=np.zeros(n, np.int64),
+                          electrodes=np.zeros((19, n), np.int64), path="old_shadow.bag", pac_per_frame=2)
+    with pytest.raises(ConfigError, match=r"old_shadow.bag: PAC at 200 Hz \(2 samples a frame"):
+        check_pac_rate([two])
+    full = BiotacRecording(**{**two.__dict__, "pac": np.zeros(22 * n, np.int64), "pac_per_frame": 22,
+                              "pac_t_ns": np.arange(22 * n, dtype=np.int64) * 454_545})
+    check_pac_rate([full])
