@@ -66,6 +66,7 @@ __all__ = [
     "Plan",
     "FULL_PLAN",
     "QUICK_PLAN",
+    "SKIN_GROUPS_PLAN",
     "Protocol",
     "PROTOCOLS",
     "DescriptorSet",
@@ -87,12 +88,18 @@ __all__ = [
     "HELD_OUT_SEED_OFFSET",
 ]
 
-#: Descriptor modes: name -> (layout, channels) of :func:`describe_window`.
-MODES: dict[str, tuple[str, str]] = {
-    "paper": ("concat", "averaged"),
-    "per_channel": ("concat", "per_channel"),
-    "pooled": ("pooled", "averaged"),
-    "pooled_per_channel": ("pooled", "per_channel"),
+#: Descriptor modes: name -> (layout, feature groups) of :func:`describe_window`.  The ``pooled_*``
+#: group selections are the candidates the skin cells' default was chosen from (docs/simulated.md).
+MODES: dict[str, tuple[str, tuple[str, ...]]] = {
+    "paper": ("concat", ("paper",)),
+    "per_channel": ("concat", ("per_channel",)),
+    "pooled": ("pooled", ("paper",)),
+    "pooled_per_channel": ("pooled", ("per_channel",)),
+    "pooled_bands": ("pooled", ("per_channel", "bands")),
+    "pooled_levels": ("pooled", ("per_channel", "levels")),
+    "pooled_statistics": ("pooled", ("per_channel", "statistics")),
+    "pooled_combined": ("pooled", ("per_channel", "bands", "levels", "statistics")),
+    "pooled_paper_bands": ("pooled", ("paper", "bands")),
 }
 
 #: The paper's own numbers (its robots, its data), with where they are printed.
@@ -457,7 +464,24 @@ def exploration_signals(result: SimResult, timing: ExplorationTiming, robot: Rob
         tare = _tare(cell, ct, p0, p1)
         force_n = (frc.astype(np.float64) - tare[:, None]).mean(axis=0) * float(ct.force.n_per_count)
         out[cid] = CellSignals(vib, vt, dfm, dt, force_n, valid=vib.shape[1] > 0 and dfm.shape[1] > 1,
-                               gap=vgap or dgap or fgap, invalid_samples=vbad + dbad + fbad)
+                               gap=vgap or dgap or fgap, invalid_samples=vbad + dbad + fbad,
+                               extra=_extra_at(cell, ct.extra_channels, dt) if ct.extra_channels else None)
+    return out
+
+
+def _extra_at(cell: CellRecord, channels: tuple[str, ...], t_ns: np.ndarray) -> np.ndarray:
+    """The extra channels at the deformation stamps ``t_ns``: each channel's latest valid sample, as a
+    driver publishes them with each force sample (NaN before a channel's first sample)."""
+    out = np.full((len(channels), t_ns.size), np.nan)
+    for k, ch in enumerate(channels):
+        st, rows = _stream_with(cell, (ch,))
+        ok = st.fault[rows[0]] == 0
+        ts, vals = st.t_ns[ok], st.counts[rows[0], ok].astype(np.float64)
+        if ch == "temperature":  # the simulator's counts are centi-degrees; drivers publish degrees C
+            vals = vals / 100.0
+        i = np.searchsorted(ts, t_ns, side="right") - 1
+        have = i >= 0
+        out[k, have] = vals[i[have]]
     return out
 
 
@@ -536,8 +560,8 @@ def describe_scene(scene: Scene, modes: Sequence[str], *, chunk_s: float = 60.0,
             sigs = exploration_signals(res, timing, robot)
             contact: list[str] = []
             for m in modes:
-                layout, channels = MODES[m]
-                d = describe_window(robot, sigs, layout=layout, channels=channels)
+                layout, groups = MODES[m]
+                d = describe_window(robot, sigs, layout=layout, groups=groups)
                 rows[m].append(np.asarray(d.values, dtype=np.float64))
                 flabels.setdefault(m, d.labels)
                 if not contact:
@@ -717,6 +741,13 @@ PROTOCOLS: dict[str, Protocol] = {p.key: p for p in (
 #: The full plan (docs/simulated.md): about 10-15 minutes on one core; the SVM's CV is repeated 3
 #: times instead of the paper's 10 (its cost is linear in the repeats; C barely moves).
 FULL_PLAN = Plan("full", cv_repeats=3)
+#: The skin cells' feature groups compared on the NAO protocols (docs/decisions.md): the candidate
+#: selections of :data:`MODES` in the pooled layout, 12 materials x 8 training / 4 test rounds, 6 objects.
+SKIN_GROUPS_PLAN = Plan("skin_groups", materials=12, objects=6, train_repeat=8, test_repeat=4,
+                        objects_train_repeat=5, objects_test_repeat=1, cv_repeats=2, pa_orders=2,
+                        modes=("pooled", "pooled_per_channel", "pooled_bands", "pooled_levels", "pooled_statistics",
+                               "pooled_combined", "pooled_paper_bands"),
+                        protocols=("nao_right_to_left", "nao_large_objects"))
 #: A small plan for smoke runs: a few materials, short tests, 2 CV repeats.
 QUICK_PLAN = Plan("quick", materials=5, objects=4, train_repeat=6, test_repeat=2, combined_train_repeat=6,
                   objects_train_repeat=5, objects_test_repeat=1, test_duration_s=2.0, cv_repeats=2, pa_orders=2,

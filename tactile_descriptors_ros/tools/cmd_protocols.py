@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..errors import ConfigError
+
 __all__ = ["register", "run"]
 
 
@@ -26,6 +28,9 @@ def register(subparsers) -> None:
         "beside the paper's own numbers. Simulated, not real data.")
     p.add_argument("--out", default="docs", help="output folder (default docs; '' = write nothing)")
     p.add_argument("--quick", action="store_true", help="a small plan (few materials, short tests; a smoke run)")
+    p.add_argument("--plan", default=None, choices=("full", "quick", "skin_groups"),
+                   help="the plan: full (default), quick (= --quick) or skin_groups (the NAO protocols on the "
+                   "skin cells' candidate feature groups, docs/decisions.md)")
     p.add_argument("--protocol", action="append", default=None, metavar="NAME",
                    help="run only this protocol (repeatable); default: all of the plan")
     p.add_argument("--json", action="store_true", help="print one JSON object (summary) on stdout")
@@ -36,9 +41,13 @@ def run(args: argparse.Namespace) -> int:
     """Run the plan, write the report, print a summary."""
     import dataclasses
 
-    from ..evaluation.simulated import FULL_PLAN, QUICK_PLAN, results_table, run_protocols, write_report
+    from ..evaluation.simulated import (FULL_PLAN, QUICK_PLAN, SKIN_GROUPS_PLAN, results_table, run_protocols,
+                                        write_report)
 
-    plan = QUICK_PLAN if args.quick else FULL_PLAN
+    plans = {"full": FULL_PLAN, "quick": QUICK_PLAN, "skin_groups": SKIN_GROUPS_PLAN}
+    if args.quick and args.plan not in (None, "quick"):
+        raise ConfigError(f"--quick and --plan {args.plan} name two plans", key="plan")
+    plan = plans[args.plan or ("quick" if args.quick else "full")]
     if args.protocol:
         plan = dataclasses.replace(plan, protocols=tuple(args.protocol))
     results = run_protocols(plan, progress=True)

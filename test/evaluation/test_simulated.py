@@ -61,6 +61,34 @@ def test_window_and_force_tare():
     assert index.valid and not index.gap and index.invalid_samples == 0
 
 
+def test_skin_cells_extra_channels_follow_the_force_samples():
+    """Proximity and temperature reach the skin groups as a driver publishes them: the latest sample at each
+    force sample, temperature in degrees C; every candidate selection of the skin groups is finite."""
+    scene = parse_scene({
+        "scene": {"name": "skin_extra", "robot": "nao", "seed": 4, "lead_in_s": 0.5},
+        "effects": {"normal_force": {"ramp_s": 0.1}, "texture_vibration": {}, "electrode_deformation": {},
+                    "proximity": {}, "sensor_noise": {}, "adc": {}},
+        "defaults": {"motion": "lateral", "body_parts": ["right_hand"], "force_n": 1.5, "speed_m_s": 0.02,
+                     "duration_s": 1.0, "pause_s": 0.5},
+        "explorations": [{"materials": ["cork"], "repeat": 1}],
+    })
+    scene = S.restrict_robot(scene, ["right_hand"])
+    res = simulate(scene)
+    sigs = S.exploration_signals(res, res.explorations[0], scene.robot)
+    cid, cell = next(iter(sigs.items()))
+    ct = scene.robot.cell_types[scene.robot.cell_index()[cid][0].cell_type]
+    assert ct.extra_channels == ("proximity", "temperature")
+    assert cell.extra.shape == (2, cell.deformation.shape[1])
+    prox, temp = cell.extra
+    assert np.all(np.isfinite(prox)) and prox.max() > 0  # the hand is touching: proximity reads near
+    assert np.all((temp > 0) & (temp < 60))  # degrees C, not the simulator's centi-degree counts
+    for mode in ("pooled_levels", "pooled_statistics", "pooled_combined"):
+        layout, groups = S.MODES[mode]
+        d = S.describe_window(scene.robot, sigs, layout=layout, groups=groups)
+        assert np.all(np.isfinite(d.values)) and any("level_proximity" in lab for lab in d.labels) == (
+            "levels" in groups)
+
+
 def test_svm_pa_gmm_beat_chance_on_an_easy_scene(easy_sets):
     train, test = easy_sets
     r = S.evaluate_sets(train, test, modes=["paper", "pooled"], cv_repeats=1, pa_orders=2, n_pa_max=6,
@@ -129,6 +157,17 @@ def test_plan_validation():
         S.Plan("x", protocols=("nope",))
     with pytest.raises(ConfigError, match="5-fold"):
         S.Plan("x", train_repeat=3)
+
+
+def test_protocols_command_refuses_two_plans():
+    import argparse
+
+    from tactile_descriptors_ros.tools import cmd_protocols
+
+    args = argparse.Namespace(quick=True, plan="skin_groups", protocol=None, out="", json=False)
+    with pytest.raises(ConfigError, match="two plans"):
+        cmd_protocols.run(args)
+    assert all(S.MODES[m][0] == "pooled" for m in S.SKIN_GROUPS_PLAN.modes)  # one hand trains, the other tests
 
 
 TINY = dataclasses.replace(S.QUICK_PLAN, name="tiny", materials=3, train_repeat=5, test_repeat=1, cv_repeats=1,
