@@ -73,23 +73,24 @@ class TopicSelector:
     ----------
     topics : iterable of str
         Exact names (always taken, even if excluded by default).
-    regex : str, optional
-        ``re.search`` pattern on the topic name.
+    regex : str or sequence of str, optional
+        ``re.search`` pattern(s) on the topic name; a topic matching any is taken.
     all_topics : bool
     exclude : str, optional
         Pattern of topics never to take (besides :data:`DEFAULT_EXCLUDED_TOPICS`).
     """
 
-    def __init__(self, topics: Iterable[str] = (), regex: str | None = None, all_topics: bool = False,
-                 exclude: str | None = None) -> None:
+    def __init__(self, topics: Iterable[str] = (), regex: str | Sequence[str] | None = None,
+                 all_topics: bool = False, exclude: str | None = None) -> None:
         self.names = {t if t.startswith("/") else "/" + t for t in topics}
+        patterns = [regex] if isinstance(regex, str) else [r for r in (regex or ()) if r]
         try:
-            self.regex = re.compile(regex) if regex else None
+            self.regexes = [re.compile(r) for r in patterns if r]
             self.exclude = re.compile(exclude) if exclude else None
         except re.error as exc:
             raise BagError(f"bad topic pattern: {exc}") from None
         self.all_topics = all_topics
-        if not (self.names or self.regex or self.all_topics):
+        if not (self.names or self.regexes or self.all_topics):
             raise BagError("no topics selected: name topics, give --regex PATTERN, or --all")
 
     def __call__(self, topic: str) -> bool:
@@ -99,7 +100,7 @@ class TopicSelector:
             return False
         if self.all_topics:
             return True
-        return bool(self.regex and self.regex.search(topic))
+        return any(r.search(topic) for r in self.regexes)
 
 
 @contextlib.contextmanager

@@ -318,7 +318,7 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     svm = pa = gmm = None
     if "svm" in classifiers:
         svm = fit_svm(X_tr, y_tr, b_train.groups_id, labels, scaling=cfg.scaling, folds=cfg.cv_folds,
-                      repeats=cfg.cv_repeats, seed=cfg.seed, jobs=cfg.jobs)
+                      repeats=cfg.cv_repeats, seed=cfg.seed, jobs=cfg.jobs, progress=cfg.progress)
         svm_pred = svm.predict(X_all)
     if "pa" in classifiers:
         pa = pa_curve(X_tr, y_tr, b_train.trials, X_all, y_all, labels, n_max=cfg.pa_max, orders=cfg.pa_orders,

@@ -44,7 +44,29 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["register", "run_demo", "match_exploration", "learning_curve"]
+__all__ = ["register", "run_demo", "match_exploration", "learning_curve", "never_windowed", "positive_float"]
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number above zero (``--speed``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number above 0, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer of at least 1 (``--block``)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
 
 
 def match_exploration(start_ns: int, end_ns: int, timings) -> int | None:
@@ -55,6 +77,12 @@ def match_exploration(start_ns: int, end_ns: int, timings) -> int | None:
         if overlap > best_overlap:
             best, best_overlap = i, overlap
     return best
+
+
+def never_windowed(windows: list[tuple[int, int]], timings) -> list[int]:
+    """Indices of the scene explorations that no descriptor window overlaps (touches the graph missed)."""
+    hit = {match_exploration(start, end, timings) for start, end in windows}
+    return [i for i in range(len(timings)) if i not in hit]
 
 
 def learning_curve(rows: list[dict], block: int) -> list[float]:
@@ -68,11 +96,15 @@ def run_demo(robot: str, scene: str | None = None, speed: float = 1.0, split_win
              wire: str | None = None, block: int = 5) -> dict:
     """Run the demo; return the summary (see the module docstring).
 
-    ``channels``: descriptor channel mode of the window nodes (``robot``, the
+    ``speed`` must be above 0.  ``channels``: descriptor channel mode of the window nodes (``robot``, the
     default: the robot description's; or ``averaged``, ``per_channel``).  ``wire``:
     framing of simulated skin buses (``can`` or ``serial``; default the
     driver's).
     """
+    from ..errors import ConfigError
+
+    if not (speed > 0 and speed != float("inf")):
+        raise ConfigError(f"must be a finite number above 0, got {speed!r}", key="speed")
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     import rclpy
@@ -139,9 +171,14 @@ def run_demo(robot: str, scene: str | None = None, speed: float = 1.0, split_win
               file=out, flush=True)
 
     windows: dict[int, int] = {}  # exploration id -> window start [ns], from the descriptors
-    node.create_subscription(Descriptor, "tactile/descriptor",
-                             lambda m: windows.__setitem__(int(m.exploration_id), m.window_start.sec * 1_000_000_000
-                                                           + m.window_start.nanosec), qos)
+    spans: list[tuple[int, int]] = []  # every descriptor's window [start, end) [ns]
+
+    def on_descriptor(m) -> None:
+        start = m.window_start.sec * 1_000_000_000 + m.window_start.nanosec
+        windows[int(m.exploration_id)] = start
+        spans.append((start, m.window_end.sec * 1_000_000_000 + m.window_end.nanosec))
+
+    node.create_subscription(Descriptor, "tactile/descriptor", on_descriptor, qos)
     node.create_subscription(Prediction, "tactile/prediction", on_prediction, qos)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -185,12 +222,17 @@ def run_demo(robot: str, scene: str | None = None, speed: float = 1.0, split_win
         print(f"online accuracy {sum(r['correct'] for r in later)}/{len(later)} = "
               f"{sum(r['correct'] for r in later) / len(later):.2f} over the scored explorations (chance "
               f"{1.0 / len(seen_classes):.2f}, {len(seen_classes)} classes)", file=out, flush=True)
+    missed = never_windowed(spans, truth)
+    if missed:
+        print(f"{len(missed)} of {len(truth)} scene touches were never windowed (no descriptor overlaps them): "
+              f"scene explorations {', '.join(map(str, missed))}", file=out, flush=True)
     return {
         "robot": rob.name, "scene": sc.name, "explorations": len(truth), "predictions": n,
         "accuracy": round(sum(r["correct"] for r in later) / len(later), 4) if later else None,
         "scored": len(later), "accuracy_all": round(sum(r["correct"] for r in rows) / n, 4) if n else None,
         "chance": round(1.0 / len(seen_classes), 4) if seen_classes else None, "learning_curve": curve,
         "classes": len(seen_classes), "unmatched": sum(1 for r in rows if r.get("truth") is None),
+        "windowed": len(truth) - len(missed), "never_windowed": missed,
         "channels": channels, "speed": speed, "failed_nodes": failed,
         "wall_time_s": round(time.monotonic() - t_start, 1),
     }
@@ -208,11 +250,11 @@ def register(subparsers) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("robot", help="shadow_hand or nao (or a robot YAML path with a nodes: section)")
     p.add_argument("--scene", default=None, help="scene name or path (default demo_<robot>)")
-    p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
+    p.add_argument("--speed", type=positive_float, default=1.0, help="simulated seconds per wall second (> 0)")
     p.add_argument("--channels", default="robot", choices=("robot", "per_channel", "averaged"),
                    help="descriptor channel mode of the window nodes (default robot: the robot description's)")
     p.add_argument("--wire", default=None, choices=("can", "serial"), help="framing of simulated skin buses")
-    p.add_argument("--block", type=int, default=5, help="predictions per learning-curve point")
+    p.add_argument("--block", type=positive_int, default=5, help="predictions per learning-curve point")
     p.add_argument("--split-window-nodes", action="store_true", help="one window node per body part")
     p.add_argument("--timeout-s", type=float, default=None, help="give up after this long")
     p.add_argument("--verbose", action="store_true", help="forward the nodes' output to stderr")

@@ -1,8 +1,11 @@
 """``tactile fit-textures DATA_DIR -o DIR``: fit the simulator's texture models to real BioTac recordings.
 
 Writes one small JSON file per material (AR model of PAC, electrode and PDC
-statistics; see :mod:`tactile_descriptors_ros.sim.textures`).  Only the
-fitted parameters are written, never the data.
+statistics; see :mod:`tactile_descriptors_ros.sim.textures`) into ``-o DIR``,
+by default ``texture_models`` in the current directory: never into the
+installed package (regenerating the shipped models is an explicit
+``-o tactile_descriptors_ros/sim/models`` in a checkout).  Only the fitted
+parameters are written, never the data.
 """
 
 from __future__ import annotations
@@ -11,7 +14,10 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "DEFAULT_OUTPUT"]
+
+#: Output folder when ``-o`` is not given (relative to the current directory).
+DEFAULT_OUTPUT = Path("texture_models")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -19,7 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("data_dir", type=Path, help="folder holding raw_data/mat<M>/mat<M>_<N>_bio.csv")
     p.add_argument("-o", "--output", type=Path, default=None,
-                   help="output folder (default: the package's sim/models)")
+                   help=f"output folder (default: ./{DEFAULT_OUTPUT})")
     p.add_argument("--trials", default=None, help="trials to use, e.g. 1-30 (default: all found)")
     p.add_argument("--pac-order", type=int, default=12, help="AR order of the PAC model (default 12)")
     p.add_argument("--segment-s", type=float, default=2.0, help="statistics over segments of this length (default 2 s)")
@@ -38,9 +44,9 @@ def _parse_trials(text: str | None) -> list[int] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..sim.textures import fit_materials, models_dir, save_material
+    from ..sim.textures import fit_materials, save_material
 
-    out = args.output or models_dir()
+    out = args.output or DEFAULT_OUTPUT
     out.mkdir(parents=True, exist_ok=True)
     models = fit_materials(args.data_dir, trials=_parse_trials(args.trials), progress=not args.json,
                            pac_order=args.pac_order, segment_s=args.segment_s)

@@ -22,7 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("record", help="record live topics into a bag",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("topics", nargs="*", help="topics to record")
-    p.add_argument("--regex", "-e", default=None, help="also record topics matching this pattern (re.search)")
+    p.add_argument("--regex", "-e", action="append", default=None, metavar="PATTERN",
+                   help="also record topics matching this pattern (re.search; repeatable: any of them)")
     p.add_argument("--all", "-a", dest="all_topics", action="store_true",
                    help="record every topic (except /rosout and /parameter_events unless named)")
     p.add_argument("--exclude", "-x", default=None, help="never record topics matching this pattern")

@@ -15,19 +15,54 @@ import json
 import sys
 from pathlib import Path
 
-__all__ = ["register", "run"]
+__all__ = ["register", "run", "clock_option", "DEFAULT_CLOCK_HZ"]
+
+#: /clock ticks per second of bag time with a bare ``--clock``.
+DEFAULT_CLOCK_HZ = 100.0
+
+
+def clock_option(bag: Path | None, clock: str | None) -> tuple[Path, float | None]:
+    """The bag and the /clock rate from the parsed ``BAG`` and ``--clock [HZ]``.
+
+    ``--clock`` takes an optional value, so in ``tactile replay --clock BAG``
+    argparse hands BAG to ``--clock``: a value that is not a number is the
+    bag when no other bag was given.
+
+    Raises
+    ------
+    ConfigError
+        No bag, or a ``--clock`` value that is neither a rate nor the bag.
+    """
+    from ..errors import ConfigError
+
+    rate = None
+    if clock is not None:
+        try:
+            rate = float(clock)
+        except ValueError:
+            if bag is not None:
+                raise ConfigError(f"--clock takes a rate in Hz, got {clock!r}", key="--clock") from None
+            bag, rate = Path(clock), DEFAULT_CLOCK_HZ
+        else:
+            if not rate >= 0:  # 0: /clock only at the messages
+                raise ConfigError(f"--clock rate must not be negative, got {clock!r}", key="--clock")
+    if bag is None:
+        raise ConfigError("no bag given: tactile replay BAG", key="BAG")
+    return bag, rate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("replay", help="play a bag onto live topics",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("bag", type=Path, help="bag directory (or a .mcap / .db3 file)")
+    p.add_argument("bag", type=Path, nargs="?", help="bag directory (or a .mcap / .db3 file)")
     p.add_argument("--rate", "-r", type=float, default=1.0, help="speed factor (default 1)")
     p.add_argument("--start-offset", type=float, default=0.0, help="skip this many seconds of the bag")
     p.add_argument("--loop", "-l", action="store_true", help="play again from the start at the end")
     p.add_argument("--topics", nargs="+", default=None, help="only these topics")
-    p.add_argument("--clock", nargs="?", type=float, const=100.0, default=None, metavar="HZ",
-                   help="publish /clock; ticks at HZ of bag time between messages (default 100)")
+    # ``--clock [HZ]`` as in ``ros2 bag play``; argparse gives an optional value
+    # whatever follows, so ``--clock BAG`` is told apart after parsing (clock_option).
+    p.add_argument("--clock", nargs="?", const=str(DEFAULT_CLOCK_HZ), default=None, metavar="HZ",
+                   help=f"publish /clock; ticks at HZ of bag time between messages (default {DEFAULT_CLOCK_HZ:g})")
     p.add_argument("--remap", nargs="+", default=[], metavar="FROM:=TO", help="publish bag topic FROM on TO")
     p.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
                    help="wait up to S seconds for a subscriber on every topic before playing")
@@ -68,6 +103,7 @@ def _print_info(bag: Path, as_json: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    args.bag, args.clock = clock_option(args.bag, args.clock)
     if args.info:
         _print_info(args.bag, args.json)
         return 0

@@ -1,0 +1,117 @@
+"""Command-line arguments: replay --clock BAG, record -e repeated, demo --speed, fit-textures output, progress."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_descriptors_ros.errors import ConfigError
+from tactile_descriptors_ros.tools.cli import build_parser, main
+from tactile_descriptors_ros.tools.cmd_replay import clock_option
+
+
+def _bag(tmp_path):
+    from tactile_descriptors_ros.bags.io import BagWriter
+    from tactile_descriptors_ros.bags.types import tactile_typestore
+
+    store = tactile_typestore()
+    label = "tactile_descriptors_msgs/msg/Label"
+    stamp = store.types["builtin_interfaces/msg/Time"](sec=1_700_000_000, nanosec=0)
+    header = store.types["std_msgs/msg/Header"](stamp=stamp, frame_id="")
+    msg = store.types[label](header=header, exploration_id=1, class_name="cork")
+    path = tmp_path / "labels"
+    with BagWriter(path) as bag:
+        bag.add_topic("/tactile/label", label)
+        bag.write("/tactile/label", 1_700_000_000_000_000_000, msg)
+    return path
+
+
+def test_replay_clock_followed_by_the_bag(tmp_path, capsys):
+    bag = _bag(tmp_path)
+    args = build_parser().parse_args(["replay", "--clock", str(bag)])
+    assert clock_option(args.bag, args.clock) == (bag, 100.0)
+    args = build_parser().parse_args(["replay", "--clock", "200", str(bag)])
+    assert clock_option(args.bag, args.clock) == (bag, 200.0)
+    args = build_parser().parse_args(["replay", str(bag), "--clock"])
+    assert clock_option(args.bag, args.clock) == (bag, 100.0)
+    args = build_parser().parse_args(["replay", str(bag)])
+    assert clock_option(args.bag, args.clock) == (bag, None)
+    with pytest.raises(ConfigError, match="--clock takes a rate"):
+        clock_option(bag, "fast")
+    with pytest.raises(ConfigError, match="no bag"):
+        clock_option(None, "50")
+    assert main(["replay", "--clock", str(bag), "--info", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["message_count"] == 1
+
+
+def test_record_keeps_every_regex():
+    from tactile_descriptors_ros.bags.live import TopicSelector
+
+    args = build_parser().parse_args(["record", "-e", "^/a", "-e", "^/b", "-o", "x"])
+    assert args.regex == ["^/a", "^/b"]
+    take = TopicSelector(args.topics, regex=args.regex)
+    assert take("/a1") and take("/b2") and not take("/c")
+    assert TopicSelector(regex="^/a")("/a1")  # one pattern as a string still works
+
+
+@pytest.mark.parametrize("speed", ["0", "-1", "nan", "inf", "fast"])
+def test_demo_speed_must_be_a_positive_number(speed, capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(["demo", "shadow_hand", "--speed", speed])
+    assert exc.value.code == 2 and "--speed" in capsys.readouterr().err
+
+
+def test_demo_summary_names_touches_never_windowed():
+    from types import SimpleNamespace
+
+    from tactile_descriptors_ros.tools.cmd_demo import never_windowed
+
+    touches = [SimpleNamespace(onset_ns=a, release_ns=b) for a, b in ((0, 10), (20, 30), (40, 50))]
+    assert never_windowed([(1, 9), (41, 60)], touches) == [1]
+    assert never_windowed([(0, 100)], touches) == [1, 2]  # one window over all counts for one touch only
+    assert never_windowed([(-5, 12), (19, 31), (45, 46)], touches) == []
+
+
+@pytest.mark.realdata
+def test_fit_textures_writes_into_the_current_directory_by_default(biotac_data_dir, tmp_path, monkeypatch):
+    from tactile_descriptors_ros.sim.textures import models_dir
+
+    shipped = {p.name: p.stat().st_mtime_ns for p in models_dir().glob("*.json")}
+    monkeypatch.chdir(tmp_path)
+    assert main(["fit-textures", str(biotac_data_dir), "--trials", "1-2", "--json"]) == 0
+    written = sorted(p.name for p in (tmp_path / "texture_models").glob("*.json"))
+    assert written and {p.name: p.stat().st_mtime_ns for p in models_dir().glob("*.json")} == shipped
+
+
+def test_choosing_c_shows_progress_and_scores_as_a_grid_search(capsys):
+    from sklearn.model_selection import GridSearchCV
+
+    from tactile_descriptors_ros.evaluation.classifiers import _svm_pipeline, cv_splits, fit_svm
+
+    rng = np.random.default_rng(0)
+    y = np.repeat(np.arange(3), 12)
+    X = rng.normal(size=(36, 4)) + y[:, None]
+    groups = np.arange(36)
+    labels = [f"f{i}" for i in range(4)]
+    grid = (0.01, 1.0, 100.0)
+    res = fit_svm(X, y, groups, labels, scaling="standardize", folds=3, repeats=2, c_grid=grid, progress=True)
+    err = capsys.readouterr().err
+    assert "choosing C" in err and "3/3" in err
+    search = GridSearchCV(_svm_pipeline("standardize", labels), {"svc__C": list(grid)},
+                          cv=cv_splits(y, groups, 3, 2, 0), refit=False).fit(X, y)
+    assert res.cv_scores == {c: float(m) for c, m in zip(grid, search.cv_results_["mean_test_score"])}
+
+
+def test_fit_svm_is_quiet_without_progress(capsys):
+    from tactile_descriptors_ros.evaluation.classifiers import fit_svm
+
+    rng = np.random.default_rng(1)
+    y = np.repeat(np.arange(2), 10)
+    fit_svm(rng.normal(size=(20, 3)) + y[:, None], y, np.arange(20), ["a", "b", "c"], scaling="standardize",
+            folds=2, repeats=1, c_grid=(1.0,))
+    assert capsys.readouterr().err == ""
+
+
