@@ -13,39 +13,112 @@ fallback and the reference.
 
 This module imports numba; :mod:`.fast` imports it lazily, only when the
 accelerator is first used (``TACTILE_NO_NUMBA=1`` disables it).  Compiled
-code is cached on disk (``cache=True``): next to this module when that is
-writable, else in ``$NUMBA_CACHE_DIR`` or a directory under the system's
-temporary directory.
+code is cached on disk (``cache=True``) in :data:`CACHE_DIR`, filled at
+set-up (``make setup`` runs :func:`~.fast.main`) and found by every node
+afterwards:
+
+* ``$NUMBA_CACHE_DIR/tactile_descriptors_ros`` when the user set it;
+* else ``<venv>/var/cache/tactile_descriptors_ros/numba`` in a virtual
+  environment (one cache per set of installed libraries);
+* else ``$XDG_CACHE_HOME`` (``~/.cache``) ``/tactile_descriptors_ros/numba``.
+
+numba names a cache folder after the source file's directory, so a copy of
+the package at another path (colcon's ``build/`` or ``install/``, a wheel)
+would compile again for about 30 s.  This module's functions are therefore
+located by :class:`_KernelCacheLocator`: one folder for any path, and
+numba's own staleness check (a hash of the source file's contents, plus
+numba's version and the CPU) decides whether the cached code fits.  numba
+has no public hook for that (``NUMBA_CACHE_LOCATOR_CLASSES`` replaces every
+locator, also other packages'), so the locator is put first in numba's list
+of locators; if that list ever moves, numba's default locators serve, only
+path-dependent.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 from pathlib import Path
 
 import numba
 import numpy as np
 
-__all__ = ["quantities", "cell_bounds", "CACHE_DIR", "OK", "NOT_EXACT", "DEGENERATE", "UNSORTED", "TOO_WIDE"]
+__all__ = ["quantities", "cell_bounds", "CACHE_DIR", "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
+           "UNSORTED", "TOO_WIDE"]
+
+
+def _writable_dir(path: Path) -> bool:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return False
+    return os.access(path, os.W_OK)
 
 
 def _cache_dir() -> str:
-    """Where compiled code is cached (set before the first compilation)."""
+    """Where compiled code is cached (see the module docstring)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
-        return os.environ["NUMBA_CACHE_DIR"]
-    here = Path(__file__).resolve().parent
-    pycache = here / "__pycache__"
-    if os.access(pycache if pycache.is_dir() else here, os.W_OK):
-        return str(pycache)
-    fallback = Path(tempfile.gettempdir()) / f"tactile_numba_cache_{os.getuid() if hasattr(os, 'getuid') else 0}"
-    fallback.mkdir(parents=True, exist_ok=True)
-    numba.config.CACHE_DIR = str(fallback)
-    return str(fallback)
+        candidates = [Path(os.environ["NUMBA_CACHE_DIR"]) / "tactile_descriptors_ros"]
+    else:
+        candidates = []
+        if sys.prefix != sys.base_prefix:  # a virtual environment
+            candidates.append(Path(sys.prefix) / "var" / "cache" / "tactile_descriptors_ros" / "numba")
+        xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+        candidates.append(Path(xdg) / "tactile_descriptors_ros" / "numba")
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    candidates.append(Path(tempfile.gettempdir()) / f"tactile_numba_cache_{uid}")
+    for path in candidates:
+        if _writable_dir(path):
+            return str(path)
+    return str(candidates[-1])
 
 
 #: Directory of the on-disk cache of compiled code.
 CACHE_DIR: str = _cache_dir()
+_THIS_FILE = Path(__file__).resolve()
+
+
+def _install_locator() -> bool:
+    """Put :class:`_KernelCacheLocator` first in numba's locators; False when numba's internals differ."""
+    try:
+        from numba.core import caching
+        from numba.core.caching import _CacheLocator, _SourceFileBackedLocatorMixin
+    except ImportError:
+        return False
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # renamed in numba 0.6x
+
+    class _KernelCacheLocator(_SourceFileBackedLocatorMixin, _CacheLocator):
+        """This module's functions, cached in :data:`CACHE_DIR` whatever the install path."""
+
+        def __init__(self, py_func, py_file) -> None:
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+
+        def get_cache_path(self) -> str:
+            return CACHE_DIR
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                if Path(py_file).resolve() != _THIS_FILE:
+                    return None  # another package's function: numba's own locators
+            except OSError:
+                return None
+            return super().from_function(py_func, py_file)
+
+    locators = getattr(impl, "_locator_classes", None)
+    if not isinstance(locators, list):
+        return False
+    if not any(c.__name__ == "_KernelCacheLocator" for c in locators):
+        locators.insert(0, _KernelCacheLocator)
+    return True
+
+
+#: True when the cache does not depend on where the package is installed.
+PATH_INDEPENDENT_CACHE: bool = _install_locator()
+if not PATH_INDEPENDENT_CACHE:
+    numba.config.CACHE_DIR = CACHE_DIR
 
 #: Status codes of :func:`quantities` (anything but OK: let the numpy kernel decide).
 OK, NOT_EXACT, DEGENERATE, UNSORTED, TOO_WIDE = 0, 1, 2, 3, 4
