@@ -1,6 +1,6 @@
 """Launch the shadow_hand tactile graph: drivers, window node(s), classifier.
 
-    ros2 launch tactile_descriptors_ros shadow_hand.launch.py [sim:=demo_shadow_hand] [split_window_nodes:=true]
+    ros2 launch tactile_descriptors_ros shadow_hand.launch.py [sim:=demo_shadow_hand] [sim_speed:=0.5] [split_window_nodes:=true]
         [model_path:=/path/model.json] [use_sim_time:=true]
 
 Thin over the robot description's ``nodes:`` section: see

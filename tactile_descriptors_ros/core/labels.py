@@ -138,6 +138,29 @@ class LabelProtocol(Generic[T]):
         self._serial = 0
         self._held: OrderedDict[int, str] = OrderedDict()  # exploration id -> class name
 
+    def set_horizon(self, horizon: int) -> int:
+        """Change the horizon while running; a smaller one forgets the oldest kept descriptors now.
+
+        Held labels beyond the new horizon are dropped and counted
+        (``label_dropped_by_horizon``), never silently.  Returns how many were dropped.
+
+        Raises
+        ------
+        ConfigError
+            For a horizon below 1.
+        """
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+            raise ConfigError(f"must be an integer >= 1, got {horizon!r}", key="label_horizon")
+        self.horizon = horizon
+        while len(self._kept) > horizon:
+            self._kept.popitem(last=False)
+        dropped = 0
+        while len(self._held) > horizon:
+            self._held.popitem(last=False)
+            dropped += 1
+        self.counts["label_dropped_by_horizon"] += dropped
+        return dropped
+
     @property
     def held(self) -> int:
         """Labels held for explorations not seen yet."""

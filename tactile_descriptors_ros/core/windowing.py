@@ -254,6 +254,44 @@ class Windower:
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
+    # ------------------------------------------------------------- settings
+    #: Settings :meth:`retune` may change while data flows.
+    TUNABLE = ("length_s", "hop_s", "min_duration_s", "max_duration_s", "release_s", "force_threshold_n",
+               "release_threshold_n", "lateness_s")
+
+    def settings(self) -> dict[str, float]:
+        """The current values of :attr:`TUNABLE` (seconds and newtons)."""
+        return {"length_s": self.length_ns / 1e9, "hop_s": self.hop_ns / 1e9, "min_duration_s": self.min_ns / 1e9,
+                "max_duration_s": self.max_ns / 1e9, "release_s": self.release_ns / 1e9,
+                "force_threshold_n": self.onset_n, "release_threshold_n": self.release_n,
+                "lateness_s": self.lateness_ns / 1e9}
+
+    def retune(self, dry_run: bool = False, **changes: float) -> None:
+        """Change some of :attr:`TUNABLE` while running; the buffered data and the current window are kept.
+
+        The new values are checked together with the unchanged ones, exactly
+        as the constructor checks them; on an error nothing changes.  A new
+        window length or hop applies from the next fixed window on, new
+        thresholds from the next onset/release decision.  ``dry_run`` only
+        checks.
+
+        Raises
+        ------
+        ConfigError
+            For an unknown setting or an invalid combination (naming it).
+        """
+        unknown = sorted(set(changes) - set(self.TUNABLE))
+        if unknown:
+            raise ConfigError(f"cannot retune {unknown[0]!r} (tunable: {', '.join(self.TUNABLE)})", key=unknown[0])
+        merged = {**self.settings(), **changes}
+        probe = Windower(self.robot, mode=self.mode, clock_jump_s=self.clock_jump_ns / 1e9,
+                         smooth_s=self.smooth_ns / 1e9, max_invalid_fraction=self.max_invalid_fraction, **merged)
+        if dry_run:
+            return
+        for attr in ("length_ns", "hop_ns", "min_ns", "max_ns", "release_ns", "onset_n", "release_n", "lateness_ns",
+                     "_retain_ns"):
+            setattr(self, attr, getattr(probe, attr))
+
     # ------------------------------------------------------------------ input
     def add(self, cell_id: int, chunk: CellChunk) -> bool:
         """Buffer one chunk; return False (and count why) when it was dropped."""

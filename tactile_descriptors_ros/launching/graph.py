@@ -37,6 +37,7 @@ import yaml
 
 from ..core.robot import RobotDescription, load_robot
 from ..errors import ConfigError
+from .parameters import check_parameters
 
 __all__ = [
     "PACKAGE",
@@ -166,7 +167,7 @@ def _entry(robot: RobotDescription, name: str, raw: Any) -> dict[str, Any]:
 
 
 def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: str | os.PathLike[str] | None = None,
-                split_window_nodes: bool = False, model_path: str | None = None,
+                sim_speed: float | None = None, split_window_nodes: bool = False, model_path: str | None = None,
                 use_sim_time: bool = False, overrides: Mapping[str, Mapping[str, Any]] | None = None,
                 namespace: str = "") -> list[NodeSpec]:
     """The nodes to start for a robot.
@@ -179,6 +180,10 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
         A scene name (``demo_shadow_hand``) or path: drivers run on the
         simulated transport (their ``sim_parameters``, plus ``sim.scene`` as
         an absolute path).
+    sim_speed : float, optional
+        ``sim.speed`` of the drivers with ``sim_scene``: simulated seconds per
+        wall second (a busy machine needs less than 1; default: the
+        ``sim_parameters``', else the driver's 1.0).
     split_window_nodes : bool
         Scale-out: every window node serving several body parts becomes one
         node per body part (``<name>_<body part>``), all publishing on the
@@ -203,7 +208,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     ------
     ConfigError
         For an empty or malformed ``nodes:`` section, an unknown body part,
-        executable or override target, or contradictory options.
+        executable or override target, a parameter the node does not declare
+        or of the wrong type (:func:`~.parameters.check_parameters`), or
+        contradictory options.
     """
     if not isinstance(robot, RobotDescription):
         robot = load_robot(robot)
@@ -211,6 +218,8 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
         raise ConfigError("the robot description has no 'nodes:' section to launch", key="nodes",
                           source=robot.source)
     robot_param = str(Path(robot.source).resolve()) if robot.source and Path(robot.source).is_file() else robot.name
+    if sim_speed is not None and not (float(sim_speed) > 0 and float(sim_speed) != float("inf")):
+        raise ConfigError(f"must be a finite number above 0, got {sim_speed!r}", key="sim_speed")
     scene_param = None
     if sim_scene is not None and str(sim_scene):
         from ..sim.scene import scene_path
@@ -223,8 +232,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     for name, e in entries.items():
         params: dict[str, Any] = {}
         exe = e["executable"]
+        # the classifier only names its default model file after the robot
+        params["robot"] = robot_param
         if exe != "classifier_node":
-            params["robot"] = robot_param
             if e["body_parts"]:
                 params["body_parts"] = list(e["body_parts"])
         params.update(e["parameters"])
@@ -232,6 +242,8 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
             params.update(e["sim_parameters"])
             params.setdefault("transport", "simulated")
             params["sim.scene"] = scene_param
+            if sim_speed is not None:
+                params["sim.speed"] = float(sim_speed)
         if exe == "classifier_node" and model_path is not None:
             params["model_path"] = str(model_path)
         if use_sim_time:
@@ -248,6 +260,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
                               key=f"overrides.{target}")
         specs = [NodeSpec(s.name, s.executable, {**s.parameters, **values}, s.remappings, s.namespace, s.package)
                  if s.name == target else s for s in specs]
+    # every parameter declared by its executable, with its type (an integer for a double widens)
+    specs = [NodeSpec(s.name, s.executable, check_parameters(s.name, s.executable, s.parameters), s.remappings,
+                      s.namespace, s.package) for s in specs]
     fq = [s.fully_qualified_name for s in specs]
     dup = sorted({n for n in fq if fq.count(n) > 1})
     if dup:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..errors import ConfigError
 from .graph import build_graph
 
 __all__ = ["LAUNCH_ARGUMENTS", "launch_description_for"]
@@ -18,6 +19,8 @@ __all__ = ["LAUNCH_ARGUMENTS", "launch_description_for"]
 #: launch arguments besides ``robot``: (name, default, description)
 LAUNCH_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
     ("sim", "", "scene name or path: run the drivers on simulated sensors"),
+    ("sim_speed", "", "simulated seconds per wall second with sim ('' = the robot's sim_parameters, else 1.0); "
+                      "a busy machine needs less, the NAO skin about 0.04"),
     ("split_window_nodes", "false", "one window node per body part (pooled descriptors)"),
     ("model_path", "", "classifier model file ('' = the nodes: section's)"),
     ("use_sim_time", "false", "use /clock (bag replay)"),
@@ -35,9 +38,15 @@ def _nodes(context: Any, *args: Any, **kwargs: Any) -> list:
     from launch_ros.actions import Node
 
     model_path = LaunchConfiguration("model_path").perform(context)
+    speed = LaunchConfiguration("sim_speed").perform(context).strip()
+    try:
+        sim_speed = float(speed) if speed else None
+    except ValueError:
+        raise ConfigError(f"must be a number, got {speed!r}", key="sim_speed") from None
     specs = build_graph(
         LaunchConfiguration("robot").perform(context),
         sim_scene=LaunchConfiguration("sim").perform(context) or None,
+        sim_speed=sim_speed,
         split_window_nodes=_true(LaunchConfiguration("split_window_nodes").perform(context)),
         model_path=model_path or None,
         use_sim_time=_true(LaunchConfiguration("use_sim_time").perform(context)),

@@ -111,6 +111,8 @@ class GraphProcesses:
         self.workdir = Path(workdir if workdir is not None else self._tmp.name)
         self.params_file = self.workdir / "parameters.yaml"
         self.nodes: list[RunningNode] = []
+        #: names of the nodes that ended on their own (before :meth:`stop`), in order
+        self.died: list[str] = []
         self._lock = threading.Lock()
 
     # ----------------------------------------------------------------- start
@@ -199,11 +201,14 @@ class GraphProcesses:
 
 
 def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None,
-                          stop_when_one_exits: bool = False) -> dict[str, int | None]:
+                          stop_when_one_exits: bool = True) -> dict[str, int | None]:
     """Start ``procs`` and supervise them until Ctrl-C, SIGTERM or ``duration_s``; then stop them.
 
-    A node that exits is reported on stderr; the others keep running (as with
-    ``ros2 launch``) unless ``stop_when_one_exits``.  Returns the exit codes.
+    A node that exits on its own is reported on stderr and recorded in
+    ``procs.died``; with ``stop_when_one_exits`` (the default: a graph with a
+    node missing does not recognise anything, so it should not look alive,
+    like ``ros2 launch`` with ``on_exit=Shutdown()``) the others are then
+    stopped, else they keep running.  Returns the exit codes.
     """
     def on_term(signum, frame):  # SIGTERM to the launcher: stop the graph like Ctrl-C
         raise KeyboardInterrupt
@@ -221,8 +226,10 @@ def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None
             for n in done:
                 if n.spec.name not in reported:
                     reported.add(n.spec.name)
-                    print(f"tactile launch: node {n.spec.name} exited with code {n.returncode}", file=sys.stderr,
-                          flush=True)
+                    procs.died.append(n.spec.name)
+                    then = "; stopping the others" if stop_when_one_exits and len(reported) < len(procs.nodes) else ""
+                    print(f"tactile launch: node {n.spec.name} exited with code {n.returncode}{then}",
+                          file=sys.stderr, flush=True)
             if len(reported) == len(procs.nodes) or (reported and stop_when_one_exits):
                 break
     except KeyboardInterrupt:

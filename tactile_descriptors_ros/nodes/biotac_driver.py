@@ -85,9 +85,10 @@ class BiotacDriver(DriverBase):
                                       "frames averaged by ~/tare [s]")
         self.track_s = declare(self, "tare.track_s", 0.5, "PDC baseline follows drift with this time constant while "
                                "the force is below tare.track_band_n [s] (0 = tare only at start and on ~/tare)",
-                               minimum=0.0)
+                               minimum=0.0, on_set=lambda v: lambda: self._set_track_s(v))
         self.track_band_n = declare(self, "tare.track_band_n", self.contact_threshold_n,
-                                    "baseline tracking only while |force| is below this [N]", minimum=0.0)
+                                    "baseline tracking only while |force| is below this [N]", minimum=0.0,
+                                    on_set=lambda v: lambda: self._set_track_band_n(v))
         self.pdc_pa_per_count = declare(self, "pdc_pa_per_count", 0.0,
                                         "static pressure scale [Pa/count] (0 = not calibrated)", minimum=0.0)
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
@@ -129,6 +130,21 @@ class BiotacDriver(DriverBase):
         self._start(autostart, [("transport", self._transport_status)]
                     + [(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
                        for cs, cfg in sorted(self.sensors.items())])
+
+    def _set_track_s(self, track_s: float) -> None:
+        """``ros2 param set ... tare.track_s``: the running stream's weight of one frame follows (0 = off)."""
+        self.track_s = track_s
+        if self.stream is not None:
+            frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
+            with self._lock:
+                self.stream.track_alpha = min(1.0, 1.0 / (frame_hz * track_s)) if track_s > 0 else 0.0
+
+    def _set_track_band_n(self, band_n: float) -> None:
+        """``ros2 param set ... tare.track_band_n``: for the running stream too."""
+        self.track_band_n = band_n
+        if self.stream is not None:
+            with self._lock:
+                self.stream.track_band_n = band_n
 
     # ------------------------------------------------------------- lifecycle
     def _simulated_source(self):
@@ -241,6 +257,16 @@ class BiotacDriver(DriverBase):
             if not self.state or all(not s.recent_pdc for s in self.state.values()):
                 response.success, response.message = False, "no frames received yet (is the driver active?)"
                 return response
+            now = time.monotonic()
+            # sensors that sent frames but none lately (one that never sent fails its own tare below)
+            ages = {self.sensors[cs].sensor_name: now - t for cs, t in self._last_frame.items()}
+            stale = [f"{name} {age:.1f} s ago" for name, age in ages.items() if age > self.stale_after_s]
+            if stale:
+                why = "the simulated scene has ended" if self.scene_ended() else "unplugged or stopped?"
+                response.success = False
+                response.message = (f"refused: stale frames (last frame {', '.join(stale)}; {why}); a tare needs "
+                                    f"frames from the last {self.stale_after_s} s")
+                return response
             touching = []
             for st in self.state.values():
                 f = self.stream.force_now(st)
@@ -304,7 +330,9 @@ class BiotacDriver(DriverBase):
             values["force_n"] = f
         last = self._last_frame.get(cs)
         age = None if last is None else time.monotonic() - last
-        if age is None or age > 1.0:
+        if self.scene_ended() and (age is None or age > self.stale_after_s):
+            return Status("stale", "scene ended: the simulated scene was played to its end, no more frames", values)
+        if age is None or age > self.stale_after_s:
             return Status("error", f"no frames {'yet' if age is None else f'for {age:.1f} s'} "
                                    f"(unplugged? wrong chip select?)", values)
         if bad_rate.rate_hz > 0:

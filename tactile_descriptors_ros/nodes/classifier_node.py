@@ -18,8 +18,11 @@
   N"): one entry appended and synced to ``<model_path>.journal``
   (:class:`~tactile_descriptors_ros.core.learning.ModelStore`), compacted into
   ``model_path`` as it grows and at shutdown.  ``model_path`` defaults to
-  ``$ROS_HOME/tactile_descriptors_ros/<node name>.json`` (``ROS_HOME``
-  defaulting to ``~/.ros``) and is reloaded at start.  A model trained on
+  ``$ROS_HOME/tactile_descriptors_ros/<robot>/<node name>.json`` with the
+  ``robot`` parameter, ``$ROS_HOME/tactile_descriptors_ros/<node name>.json``
+  without (``ROS_HOME`` defaulting to ``~/.ros``), so two robots never share a
+  model file; the parameter reads the path used.  It is reloaded at start.  A
+  model trained on
   another descriptor layout is refused (an error in ``/diagnostics``; call
   ``~/reset`` or choose another path), never silently overwritten; a corrupt
   model file stops the node with an error naming the file and the key.
@@ -42,8 +45,9 @@ from rclpy.node import Node
 
 from ..core.labels import DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED, LabelProtocol
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
+from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
-from .common import Diagnostics, Status, declare, run_node
+from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
 from .qos import QosDefaults, declare_qos
 
@@ -54,10 +58,15 @@ LABEL_TOPIC = "tactile/label"
 PREDICTION_TOPIC = "tactile/prediction"
 
 
-def default_model_path(node_name: str) -> Path:
-    """``$ROS_HOME/tactile_descriptors_ros/<node_name>.json`` (``ROS_HOME`` defaults to ``~/.ros``)."""
+def default_model_path(node_name: str, robot: str = "") -> Path:
+    """``$ROS_HOME/tactile_descriptors_ros/[<robot>/]<node_name>.json`` (``ROS_HOME`` defaults to ``~/.ros``).
+
+    Each robot has its own folder, so a NAO and a Shadow Hand (both with a
+    ``classifier_node``) never read or reset each other's model.
+    """
     home = Path(os.environ.get("ROS_HOME") or Path.home() / ".ros")
-    return home / "tactile_descriptors_ros" / f"{node_name}.json"
+    folder = home / "tactile_descriptors_ros"
+    return (folder / robot if robot else folder) / f"{node_name}.json"
 
 
 @dataclass(frozen=True)
@@ -76,9 +85,16 @@ class ClassifierNode(Node):
         from std_srvs.srv import Trigger
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
 
-        path = declare(self, "model_path", "", "model file (JSON); '' = $ROS_HOME/tactile_descriptors_ros/<node>.json")
-        self.model_path = Path(os.path.expanduser(path)) if path else default_model_path(self.get_name())
-        self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1)", minimum=1e-12)
+        robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model file is per robot "
+                            "('' = no robot folder)")
+        self.robot_name = load_robot(robot_arg).name if robot_arg else ""
+        fallback = default_model_path(self.get_name(), self.robot_name)
+        path = declare(self, "model_path", "",
+                       "model file (JSON); '' = $ROS_HOME/tactile_descriptors_ros/<robot>/<node>.json; reads the "
+                       "path used", resolve=lambda p: str(Path(os.path.expanduser(p)) if p else fallback))
+        self.model_path = Path(path)
+        self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1); from the next update on",
+                           minimum=1e-12, on_set=self._set_eta)
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
         self.standardize = declare(self, "standardize", True, "running standardisation of features")
         self.pa_update = declare(self, "pa_update", RECOMMENDED_PA_UPDATE,
@@ -86,15 +102,18 @@ class ClassifierNode(Node):
         self.pa_average = declare(self, "pa_average", RECOMMENDED_PA_AVERAGE,
                                   "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,
-                               "descriptors kept for late labels (and early labels held)", minimum=1)
+                               "descriptors kept for late labels (and early labels held)", minimum=1,
+                               on_set=self._set_horizon)
         expiry = declare(self, "label_expiry_explorations", 10,
                          "a held label expires when a descriptor this many ids past it arrives", minimum=1)
         max_name = declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
                            "longest class name accepted [characters]", minimum=1)
         self.labels = LabelProtocol(self.horizon, expiry, max_name)
-        self.save_after_update = declare(self, "save_after_update", True, "save the model after every update")
+        self.save_after_update = declare(self, "save_after_update", True, "save the model after every update",
+                                         on_set=lambda v: lambda: setattr(self, "save_after_update", v))
         self.load_on_start = declare(self, "load_model", True, "load model_path at start if it exists")
-        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions")
+        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions",
+                                on_set=lambda v: lambda: setattr(self, "frame_id", v))
 
         self.model: OnlineClassifier | None = None
         self.store = ModelStore(self.model_path)
@@ -121,7 +140,28 @@ class ClassifierNode(Node):
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
                                                      minimum=0.01))
         self.diagnostics.add("classifier", self._status)
+        report_unknown_overrides(self)
         self.get_logger().info(f"model file {self.model_path}; predictions on {self.pub.topic_name}")
+
+    # ------------------------------------------------------------- parameters
+    def _set_eta(self, value: float):
+        """``ros2 param set ... eta``: the model learns with the new aggressiveness from its next update."""
+        def apply() -> None:
+            self.eta = value
+            if self.model is not None:
+                self.model.pa.eta = value
+
+        return apply
+
+    def _set_horizon(self, value: int):
+        """``ros2 param set ... label_horizon``: a smaller horizon forgets the oldest kept descriptors now."""
+        def apply() -> None:
+            self.horizon = value
+            dropped = self.labels.set_horizon(value)
+            if dropped:
+                self.get_logger().warning(f"label_horizon {value}: dropped the {dropped} oldest held labels")
+
+        return apply
 
     # ------------------------------------------------------------ descriptors
 

@@ -35,7 +35,7 @@ from ..core.robot import RobotDescription, load_robot
 from ..errors import ConfigError, TactileError, TransportError
 from ..streams.link import DeviceLink
 from ..transports import create_transport
-from .common import Diagnostics, Status, declare
+from .common import Diagnostics, Status, declare, report_unknown_overrides
 from .window_node import message_kind, select_body_parts
 
 __all__ = ["DriverBase"]
@@ -53,6 +53,8 @@ class DriverBase(LifecycleNode):
 
     #: name of the reader thread
     reader_thread_name = "reader"
+    #: frames older than this are stale: ``~/tare`` refuses them, diagnostics report the sensor silent [s]
+    stale_after_s = 1.0
     #: close a transport whose configure failed (else it is only dropped)
     close_on_failed_configure = True
 
@@ -75,6 +77,7 @@ class DriverBase(LifecycleNode):
         self._thread: threading.Thread | None = None
         self.last_error: str | None = None
         self._last_error_monotonic = float("-inf")
+        self.scene_ended_logged = False
 
     # ---------------------------------------------------------- parameters
     def _declare_robot(self, kind: str, example: str, parts_what: str
@@ -106,9 +109,11 @@ class DriverBase(LifecycleNode):
         self.resync_s = declare(self, "resync_s", 1.0, "re-anchor clock stamps beyond this drift [s] (0 = never)",
                                 minimum=0.0)
         self.tare_on_start_s = declare(self, "tare_on_start_s", 0.5, tare_on_start_what, minimum=0.0)
-        self.tare_window_s = declare(self, "tare.window_s", 0.2, tare_window_what, minimum=0.01)
+        self.tare_window_s = declare(self, "tare.window_s", 0.2, tare_window_what, minimum=0.01,
+                                     on_set=lambda v: lambda: setattr(self, "tare_window_s", v))
         self.contact_threshold_n = declare(self, "contact_threshold_n", contact_threshold_n,
-                                           "~/tare is refused at or above this force [N]", minimum=0.0)
+                                           "~/tare is refused at or above this force [N]", minimum=0.0,
+                                           on_set=lambda v: lambda: setattr(self, "contact_threshold_n", v))
 
     def _start(self, autostart: bool, tasks: Iterable[tuple[str, Callable[[], Status]]]) -> None:
         """Create ``~/tare`` and the diagnostics (``tasks``), then configure and activate if ``autostart``."""
@@ -122,6 +127,7 @@ class DriverBase(LifecycleNode):
                                                      minimum=0.01), hardware_id=self.transport_name)
         for name, task in tasks:
             self.diagnostics.add(name, task)
+        report_unknown_overrides(self)
         if autostart:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 raise TransportError(f"configure failed: {self.last_error}")
@@ -227,6 +233,18 @@ class DriverBase(LifecycleNode):
             transport.close()
 
     # ---------------------------------------------------------------- reading
+    def scene_ended(self) -> bool:
+        """The simulated transport's scene has been played to its end (always False on hardware)."""
+        if self.transport_name != "simulated" or self.transport is None:
+            return False
+        return bool(getattr(getattr(self.transport, "source", None), "finished", False))
+
+    def _note_scene_end(self) -> None:
+        if not self.scene_ended_logged and self.scene_ended():
+            self.scene_ended_logged = True
+            self.get_logger().info(f"simulated scene {self.sim_scene} ended: no more frames (the sensors are idle, "
+                                   "not unplugged)")
+
     def _run(self) -> None:
         while not self._stop.is_set() and self.context.ok():
             link = self.link
@@ -263,6 +281,8 @@ class DriverBase(LifecycleNode):
                 if not self.context.ok():
                     return  # published after shutdown: the node is stopping, not faulty
                 self._count_error("consume_errors", f"handling a read: {exc!r}")
+            if not items:
+                self._note_scene_end()
 
     def _count_error(self, counter: str, text: str) -> None:
         self.faults[counter] += 1

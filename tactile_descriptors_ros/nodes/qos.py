@@ -72,19 +72,18 @@ def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "
 
 
 def declare_qos(node, endpoint: str, defaults: QosDefaults):
-    """Declare ``qos.<endpoint>.{reliability,durability,depth}`` on ``node`` and return the profile."""
-    from rcl_interfaces.msg import ParameterDescriptor
+    """Declare ``qos.<endpoint>.{reliability,durability,depth}`` on ``node`` and return the profile.
+
+    Read-only: an endpoint's QoS is fixed when it is created.  The choices
+    and the depth's range are in the descriptors (``ros2 param describe``).
+    """
+    from .common import declare
 
     prefix = f"qos.{endpoint}"
-    rel = node.declare_parameter(
-        f"{prefix}.reliability", defaults.reliability,
-        ParameterDescriptor(description=f"QoS reliability of '{endpoint}': {', '.join(RELIABILITIES)}",
-                            read_only=True)).value
-    dur = node.declare_parameter(
-        f"{prefix}.durability", defaults.durability,
-        ParameterDescriptor(description=f"QoS durability of '{endpoint}': {', '.join(DURABILITIES)}",
-                            read_only=True)).value
-    depth = node.declare_parameter(
-        f"{prefix}.depth", defaults.depth,
-        ParameterDescriptor(description=f"QoS history depth of '{endpoint}' (KEEP_LAST)", read_only=True)).value
+    rel = declare(node, f"{prefix}.reliability", defaults.reliability, f"QoS reliability of '{endpoint}'",
+                  choices=RELIABILITIES, resolve=str.lower)
+    dur = declare(node, f"{prefix}.durability", defaults.durability, f"QoS durability of '{endpoint}'",
+                  choices=DURABILITIES, resolve=str.lower)
+    depth = declare(node, f"{prefix}.depth", defaults.depth, f"QoS history depth of '{endpoint}' (KEEP_LAST)",
+                    minimum=1)
     return qos_profile(rel, dur, depth, endpoint)

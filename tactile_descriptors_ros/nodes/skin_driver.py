@@ -188,6 +188,17 @@ class SkinDriver(DriverBase):
     # ------------------------------------------------------------------- tare
     def _srv_tare(self, request, response):
         with self._lock:
+            now = time.monotonic()
+            # cells that sent frames but none lately (a cell that never sent fails its own tare below)
+            stale = [c.cell_id for c in self.cells.values()
+                     if c.last_monotonic is not None and now - c.last_monotonic > self.stale_after_s]
+            if stale:
+                why = "the simulated scene has ended" if self.scene_ended() else "unplugged or stopped?"
+                response.success = False
+                response.message = (f"refused: stale frames from {len(stale)} of {len(self.cells)} cells (e.g. cell "
+                                     f"{stale[0]}: nothing in the last {self.stale_after_s} s; {why}); a tare needs "
+                                     "current frames")
+                return response
             touching = [(c.cell_id, f) for c in self.cells.values()
                         if (f := self.stream.force_n(c, self.force_n_per_count)) is not None and f >= self.contact_threshold_n]
             if touching:
@@ -232,12 +243,14 @@ class SkinDriver(DriverBase):
         cells = [self.cells.get(c.id) for c in part.cells]
         now = time.monotonic()
         silent = [c.id for c, st in zip(part.cells, cells) if st is None or st.last_monotonic is None
-                  or now - st.last_monotonic > 1.0]
+                  or now - st.last_monotonic > self.stale_after_s]
         live = [st for st in cells if st is not None]
         values = {"cells": len(part.cells), "silent_cells": len(silent),
                   "samples_per_s": sum(self._rates[st.cell_id].rate_hz for st in live),
                   "messages": sum(st.messages for st in live), "lost_frames": sum(st.lost for st in live),
                   "tared_cells": sum(st.tared for st in live)}
+        if silent and self.scene_ended():
+            return Status("stale", "scene ended: the simulated scene was played to its end, no more frames", values)
         if silent:
             values["silent_cell_ids"] = ", ".join(map(str, silent[:20]))
             level = "error" if len(silent) == len(part.cells) else "warn"

@@ -17,6 +17,12 @@ per callback here, more than the conversion and the windowing together, so a
 node that has fallen behind catches up instead of paying that per message
 (``docs/latency.md``).
 
+The node subscribes as soon as it starts.  The descriptor kernel loads from
+its on-disk cache (``make setup`` fills it) on a thread meanwhile, or
+compiles when the cache is missing (about 30 s); windows that close before
+it is ready are held and described in order once it is, so no touch at
+start-up is lost (``windows_held_at_start`` in diagnostics).
+
 Everything runs on the *sensor time stamps*: live data, ``use_sim_time`` and
 replayed bags give the same windows.  Faults (unknown sensors, malformed
 messages, lost frames, the windower's out-of-order / duplicate / clock-jump
@@ -28,6 +34,7 @@ Topics, parameters and QoS: ``docs/nodes.md``.
 from __future__ import annotations
 
 import dataclasses
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -41,7 +48,7 @@ from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, Ro
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..streams.sequence import unwrap
-from .common import Diagnostics, RateMeter, Status, declare, run_node
+from .common import Diagnostics, RateMeter, Status, declare, report_unknown_overrides, run_node, steady_clock
 from .conversions import biotac_msg_to_chunk, descriptor_to_msg, skin_msg_to_chunk
 from .qos import QosDefaults, declare_qos
 
@@ -112,25 +119,32 @@ class WindowNode(Node):
         mode = declare(self, "window.mode", w.mode, "window mode", choices=WINDOW_MODES)
         self.layout = declare(self, "descriptor.layout", d.layout, "descriptor layout", choices=LAYOUT_MODES)
         self.channels = declare(self, "descriptor.channels", d.channels, "channel mode", choices=CHANNEL_MODES)
+        # What a user tunes on a running robot: checked together by the windower, applied from the next
+        # window (length, hop) or onset/release decision (thresholds) on.
+        tune = self._retune_windower
         self.windower = Windower(
             self.robot, mode=mode,
-            length_s=declare(self, "window.length_s", w.length_s, "fixed window length [s]"),
-            hop_s=declare(self, "window.hop_s", w.hop_s, "fixed window hop [s]"),
+            length_s=declare(self, "window.length_s", w.length_s, "fixed window length [s]", minimum=1e-3,
+                             on_set_group=tune),
+            hop_s=declare(self, "window.hop_s", w.hop_s, "fixed window hop [s]", minimum=1e-3, on_set_group=tune),
             min_duration_s=declare(self, "window.min_duration_s", w.min_duration_s,
-                                   "shortest exploration kept [s]"),
+                                   "shortest exploration kept [s]", minimum=0.0, on_set_group=tune),
             max_duration_s=declare(self, "window.max_duration_s", w.max_duration_s,
-                                   "longest exploration window [s]"),
+                                   "longest exploration window [s]", minimum=1e-3, on_set_group=tune),
             release_s=declare(self, "window.release_s", w.release_s,
-                              "force below the release threshold this long ends an exploration [s]"),
+                              "force below the release threshold this long ends an exploration [s]", minimum=0.0,
+                              on_set_group=tune),
             force_threshold_n=declare(self, "contact.force_threshold_n", c.force_threshold_n,
-                                      "contact gate F_t (eq. 13) [N]", minimum=0.0),
+                                      "contact gate F_t (eq. 13) [N]", minimum=0.0, on_set_group=tune),
             release_threshold_n=declare(self, "contact.release_threshold_n", c.release_threshold_n,
-                                        "exploration release threshold [N]", minimum=0.0),
+                                        "exploration release threshold [N]", minimum=0.0, on_set_group=tune),
             lateness_s=declare(self, "window.lateness_s", 0.05, "wait for late cells after a fixed window [s]",
-                               minimum=0.0),
+                               minimum=0.0, on_set_group=tune),
         )
         self.force_threshold_n = self.windower.onset_n
-        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the descriptors")
+        self.frame_id = declare(self, "frame_id", self.robot.name,
+                                "header.frame_id of the descriptors (default: the robot's name)",
+                                on_set=lambda v: lambda: setattr(self, "frame_id", v))
         self.id_stride = declare(self, "exploration_id_stride", 1,
                                  "published exploration id = local id * stride + offset", minimum=1)
         self.id_offset = declare(self, "exploration_id_offset", 0, "see exploration_id_stride", minimum=0)
@@ -146,19 +160,21 @@ class WindowNode(Node):
         self._rates: dict[str, RateMeter] = {}
         self._last_seen: dict[str, float] = {}
 
-        # Load (or compile) the descriptor kernel before any frame arrives: its first
-        # call would otherwise stall the first window by up to a few seconds and
-        # the frames queued meanwhile would be late or lost.
-        kernel = warm_up()
-        self.get_logger().info(f"descriptor kernel: {kernel['accelerator']} "
-                               f"(ready in {kernel['import_s'] + kernel['first_call_s']:.2f} s)")
+        # The descriptor kernel loads from its cache (filled by ``make setup``) in about a second, but
+        # compiles for about 30 s when the cache is missing or stale.  The node subscribes at once and
+        # warms the kernel up on a thread: frames are windowed as they come, and the windows that close
+        # before the kernel is ready are held and described, in order, as soon as it is.
+        self.kernel_ready = threading.Event()
+        self.kernel_info: dict | None = None
+        self.held_windows: list[Window] = []
+        self.windows_held_at_start = 0
         qos_frames = declare_qos(self, "frames", QosDefaults("best_effort", "volatile", 256))
         qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 10))
         self.pub = self.create_publisher(Descriptor, DESCRIPTOR_TOPIC, qos_desc)
         self._cells_by_name: dict[tuple[str, str], int] = {}
         self.drain_max = declare(self, "frames.drain_max", 1000,
                                  "frames taken from the queues per callback besides its own (0 = one per callback)",
-                                 minimum=0)
+                                 minimum=0, on_set=lambda v: lambda: setattr(self, "drain_max", v))
         self.subs = []
         self._handlers: dict[object, object] = {}
         for part in self.robot.body_parts:
@@ -184,10 +200,33 @@ class WindowNode(Node):
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0,
                                                      "diagnostics period [s]", minimum=0.01))
         self.diagnostics.add("windows", self._status)
+        report_unknown_overrides(self)
+        self._release_timer = self.create_timer(0.05, self._release_held, clock=steady_clock())
+        self._warm_thread = threading.Thread(target=self._warm_up, daemon=True, name="kernel-warm-up")
+        self._warm_thread.start()
         self.get_logger().info(
             f"robot {self.robot.name}: {len(self.robot.body_parts)} body parts "
             f"({', '.join(p.name for p in self.robot.body_parts)}), {self.windower.mode} windows, "
             f"{self.layout}/{self.channels} descriptors on {self.pub.topic_name}")
+
+    # ------------------------------------------------------- parameters
+    #: parameter -> Windower setting
+    _WINDOWER_SETTINGS = {"window.length_s": "length_s", "window.hop_s": "hop_s",
+                          "window.min_duration_s": "min_duration_s", "window.max_duration_s": "max_duration_s",
+                          "window.release_s": "release_s", "window.lateness_s": "lateness_s",
+                          "contact.force_threshold_n": "force_threshold_n",
+                          "contact.release_threshold_n": "release_threshold_n"}
+
+    def _retune_windower(self, values: dict[str, float]):
+        """``ros2 param set`` of window/contact settings: checked together now, applied by the returned function."""
+        changes = {self._WINDOWER_SETTINGS[k]: v for k, v in values.items()}
+        self.windower.retune(dry_run=True, **changes)  # ConfigError: refused, nothing changed
+
+        def apply() -> None:
+            self.windower.retune(**changes)
+            self.force_threshold_n = self.windower.onset_n
+
+        return apply
 
     # ------------------------------------------------------------ input
     def _seen(self, part: str, frames: int) -> None:
@@ -207,8 +246,7 @@ class WindowNode(Node):
             except SignalError as exc:  # the chunks before the offending one stay buffered
                 self.faults["malformed"] += 1
                 self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
-            for w in self.windower.poll():
-                self._publish(w)
+            self._emit(self.windower.poll())
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
@@ -299,6 +337,43 @@ class WindowNode(Node):
         self._next_seq[key] = u + count
 
     # ----------------------------------------------------------- output
+    def _warm_up(self) -> None:
+        """Kernel warm-up thread: load (or compile) the descriptor kernel, then let the held windows go."""
+        try:
+            info = warm_up()
+        except Exception as exc:  # noqa: BLE001 - the numpy kernel serves; say why
+            info = {"accelerator": "numpy", "import_s": 0.0, "first_call_s": 0.0, "error": repr(exc)}
+        self.kernel_info = info
+        self.get_logger().info(f"descriptor kernel: {info['accelerator']} "
+                               f"(ready in {info['import_s'] + info['first_call_s']:.2f} s"
+                               f"{', ' + str(info['error']) if info.get('error') else ''})")
+        self.kernel_ready.set()
+
+    def _emit(self, windows: list[Window]) -> None:
+        """Publish finished windows in order; hold them while the kernel warms up."""
+        if not self.kernel_ready.is_set():
+            self.held_windows.extend(windows)
+            self.windows_held_at_start += len(windows)
+            return
+        if self.held_windows:
+            self._release_held()
+        for w in windows:
+            self._publish(w)
+
+    def _release_held(self) -> None:
+        """Timer: once the kernel is ready, describe the windows held meanwhile (then stop the timer)."""
+        if not self.kernel_ready.is_set():
+            return
+        held, self.held_windows = self.held_windows, []
+        if held:
+            self.get_logger().info(f"kernel ready: describing the {len(held)} windows that closed while it warmed up")
+        for w in held:
+            self._publish(w)
+        if self._release_timer is not None:
+            self._release_timer.cancel()
+            self.destroy_timer(self._release_timer)
+            self._release_timer = None
+
     def _publish(self, window: Window) -> None:
         try:
             desc = describe_window(self.robot, window.cells, layout=self.layout, channels=self.channels,
@@ -322,6 +397,8 @@ class WindowNode(Node):
         faults = dict(self.faults)
         faults.update({f"windower_{k}": v for k, v in self.windower.faults.items()})
         values: dict = {"descriptors_published": self.descriptors_published,
+                        "kernel": self.kernel_info["accelerator"] if self.kernel_info else "warming up",
+                        "windows_held_at_start": self.windows_held_at_start,
                         "frames_per_callback": self.frames_taken / self.batches if self.batches else 0.0,
                         "largest_frames_batch": self.largest_batch,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}

@@ -316,6 +316,11 @@ class _PacedSource:
         self._items.append(self._convert(result))
         return True
 
+    @property
+    def finished(self) -> bool:
+        """The scene has ended: everything was simulated and handed out (a driver then reads nothing more)."""
+        return self.exhausted and not any(len(c) for c in self._items) and not getattr(self, "_pending", b"")
+
     def _due_ns(self) -> int | None:
         if self.speed is None:
             return None

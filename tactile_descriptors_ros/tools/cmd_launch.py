@@ -4,7 +4,11 @@ The same nodes as ``launch/<robot>.launch.py`` (both come from
 :func:`~tactile_descriptors_ros.launching.graph.build_graph`), started as
 subprocesses of this interpreter with ``--ros-args --params-file <tmp yaml>
 -r from:=to``; their output is forwarded with a ``[node]`` prefix; Ctrl-C
-stops them cleanly (SIGINT to each, then SIGTERM/SIGKILL by PID).
+stops them cleanly (SIGINT to each, then SIGTERM/SIGKILL by PID).  When a
+node ends on its own the others are stopped too and the exit code is 1.
+``--set NODE.PARAM=VALUE`` and the robot's ``nodes:`` section are checked
+against the parameters each node declares (name and type) before anything
+starts, also with ``--print``.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import yaml
 from ..errors import ConfigError
 from ..launching.graph import build_graph, parameters_document
 from ..launching.processes import GraphProcesses, localhost_environment, node_command, run_until_interrupted
+from .cmd_demo import positive_float
 
 __all__ = ["register", "parse_set", "specs_from_args"]
 
@@ -36,7 +41,8 @@ def parse_set(items: list[str] | None) -> dict[str, dict]:
 
 def specs_from_args(args: argparse.Namespace):
     """The NodeSpecs selected by the command-line options."""
-    return build_graph(args.robot, sim_scene=args.sim, split_window_nodes=args.split_window_nodes,
+    return build_graph(args.robot, sim_scene=args.sim, sim_speed=args.sim_speed,
+                       split_window_nodes=args.split_window_nodes,
                        model_path=args.model_path, use_sim_time=args.use_sim_time,
                        overrides=parse_set(args.set), namespace=args.namespace)
 
@@ -53,14 +59,18 @@ def _run(args: argparse.Namespace) -> int:
             for s in specs:
                 print(" ".join(node_command(s, "<params.yaml>")))
         return 0
-    procs = GraphProcesses(specs, env=localhost_environment())
+    # the nodes' lines go to stdout, or to stderr when stdout carries the JSON result
+    procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if args.json else sys.stdout)
     print(f"tactile launch: starting {len(specs)} nodes ({', '.join(s.name for s in specs)}); Ctrl-C stops them",
           file=sys.stderr, flush=True)
-    codes = run_until_interrupted(procs, duration_s=args.duration_s)
+    codes = run_until_interrupted(procs, duration_s=args.duration_s, stop_when_one_exits=True)
     failed = {k: v for k, v in codes.items() if v not in (0, None, -2, 130)}
     if args.json:
-        print(json.dumps({"exit_codes": codes}))
-    return 1 if failed else 0
+        print(json.dumps({"exit_codes": codes, "died": procs.died}))
+    if procs.died:
+        print(f"tactile launch: stopped the graph because {', '.join(procs.died)} ended", file=sys.stderr,
+              flush=True)
+    return 1 if failed or procs.died else 0
 
 
 def register(subparsers) -> None:
@@ -69,6 +79,9 @@ def register(subparsers) -> None:
     p.add_argument("robot", help="shipped robot (shadow_hand, nao) or a robot YAML path")
     p.add_argument("--sim", metavar="SCENE", default=None,
                    help="run the drivers on simulated sensors playing this scene (name or path)")
+    p.add_argument("--sim-speed", type=positive_float, default=None, metavar="X",
+                   help="with --sim: simulated seconds per wall second (default: the robot's sim_parameters, else "
+                   "1.0; a busy machine needs less, the NAO skin about 0.04)")
     p.add_argument("--split-window-nodes", action="store_true",
                    help="one window node per body part (scale-out; pooled descriptors)")
     p.add_argument("--model-path", default=None, help="classifier model file")

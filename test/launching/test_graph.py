@@ -19,7 +19,7 @@ def test_shadow_hand_graph():
     assert drv["transport"] == "cheetah" and drv["cheetah.port"] == -1
     assert drv["robot"] == str(robot_config_path("shadow_hand").resolve())
     assert specs[1].parameters["body_parts"] == ["thumb", "index", "middle", "ring", "little"]
-    assert "robot" not in specs[2].parameters
+    assert specs[2].parameters["robot"] == drv["robot"]  # the classifier keeps its model per robot
 
 
 def test_sim_scene_switches_drivers_only():

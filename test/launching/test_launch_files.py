@@ -55,13 +55,17 @@ def test_launch_file_nodes_match_graph(repo_dir, monkeypatch, robot, sim, split)
     spec.loader.exec_module(module)
     ld = module.generate_launch_description()
     args = {a.args[0]: a.kwargs["default_value"] for a in made["arg"]}
-    assert set(args) == {"robot", "sim", "split_window_nodes", "model_path", "use_sim_time", "namespace"}
-    context = dict(args, sim=f"demo_{robot}" if sim else "", split_window_nodes=split)
+    assert set(args) == {"robot", "sim", "sim_speed", "split_window_nodes", "model_path", "use_sim_time", "namespace"}
+    context = dict(args, sim=f"demo_{robot}" if sim else "", split_window_nodes=split,
+                   sim_speed="0.04" if sim else "")
     opaque = made["opaque"][0]
     assert opaque in ld.actions
     nodes = opaque.kwargs["function"](context)
-    expected = build_graph(robot, sim_scene=context["sim"] or None, split_window_nodes=split == "true")
+    expected = build_graph(robot, sim_scene=context["sim"] or None, split_window_nodes=split == "true",
+                           sim_speed=0.04 if sim else None)
     assert len(nodes) == len(expected)
+    drivers = [s for s in expected if s.executable in ("biotac_driver", "skin_driver")]
+    assert drivers and all(s.parameters.get("sim.speed") == (0.04 if sim else None) for s in drivers)
     for node, s in zip(nodes, expected):
         assert node.kwargs["package"] == "tactile_descriptors_ros"
         assert (node.kwargs["executable"], node.kwargs["name"], node.kwargs["namespace"]) == \

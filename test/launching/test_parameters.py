@@ -1,0 +1,108 @@
+"""Launch-time parameter checks: the table matches the nodes, --set is checked and widened, a dead node stops
+the graph."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tactile_descriptors_ros.errors import ConfigError
+from tactile_descriptors_ros.launching.graph import build_graph
+from tactile_descriptors_ros.launching.parameters import BUILTIN_PARAMETERS, PARAMETER_TYPES, check_parameters
+from tactile_descriptors_ros.tools.cli import main
+
+
+def _node(executable, ros_context):
+    from rclpy.parameter import Parameter
+
+    if executable == "window_node":
+        from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+        return WindowNode(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand")])
+    if executable == "classifier_node":
+        from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
+        return ClassifierNode(context=ros_context, parameter_overrides=[Parameter("load_model", value=False)])
+    if executable == "biotac_driver":
+        from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver as cls
+
+        robot = "shadow_hand"
+    else:
+        from tactile_descriptors_ros.nodes.skin_driver import SkinDriver as cls
+
+        robot = "nao"
+    return cls(context=ros_context, parameter_overrides=[Parameter("robot", value=robot),
+                                                         Parameter("autostart", value=False)])
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("executable", sorted(PARAMETER_TYPES))
+def test_parameter_table_is_what_the_node_declares(ros_context, executable):
+    from rclpy.parameter import Parameter
+
+    node = _node(executable, ros_context)
+    try:
+        names = node.list_parameters([], 0).names
+        declared = {n: Parameter.Type(node.get_parameter(n).type_).name.lower() for n in names}
+    finally:
+        node.destroy_node()
+    want = {**{k: v for k, v in BUILTIN_PARAMETERS.items() if k in declared}, **PARAMETER_TYPES[executable]}
+    assert declared == want
+
+
+def test_integer_for_a_double_is_widened_and_other_types_refused():
+    specs = build_graph("shadow_hand", overrides={"window_node": {"window": {"length_s": 3}}})
+    value = next(s for s in specs if s.name == "window_node").parameters["window.length_s"]
+    assert value == 3.0 and isinstance(value, float)
+    with pytest.raises(ConfigError, match=r"window_node\.window\.length_s.*double"):
+        build_graph("shadow_hand", overrides={"window_node": {"window.length_s": "long"}})
+    with pytest.raises(ConfigError, match=r"classifier_node\.label_horizon.*integer"):
+        build_graph("shadow_hand", overrides={"classifier_node": {"label_horizon": 2.5}})
+
+
+def test_unknown_parameter_is_an_error_naming_it():
+    with pytest.raises(ConfigError, match=r"window_node\.bogus.*window_node has no parameter 'bogus'"):
+        build_graph("nao", overrides={"window_node": {"bogus": 1}})
+    with pytest.raises(ConfigError, match="did you mean window.length_s"):
+        check_parameters("w", "window_node", {"window.lenght_s": 1.0})
+
+
+def test_shipped_graphs_pass_the_check():
+    for robot in ("shadow_hand", "nao"):
+        for split in (False, True):
+            assert build_graph(robot, sim_scene=f"demo_{robot}", split_window_nodes=split, sim_speed=0.5)
+
+
+def test_print_checks_the_sets(capsys):
+    assert main(["launch", "shadow_hand", "--set", "window_node.bogus=1", "--print"]) == 2
+    assert "window_node.bogus" in capsys.readouterr().err
+    assert main(["launch", "shadow_hand", "--set", "window_node.window.length_s=3", "--print", "--json"]) == 0
+    nodes = {n["name"]: n for n in json.loads(capsys.readouterr().out)["nodes"]}
+    assert nodes["window_node"]["parameters"]["window.length_s"] == 3.0
+
+
+def test_sim_speed_reaches_the_drivers_and_must_be_positive(capsys):
+    specs = build_graph("nao", sim_scene="demo_nao", sim_speed=0.04)
+    assert next(s for s in specs if s.executable == "skin_driver").parameters["sim.speed"] == 0.04
+    with pytest.raises(ConfigError, match="sim_speed"):
+        build_graph("nao", sim_scene="demo_nao", sim_speed=0.0)
+    with pytest.raises(SystemExit):
+        main(["launch", "nao", "--sim", "demo_nao", "--sim-speed", "-1", "--print"])
+    assert "--sim-speed" in capsys.readouterr().err
+
+
+@pytest.mark.ros
+def test_launch_stops_the_graph_when_a_node_dies(capsys, monkeypatch):
+    """The BioTac driver cannot open its Cheetah adapter (none here) and exits; the launcher then stops the
+    window and classifier nodes and exits non-zero, long before its duration."""
+    import random
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    code = main(["launch", "shadow_hand", "--json", "--duration-s", "300",
+                 "--set", "classifier_node.load_model=false", "--set", "classifier_node.save_after_update=false"])
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert code == 1
+    assert out["died"] == ["biotac_driver"] and out["exit_codes"]["biotac_driver"] == 2
+    # the others were stopped by the launcher (SIGINT), not left running until the duration
+    assert out["exit_codes"]["window_node"] is not None and out["exit_codes"]["classifier_node"] is not None
