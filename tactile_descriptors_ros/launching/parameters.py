@@ -45,7 +45,8 @@ _DRIVER = {
     "robot": "string", "body_parts": "string_array", "transport": "string", "stamp_source": "string",
     "resync_s": "double", "tare_on_start_s": "double", "tare.window_s": "double", "contact_threshold_n": "double",
     "frames_topic": "string", "serial.port": "string", "serial.baudrate": "integer", "sim.scene": "string",
-    "sim.speed": "double", "autostart": "bool", "diagnostics_period_s": "double", **_qos("frames"),
+    "sim.speed": "double", "autostart": "bool", "diagnostics_period_s": "double", "reconnect_s": "double",
+    **_qos("frames"),
 }
 
 #: executable -> parameter name -> type name (see :data:`TYPES`).

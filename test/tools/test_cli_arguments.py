@@ -86,6 +86,7 @@ def test_fit_textures_writes_into_the_current_directory_by_default(biotac_data_d
     assert written and {p.name: p.stat().st_mtime_ns for p in models_dir().glob("*.json")} == shipped
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")  # the reference grid search's
 def test_choosing_c_shows_progress_and_scores_as_a_grid_search(capsys):
     from sklearn.model_selection import GridSearchCV
 
