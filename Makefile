@@ -115,7 +115,7 @@ $(VENV)/setup.bash: Makefile $(VENV)/.venv-created
 
 # ros2 launch / run / topic / param / service / lifecycle and launch_testing.
 $(VENV)/.ros2cli: $(VENV)/.deps
-	$(STEP) "setup 6/7: ros2 CLI and launch system"
+	$(STEP) "setup 6/7: ros2 CLI and launch system (1-3 minutes)"
 	@if [ -x "$(ROS2_CLI)/install.sh" ]; then \
 	  echo "installing the ros2 CLI and launch system from $(ROS2_CLI) (about a minute)"; \
 	  "$(ROS2_CLI)/install.sh" $(VENV) && touch $@; \
