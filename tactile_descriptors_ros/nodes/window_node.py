@@ -18,10 +18,12 @@ node that has fallen behind catches up instead of paying that per message
 (``docs/latency.md``).
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
-its on-disk cache (``make setup`` fills it) on a thread meanwhile, or
-compiles when the cache is missing (about 30 s); windows that close before
-it is ready are held and described in order once it is, so no touch at
-start-up is lost (``windows_held_at_start`` in diagnostics).
+its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a
+second, which the constructor waits for (at most ``WARM_UP_WAIT_S``; frames
+queue on the subscriptions).  When the cache is missing the kernel compiles
+for about 30 s: the node runs on, and windows that close before the kernel is
+ready are held and described in order once it is, so no touch at start-up is
+lost (``windows_held_at_start`` in diagnostics).
 
 Everything runs on the *sensor time stamps*: live data, ``use_sim_time`` and
 replayed bags give the same windows.  Faults (unknown sensors, malformed
@@ -204,10 +206,17 @@ class WindowNode(Node):
         self._release_timer = self.create_timer(0.05, self._release_held, clock=steady_clock())
         self._warm_thread = threading.Thread(target=self._warm_up, daemon=True, name="kernel-warm-up")
         self._warm_thread.start()
+        # A cached kernel loads in about a second: wait for it (frames meanwhile queue on the subscriptions,
+        # which exist already), so a graph starting together finds the node as ready as before.  A
+        # compilation takes longer: then the node runs on and holds its first windows until the kernel is in.
+        self.kernel_ready.wait(self.WARM_UP_WAIT_S)
         self.get_logger().info(
             f"robot {self.robot.name}: {len(self.robot.body_parts)} body parts "
             f"({', '.join(p.name for p in self.robot.body_parts)}), {self.windower.mode} windows, "
             f"{self.layout}/{self.channels} descriptors on {self.pub.topic_name}")
+
+    #: longest wait for the kernel in the constructor before running on with held windows [s]
+    WARM_UP_WAIT_S = 5.0
 
     # ------------------------------------------------------- parameters
     #: parameter -> Windower setting

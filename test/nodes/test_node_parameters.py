@@ -154,7 +154,7 @@ def test_window_node_subscribes_at_once_and_windows_every_touch_while_warming_up
     try:
         subscribed = spin_until(ex, lambda: pub.get_subscription_count() >= 1, 20)
         assert subscribed, "the window node did not subscribe while its kernel warmed up"
-        builder.join(10)
+        builder.join(30)  # the constructor waits up to WARM_UP_WAIT_S for the kernel, then runs on
         w = made["w"]
         ex.add_node(w)
         stream = BiotacStream()
