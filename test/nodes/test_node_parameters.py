@@ -234,7 +234,7 @@ def test_classifier_settings_are_set_at_run_time(ros_context, tmp_path):
             c.labels.add_descriptor(eid, object())
         r = c.set_parameters([Parameter("label_horizon", value=2)])[0]
         assert r.successful and c.labels.kept == 2 and c.labels.horizon == 2
-        assert c.labels.add_label(3, "cork").reason == "unknown_exploration"  # forgotten: beyond the horizon
+        assert c.labels.add_label(3, "cork").action == "held"  # its descriptor is forgotten: beyond the horizon
         assert c.labels.add_label(5, "cork").action == "learn"
         r = c.set_parameters([Parameter("label_horizon", value=0)])[0]
         assert not r.successful and c.horizon == 2
