@@ -1,6 +1,6 @@
 """Launch the nao tactile graph: drivers, window node(s), classifier.
 
-    ros2 launch tactile_descriptors_ros nao.launch.py [sim:=demo_nao] [sim_speed:=0.04] [split_window_nodes:=true]
+    ros2 launch tactile_descriptors_ros nao.launch.py [sim:=demo_nao] [sim_speed:=0.5] [split_window_nodes:=true]
         [model_path:=/path/model.json] [use_sim_time:=true]
 
 Thin over the robot description's ``nodes:`` section: see

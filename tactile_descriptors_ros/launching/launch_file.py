@@ -20,7 +20,7 @@ __all__ = ["LAUNCH_ARGUMENTS", "launch_description_for"]
 LAUNCH_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
     ("sim", "", "scene name or path: run the drivers on simulated sensors"),
     ("sim_speed", "", "simulated seconds per wall second with sim ('' = the robot's sim_parameters, else 1.0); "
-                      "a busy machine needs less, the NAO skin about 0.04"),
+                      "a machine too busy for real time needs less"),
     ("split_window_nodes", "false", "one window node per body part (pooled descriptors)"),
     ("model_path", "", "classifier model file ('' = the nodes: section's)"),
     ("use_sim_time", "false", "use /clock (bag replay)"),

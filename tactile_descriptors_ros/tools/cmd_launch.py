@@ -81,7 +81,7 @@ def register(subparsers) -> None:
                    help="run the drivers on simulated sensors playing this scene (name or path)")
     p.add_argument("--sim-speed", type=positive_float, default=None, metavar="X",
                    help="with --sim: simulated seconds per wall second (default: the robot's sim_parameters, else "
-                   "1.0; a busy machine needs less, the NAO skin about 0.04)")
+                   "1.0; a machine too busy for real time needs less)")
     p.add_argument("--split-window-nodes", action="store_true",
                    help="one window node per body part (scale-out; pooled descriptors)")
     p.add_argument("--model-path", default=None, help="classifier model file")
