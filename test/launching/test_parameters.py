@@ -106,3 +106,61 @@ def test_launch_stops_the_graph_when_a_node_dies(capsys, monkeypatch):
     assert out["died"] == ["biotac_driver"] and out["exit_codes"]["biotac_driver"] == 2
     # the others were stopped by the launcher (SIGINT), not left running until the duration
     assert out["exit_codes"]["window_node"] is not None and out["exit_codes"]["classifier_node"] is not None
+
+
+@pytest.mark.ros
+def test_launched_window_node_takes_an_integer_and_is_tuned_over_the_graph(tmp_path):
+    """``tactile launch``'s way of starting a node (parameters file, subprocess), then the parameter services
+    over DDS as ``ros2 param`` uses them: the integer given for a double, the range, a set and a refusal."""
+    import random
+    import time
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from tactile_descriptors_ros.launching.processes import GraphProcesses, localhost_environment
+
+    specs = [s for s in build_graph("shadow_hand", overrides={"window_node": {"window.length_s": 3}})
+             if s.name == "window_node"]
+    domain = random.randint(1, 100)
+    env = localhost_environment()
+    env["ROS_DOMAIN_ID"] = str(domain)
+    procs = GraphProcesses(specs, env=env, output=None, workdir=tmp_path)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = rclpy.create_node("param_probe", context=context)
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(node)
+    client = AsyncParameterClient(node, "/window_node")
+
+    def wait(future, timeout_s=30.0):
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        assert future.done(), "no answer from the window node's parameter services"
+        return future.result()
+
+    procs.start()
+    try:
+        deadline = time.monotonic() + 60
+        while not client.services_are_ready() and time.monotonic() < deadline and not procs.exited():
+            ex.spin_once(timeout_sec=0.1)
+        assert not procs.exited(), {n.spec.name: n.lines[-10:] for n in procs.exited()}
+        assert client.services_are_ready(), "the launched window node offers no parameter services"
+        got = wait(client.get_parameters(["window.length_s"])).values[0]
+        assert got.double_value == 3.0
+        desc = wait(client.describe_parameters(["contact.force_threshold_n", "window.mode"])).descriptors
+        assert desc[0].floating_point_range[0].from_value == 0.0 and not desc[0].read_only
+        assert desc[1].read_only and desc[1].additional_constraints == "one of: fixed, exploration"
+        ok = wait(client.set_parameters([Parameter("contact.force_threshold_n", value=0.5)])).results[0]
+        assert ok.successful, ok.reason
+        bad = wait(client.set_parameters([Parameter("contact.release_threshold_n", value=0.9)])).results[0]
+        assert not bad.successful and "release threshold" in bad.reason
+        assert wait(client.get_parameters(["contact.force_threshold_n"])).values[0].double_value == 0.5
+    finally:
+        codes = procs.stop()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert codes["window_node"] is not None
