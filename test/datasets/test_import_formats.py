@@ -313,3 +313,31 @@ def test_evaluate_refuses_pac_at_another_rate():
     full = BiotacRecording(**{**two.__dict__, "pac": np.zeros(22 * n, np.int64), "pac_per_frame": 22,
                               "pac_t_ns": np.arange(22 * n, dtype=np.int64) * 454_545})
     check_pac_rate([full])
+
+
+def test_the_readers_import_no_ros_client_library():
+    """datasets/ reads bags with rosbags alone: rclpy and the generated messages are blocked."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(
+        f"""
+        import sys
+        class Block:
+            def find_spec(self, name, path=None, target=None):
+                if name.split('.')[0] in ('rclpy', 'rosidl_runtime_py', 'tactile_descriptors_msgs', 'std_msgs',
+                                          'builtin_interfaces'):
+                    raise ImportError('blocked for this test: ' + name)
+        sys.meta_path.insert(0, Block())
+        from tactile_descriptors_ros.datasets import bagfiles, mapping, msgdefs, recording, sources, tables
+        from tactile_descriptors_ros.bags.types import tactile_typestore
+        store = msgdefs.foreign_typestore()
+        assert msgdefs.SHADOW_ALL in store.types and msgdefs.UPENN_HAND in store.types
+        assert 'tactile_descriptors_msgs/msg/BioTacFrameBatch' in tactile_typestore().types
+        print('ok')
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"
