@@ -3,7 +3,7 @@
 The robot's graph (``nodes:`` of its description: drivers on the simulated
 transport, window node(s), classifier) runs as separate processes, as
 ``tactile launch`` starts it, for a given time at the sensors' real rate
-(``sim.speed`` 1).  The scene is the robot's demo scene with its
+(``sim.speed`` 1; device stamps, as in the demo).  The scene is the robot's demo scene with its
 explorations repeated until it lasts the whole soak, and without the
 simulated frame drops and corruptions, so every lost frame the report shows
 was lost by the graph itself.
@@ -191,7 +191,9 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
     rob = load_robot(robot)
     tmp = tempfile.TemporaryDirectory(prefix="tactile_soak_")
     scene, scene_s = soak_scene(seconds, rob.name, tmp.name)
-    overrides = {name: {"sim.speed": 1.0} for name, e in rob.nodes.items()
+    # device stamps (the simulator's sample times), as the demo: on a loaded machine the simulator can
+    # fall behind real time, and clock stamps would then be re-anchored instead of measuring the graph
+    overrides = {name: {"sim.speed": 1.0, "stamp_source": "device"} for name, e in rob.nodes.items()
                  if e.get("executable") in ("biotac_driver", "skin_driver")}
     specs = build_graph(rob, sim_scene=scene, model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
     procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None)
