@@ -210,8 +210,8 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     ablations_groups = [("without the baseline statistics (multiband_levels)", {"mode": "multiband_levels"}),
                         ("without baseline and levels (multiband)", {"mode": "multiband"}),
                         ("per-channel descriptor only (per_channel)", {"mode": "per_channel"}),
-                        ("+ successive pieces: mean and sd over 4 x 0.5 s (combined_subwindows)",
-                         {"mode": "combined_subwindows"})]
+                        ("+ successive pieces: mean and sd over 4 x 0.5 s (combined_subwindows, one descriptor "
+                         "per window)", {"mode": "combined_subwindows", "block_s": None})]
     for m in plan.ablation_modes:
         for name, kw in ablations:
             only_pa = {"classifiers": ("pa",)} if name.startswith("PA:") else {}  # the SVM is unchanged
