@@ -651,8 +651,9 @@ def what_to_expect(serial: dict) -> str:
         f"`docs/results.md`): the default `{DEFAULT_MODE}` descriptor ({head['n_features']} values, averaged "
         f"over 1 s blocks) gets {svm(head)} (linear SVM) and {_pct(head['classifiers']['pa']['accuracy'])} % "
         f"(online PA-I, one pass) with 2 s windows, {cv_svm(cv)} by cross-validation over trials; the "
-        f"paper's 8-value descriptor gets {svm(paper2)} at 2 s and {svm(paper_whole)} on whole "
-        f"{paper_whole['common_length_s']:.0f} s trials.",
+        f"paper's 8-value descriptor, averaged over the same blocks, gets {svm(paper2)} at 2 s and "
+        f"{svm(paper_whole)} on whole {paper_whole['common_length_s']:.0f} s trials (`--block 0` describes a "
+        "window as one eq. 17 descriptor).",
         f"- **Touch length**: trained on 2 s windows and tested on touches of random length 1-6 s, "
         f"{svm(mixed)} ({cv_svm(cv_mixed)} by trial cross-validation); trained and tested on short windows, "
         f"{svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s.",
