@@ -892,13 +892,14 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
         vib = _stack([sigs[k].vibration for k in rows])
         dfm = _stack([sigs[k].deformation for k in rows])
         for g in groups:
-            if g == "bands":
-                vals = band_hjorth(vib, fs_s)
-            elif g == "statistics":
-                vals = statistics_values(vib, fs_s, dfm, fs_v)
-            else:
-                vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
-                                    _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
+            with np.errstate(all="ignore"):  # non-finite samples give non-finite values: _cells_mean drops them
+                if g == "bands":
+                    vals = band_hjorth(vib, fs_s)
+                elif g == "statistics":
+                    vals = statistics_values(vib, fs_s, dfm, fs_v)
+                else:
+                    vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
+                                        _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
             for r, k in enumerate(rows):
                 out[g][k] = vals[r]
     return {g: np.stack(v) for g, v in out.items()}

@@ -61,6 +61,13 @@ class CellChunk:
     force_t_ns : numpy.ndarray of int64, shape (k,)
     vibration_valid, deformation_valid : numpy.ndarray of bool, optional
         Per-sample validity (False for parity errors, lost words).
+    extra : numpy.ndarray, shape (n_extra, m), optional
+        The cell type's extra channels (float, NaN where missing), one value
+        per deformation sample; ``None`` when the message carries none (all
+        missing).
+    deformation_tare : numpy.ndarray, shape (n_v,), optional
+        The deformation channels' tare in counts, as the driver reports it
+        (the window keeps the latest; the ``levels`` group subtracts it).
     """
 
     vibration: np.ndarray
@@ -71,6 +78,8 @@ class CellChunk:
     force_t_ns: np.ndarray
     vibration_valid: np.ndarray | None = None
     deformation_valid: np.ndarray | None = None
+    extra: np.ndarray | None = None
+    deformation_tare: np.ndarray | None = None
 
 
 @dataclass
@@ -173,9 +182,12 @@ class SampleStream:
 
 
 class _CellState:
-    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype) -> None:
+    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype, n_extra: int = 0) -> None:
         self.vib = SampleStream(n_s, dtype_s)
         self.dfm = SampleStream(n_v, dtype_v)
+        # extra channels ride on the deformation stamps (one value per deformation sample)
+        self.extra = SampleStream(n_extra, np.float64) if n_extra else None
+        self.tare: np.ndarray | None = None  # latest deformation tare reported
         self.force = SampleStream(1, np.float64)
         self.last_force_n = 0.0  # mean over the last ``smooth_s`` of force samples
         self.below_since_ns: int | None = None
@@ -244,6 +256,8 @@ class Windower:
         self._shapes = {cid: (len(robot.cell_types[part.cell_type].vibration.channels),
                               len(robot.cell_types[part.cell_type].deformation.channels))
                         for cid, (part, _) in self._index.items()}
+        self._n_extra = {cid: len(robot.cell_types[part.cell_type].extra_channels)
+                         for cid, (part, _) in self._index.items()}
         self._latest_ns: int | None = None
         self._next_start_ns: int | None = None
         self._exploration_id = 0
@@ -370,9 +384,19 @@ class Windower:
         if vib.ndim != 2 or dfm.ndim != 2 or (vib.shape[0], dfm.shape[0]) != shape:
             self.faults["bad_shape"] += 1
             return False
+        n_extra = self._n_extra[cell_id]
+        extra = None
+        if n_extra:
+            if chunk.extra is None:
+                extra = np.full((n_extra, dfm.shape[1]), np.nan)  # missing, never zeros: levels flags it
+            else:
+                extra = np.asarray(chunk.extra, dtype=np.float64)
+                if extra.shape != (n_extra, dfm.shape[1]):
+                    self.faults["bad_shape"] += 1
+                    return False
         st = self._cells.get(cell_id)
         if st is None:
-            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype)
+            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype, n_extra)
         t_v = np.asarray(chunk.vibration_t_ns, dtype=np.int64)
         if t_v.size == 0:
             self.faults["empty"] += 1
@@ -381,8 +405,9 @@ class Windower:
         if last is not None and t_v[0] <= last:
             if last - t_v[0] > self.clock_jump_ns:
                 self.faults["clock_jump"] += 1
-                for s in (st.vib, st.dfm, st.force):
-                    s.clear()
+                for s in (st.vib, st.dfm, st.force, st.extra):
+                    if s is not None:
+                        s.clear()
                 self._reset_time()
             elif t_v[0] == last or (t_v[-1] <= last):
                 self.faults["duplicate" if t_v[0] == last or np.any(t_v == last) else "out_of_order"] += 1
@@ -402,9 +427,15 @@ class Windower:
             keep = None if last_d is None else t_d > last_d
             if keep is None or keep.all():  # the usual case: no copies
                 st.dfm.append(t_d, dfm, chunk.deformation_valid)
+                if extra is not None:
+                    st.extra.append(t_d, extra)
             else:
                 dv = None if chunk.deformation_valid is None else np.asarray(chunk.deformation_valid)[keep]
                 st.dfm.append(t_d[keep], dfm[:, keep], dv)
+                if extra is not None:
+                    st.extra.append(t_d[keep], extra[:, keep])
+        if chunk.deformation_tare is not None:
+            st.tare = np.array(chunk.deformation_tare, dtype=np.float64)  # a copy: messages own their arrays
         t_f = np.asarray(chunk.force_t_ns, dtype=np.int64)
         if t_f.size:
             f = np.asarray(chunk.force_n, dtype=np.float64)
@@ -613,6 +644,7 @@ class Windower:
             # enter V's Hjorth parameters (S samples before the first V sample
             # of the window are simply not paired, at most one V period).
             td, d, okd = st.dfm.between(start, end)
+            x = st.extra.between(start, end)[1] if st.extra is not None else None
             tf, f, _ = st.force.between(start, end)
             n_bad = int(np.count_nonzero(~okv) + np.count_nonzero(~okd))
             valid = n_bad <= self.max_invalid_fraction * (okv.size + okd.size)
@@ -621,12 +653,13 @@ class Windower:
                 # true, so the hold of V and the derivative see a short hole.
                 self.faults["windows_with_invalid_samples"] += 1
                 tv, v, td, d = tv[okv], v[:, okv], td[okd], d[:, okd]
+                x = x[:, okd] if x is not None else None
                 if tv.size == 0:
                     continue
             gap = self._has_gap(cid, tv, start, end)
             if gap:
                 self.faults["gap"] += 1
-            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid, gap, n_bad)
+            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid, gap, n_bad, x, st.tare)
         return w
 
     def _has_gap(self, cell_id: int, t_ns: np.ndarray, start: int, end: int) -> bool:
@@ -648,8 +681,9 @@ class Windower:
             # its onset (memory and the release scan would grow without bound).
             horizon = min(horizon, self._onset_ns)
         for st in self._cells.values():
-            for stream in (st.vib, st.dfm, st.force):
-                stream.trim_before(horizon)
+            for stream in (st.vib, st.dfm, st.force, st.extra):
+                if stream is not None:
+                    stream.trim_before(horizon)
 
     @property
     def exploration_id(self) -> int:

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from rclpy.node import Node
 
+from ..core.features import groups_in_labels, selection_name
 from ..core.labels import DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED, LabelProtocol
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
 from ..core.robot import load_robot
@@ -51,7 +52,7 @@ from .common import Diagnostics, Status, declare, report_unknown_overrides, run_
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
 from .qos import QosDefaults, declare_qos
 
-__all__ = ["ClassifierNode", "default_model_path", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "main"]
+__all__ = ["ClassifierNode", "default_model_path", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "main", "layout_mismatch"]
 
 DESCRIPTOR_TOPIC = "tactile/descriptor"
 LABEL_TOPIC = "tactile/label"
@@ -75,6 +76,14 @@ class _Predicted:
 
     sample: DescriptorSample
     prediction: str | None
+
+
+def layout_mismatch(sample: DescriptorSample, model_labels: Sequence[str]) -> str:
+    """Why a model refuses a descriptor: both feature-group selections, value counts and body parts."""
+    return (f"descriptor of feature groups {selection_name(groups_in_labels(sample.labels))} "
+            f"({len(sample.labels)} values, {sample.robot} {'/'.join(sample.body_parts)}) does not fit the model, "
+            f"trained on feature groups {selection_name(groups_in_labels(model_labels))} ({len(model_labels)} "
+            "values); call ~/reset or set another model_path")
 
 
 class ClassifierNode(Node):
@@ -185,9 +194,7 @@ class ClassifierNode(Node):
             self.model = self._new_model(sample.labels)
         if sample.labels != self.model.labels:
             self.counts["layout_mismatch"] += 1
-            self.layout_error = (f"descriptor layout ({len(sample.labels)} values, {sample.robot} "
-                                 f"{'/'.join(sample.body_parts)}) differs from the model's ({len(self.model.labels)} "
-                                 f"values); call ~/reset or set another model_path")
+            self.layout_error = layout_mismatch(sample, self.model.labels)
             self.get_logger().error(self.layout_error, throttle_duration_sec=5.0)
             return
         self.layout_error = None

@@ -37,6 +37,8 @@ __all__ = [
     "skin_frame_to_msg",
     "skin_msg_to_frame",
     "skin_msg_to_chunk",
+    "BIOTAC_EXTRA_CHANNELS",
+    "SKIN_EXTRA_CHANNELS",
     "descriptor_to_msg",
     "DescriptorSample",
     "descriptor_from_msg",
@@ -190,12 +192,23 @@ def biotac_msg_to_batch(msg) -> BioTacBatch:
     )
 
 
-def biotac_msg_to_chunk(msg) -> CellChunk:
+#: Extra channels (robot description ``extra_channels``) each message type carries.
+BIOTAC_EXTRA_CHANNELS: tuple[str, ...] = ("pdc", "tdc", "tac")
+SKIN_EXTRA_CHANNELS: tuple[str, ...] = ("proximity", "temperature")
+
+
+def biotac_msg_to_chunk(msg, extra_channels: Sequence[str] = ()) -> CellChunk:
     """``BioTacFrameBatch`` -> :class:`CellChunk` (vibration PAC, deformation electrodes).
 
     Force (contact gate, eq. 13/16): ``(PDC - pdc_tare_counts) * force_n_per_count``
     in newtons, NaN where PDC is ``INVALID_COUNT``.  Invalid PAC or electrode
     samples are marked invalid (their values are never used).
+
+    ``extra_channels`` (names of :data:`BIOTAC_EXTRA_CHANNELS`, in the cell
+    type's order) become the chunk's extra rows, per frame: ``pdc`` tared
+    (``PDC - pdc_tare_counts``), ``tdc`` and ``tac`` as counts, NaN where
+    ``INVALID_COUNT``.  ``electrode_tare_counts`` (one per electrode) becomes
+    the deformation tare.
     """
     b = biotac_msg_to_batch(msg)
     t0 = b.stamp_ns
@@ -204,6 +217,13 @@ def biotac_msg_to_chunk(msg) -> CellChunk:
     pdc = b.pdc.astype(np.float64)
     pdc_ok = b.pdc != INVALID_COUNT
     force = np.where(pdc_ok, (pdc - float(msg.pdc_tare_counts)) * float(msg.force_n_per_count), np.nan)
+    extra = None
+    if extra_channels:
+        cols = {"pdc": np.where(pdc_ok, pdc - float(msg.pdc_tare_counts), np.nan),
+                "tdc": np.where(b.tdc != INVALID_COUNT, b.tdc.astype(np.float64), np.nan),
+                "tac": np.where(b.tac != INVALID_COUNT, b.tac.astype(np.float64), np.nan)}
+        extra = np.stack([cols[c] for c in extra_channels])
+    tare = _np(msg.electrode_tare_counts, np.float64)
     return CellChunk(
         vibration=pac[None, :],
         vibration_t_ns=t0 + b.pac_offset_ns,
@@ -213,6 +233,8 @@ def biotac_msg_to_chunk(msg) -> CellChunk:
         force_t_ns=t0 + b.frame_offset_ns,
         vibration_valid=b.pac != INVALID_COUNT,
         deformation_valid=np.all(b.electrodes != INVALID_COUNT, axis=1),
+        extra=extra,
+        deformation_tare=tare if tare.size == el.shape[0] else None,
     )
 
 
@@ -320,11 +342,16 @@ def _view(values, dtype) -> np.ndarray:
     return np.asarray(values, dtype=dtype)
 
 
-def skin_msg_to_chunk(msg) -> CellChunk:
+def skin_msg_to_chunk(msg, extra_channels: Sequence[str] = ()) -> CellChunk:
     """``SkinCellFrame`` -> :class:`CellChunk` (vibration accelerometer, deformation force).
 
     Force (contact gate, eq. 27): the mean of the three tared force sensors
     times ``force_n_per_count``, NaN where any of them is ``INVALID_COUNT``.
+    ``extra_channels`` (names of :data:`SKIN_EXTRA_CHANNELS`) become the
+    chunk's extra rows, one value per force sample: ``proximity`` in counts
+    (NaN where ``INVALID_COUNT`` or when the message has none), ``temperature``
+    the message's ``temperature_c`` (NaN when none was read).  The force
+    tare becomes the deformation tare.
 
     This is the window node's per-message hot path (one call per cell per
     batch: 2,320 calls/s for the NAO at 50 ms batches, 11,600 at 10 ms), so it
@@ -367,6 +394,13 @@ def skin_msg_to_chunk(msg) -> CellChunk:
     f_ok = (f3 != INVALID_COUNT).all(axis=0)
     mean_n = (forces - tare[:, None]).mean(axis=0) * float(msg.force_n_per_count)
     t_f = off_f + t0
+    extra = None
+    if extra_channels:
+        prox = _view(msg.proximity, np.uint16)
+        cols = {"proximity": (np.where(prox != INVALID_COUNT, prox.astype(np.float64), np.nan) if prox.size
+                              else np.full(m, np.nan)),
+                "temperature": np.full(m, float(msg.temperature_c))}
+        extra = np.stack([cols[c] for c in extra_channels])
     return CellChunk(
         vibration=acc,
         vibration_t_ns=off_a + t0,
@@ -376,6 +410,8 @@ def skin_msg_to_chunk(msg) -> CellChunk:
         force_t_ns=t_f,
         vibration_valid=(ax != INVALID_ACCEL) & (ay != INVALID_ACCEL) & (az != INVALID_ACCEL),
         deformation_valid=f_ok,
+        extra=extra,
+        deformation_tare=tare,
     )
 
 

@@ -45,13 +45,20 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 from ..core.aggregation import describe_window
+from ..core.features import check_groups, groups_of_channels, selection_name
 from ..core.fast import warm_up
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..streams.sequence import unwrap
 from .common import Diagnostics, RateMeter, Status, declare, report_unknown_overrides, run_node, steady_clock
-from .conversions import biotac_msg_to_chunk, descriptor_to_msg, skin_msg_to_chunk
+from .conversions import (
+    BIOTAC_EXTRA_CHANNELS,
+    SKIN_EXTRA_CHANNELS,
+    biotac_msg_to_chunk,
+    descriptor_to_msg,
+    skin_msg_to_chunk,
+)
 from .qos import QosDefaults, declare_qos
 
 __all__ = ["WindowNode", "select_body_parts", "message_kind", "FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "main"]
@@ -75,10 +82,15 @@ def message_kind(cell_type: CellType) -> str:
         For a cell type no message of this package carries.
     """
     n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
-    if n_s == 1:
-        return "biotac"
-    if n_s == 3 and n_v == 3:
-        return "skin"
+    kind = "biotac" if n_s == 1 else "skin" if n_s == 3 and n_v == 3 else None
+    if kind is not None:
+        carried = BIOTAC_EXTRA_CHANNELS if kind == "biotac" else SKIN_EXTRA_CHANNELS
+        missing = [c for c in cell_type.extra_channels if c not in carried]
+        if missing:
+            raise ConfigError(f"cell type {cell_type.name!r} declares extra channel {missing[0]!r}, which "
+                              f"{'BioTacFrameBatch' if kind == 'biotac' else 'SkinCellFrame'} does not carry "
+                              f"(it carries {', '.join(carried)})", key=f"cell_types.{cell_type.name}.extra_channels")
+        return kind
     raise ConfigError(f"no message type carries cell type {cell_type.name!r} ({n_s} vibration and {n_v} "
                       "deformation channels; BioTacFrameBatch has 1 + N, SkinCellFrame 3 + 3)",
                       key=f"cell_types.{cell_type.name}")
@@ -120,7 +132,7 @@ class WindowNode(Node):
         w, c, d = self.robot.window, self.robot.contact, self.robot.descriptor
         mode = declare(self, "window.mode", w.mode, "window mode", choices=WINDOW_MODES)
         self.layout = declare(self, "descriptor.layout", d.layout, "descriptor layout", choices=LAYOUT_MODES)
-        self.channels = declare(self, "descriptor.channels", d.channels, "channel mode", choices=CHANNEL_MODES)
+        self.groups = self._declare_groups()
         # What a user tunes on a running robot: checked together by the windower, applied from the next
         # window (length, hop) or onset/release decision (thresholds) on.
         tune = self._retune_windower
@@ -174,6 +186,7 @@ class WindowNode(Node):
         qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 10))
         self.pub = self.create_publisher(Descriptor, DESCRIPTOR_TOPIC, qos_desc)
         self._cells_by_name: dict[tuple[str, str], int] = {}
+        self._extra: dict[str, tuple[str, ...]] = {}  # body part -> its cell type's extra channels
         self.drain_max = declare(self, "frames.drain_max", 1000,
                                  "frames taken from the queues per callback besides its own (0 = one per callback)",
                                  minimum=0, on_set=lambda v: lambda: setattr(self, "drain_max", v))
@@ -185,6 +198,7 @@ class WindowNode(Node):
             self._rates[part.name] = RateMeter()
             for cell in part.cells:
                 self._cells_by_name[(part.name, cell.name)] = cell.id
+            self._extra[part.name] = self.robot.cell_types[part.cell_type].extra_channels
             if kind == "biotac":
                 cb = self._on_biotac
                 mtype = BioTacFrameBatch
@@ -213,7 +227,32 @@ class WindowNode(Node):
         self.get_logger().info(
             f"robot {self.robot.name}: {len(self.robot.body_parts)} body parts "
             f"({', '.join(p.name for p in self.robot.body_parts)}), {self.windower.mode} windows, "
-            f"{self.layout}/{self.channels} descriptors on {self.pub.topic_name}")
+            f"{self.layout} descriptors of feature groups {selection_name(self.groups)} on {self.pub.topic_name}")
+
+    def _declare_groups(self) -> tuple[str, ...]:
+        """``descriptor.groups`` (or the legacy ``descriptor.channels``), checked against every served cell type.
+
+        Raises
+        ------
+        ConfigError
+            At start-up, naming the group and the cell type, for a group a
+            served cell type cannot feed; for both parameters changed at once.
+        """
+        d = self.robot.descriptor
+        channels = declare(self, "descriptor.channels", d.channels,
+                           "legacy channel mode: averaged = groups [paper], per_channel = [per_channel]; "
+                           "'' = descriptor.groups decides", choices=("", *CHANNEL_MODES))
+        groups = tuple(declare(self, "descriptor.groups", list(d.groups),
+                               "feature groups in descriptor order: paper, per_channel, bands, levels "
+                               "(or levels:<ch>,<ch>), statistics (docs/nodes.md)"))
+        if channels != d.channels and channels:
+            if groups != d.groups:
+                raise ConfigError("set descriptor.groups or the legacy descriptor.channels, not both",
+                                  key="descriptor.groups")
+            groups = groups_of_channels(channels)
+        for name in dict.fromkeys(p.cell_type for p in self.robot.body_parts):
+            check_groups(self.robot.cell_types[name], groups, key="descriptor.groups")
+        return groups
 
     #: longest wait for the kernel in the constructor before running on with held windows [s]
     WARM_UP_WAIT_S = 5.0
@@ -292,7 +331,7 @@ class WindowNode(Node):
                                    throttle_duration_sec=5.0)
             return
         try:
-            chunk = biotac_msg_to_chunk(msg)
+            chunk = biotac_msg_to_chunk(msg, self._extra[part])
         except SignalError as exc:
             self.faults["malformed"] += 1
             self.get_logger().warning(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
@@ -323,7 +362,7 @@ class WindowNode(Node):
                                    f"puts it on {part!r}; dropped", throttle_duration_sec=5.0)
             return
         try:
-            chunk = skin_msg_to_chunk(msg)
+            chunk = skin_msg_to_chunk(msg, self._extra[part])
         except SignalError as exc:
             self.faults["malformed"] += 1
             self.get_logger().warning(f"malformed SkinCellFrame from cell {cid}: {exc}", throttle_duration_sec=5.0)
@@ -385,7 +424,7 @@ class WindowNode(Node):
 
     def _publish(self, window: Window) -> None:
         try:
-            desc = describe_window(self.robot, window.cells, layout=self.layout, channels=self.channels,
+            desc = describe_window(self.robot, window.cells, layout=self.layout, groups=self.groups,
                                    force_threshold_n=self.force_threshold_n)
         except SignalError as exc:
             self.faults["describe_failed"] += 1

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -9,14 +11,16 @@ from hypothesis import strategies as st
 
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
 from tactile_descriptors_ros.core.descriptors import Quality
-from tactile_descriptors_ros.core.robot import load_robot
+from tactile_descriptors_ros.core.robot import DescriptorSpec, load_robot
 from tactile_descriptors_ros.errors import SignalError
 
 pytestmark = pytest.mark.filterwarnings("error")
 
 MS = 1_000_000
-SHADOW = load_robot("shadow_hand")
-NAO = load_robot("nao")
+# the paper's descriptor (eq. 17 / 28): these cases are about its quantities; the shipped groups below
+SHADOW = dataclasses.replace(load_robot("shadow_hand"), descriptor=DescriptorSpec("concat", "averaged", ("paper",)))
+NAO = dataclasses.replace(load_robot("nao"), descriptor=DescriptorSpec("concat", "averaged", ("paper",)))
+SHADOW_SHIPPED = load_robot("shadow_hand")
 
 
 def _biotac(rng, n_frames: int = 100, force_n: float = 1.0, dtype=np.int64, pac=None, el=None) -> CellSignals:
@@ -161,3 +165,16 @@ def test_nearly_empty_window_is_short_and_finite(n_frames):
     bp = d.body_parts[0]
     if bp.contact:
         assert bp.quality & Quality.SHORT
+
+
+def test_shipped_groups_stay_finite_on_nonfinite_and_overflowing_samples():
+    rng = np.random.default_rng(7)
+    cells = {cid: _biotac(rng, dtype=np.float64) for cid in range(4)}
+    cells[1].vibration[0, 17] = np.nan
+    cells[3].deformation[4, 2] = np.inf
+    cells[2].vibration *= 1e160
+    d = describe_window(SHADOW_SHIPPED, cells)
+    assert _finite(d) and len(d.values) == 5 * 261
+    flags = {bp.name: bp.quality for bp in d.body_parts}
+    assert flags["index"] & Quality.NONFINITE and flags["ring"] & Quality.NONFINITE
+    assert flags["middle"] & Quality.OVERFLOW and not flags["thumb"] & Quality.NONFINITE

@@ -83,7 +83,7 @@ def test_descriptor_and_prediction_messages():
     d = describe_window(robot, {})
     msg = descriptor_to_msg(d, Window(1_000, 2_000_000_001, 4, "exploration"))
     s = descriptor_from_msg(msg)
-    assert s.exploration_id == 4 and s.window_end_ns == 2_000_000_001 and len(s.values) == 40
+    assert s.exploration_id == 4 and s.window_end_ns == 2_000_000_001 and len(s.values) == 5 * 261  # shipped groups
     assert s.labels == d.labels and not s.contact and s.body_parts[0] == "thumb"
     p = prediction_to_msg(s, class_name=None, class_names=[], scores=np.zeros(0), model_version=0, updates=0)
     assert not p.has_model and p.class_name == "" and p.exploration_id == 4
@@ -96,3 +96,32 @@ def test_stamp_conversion():
     assert stamp_to_ns(ns_to_stamp(12_345_678_901)) == 12_345_678_901
     with pytest.raises(SignalError):
         ns_to_stamp(-1)
+
+
+def test_extra_channels_and_tares_reach_the_chunk():
+    from tactile_descriptors_ros.nodes.conversions import (
+        INVALID_COUNT, BioTacBatch, SkinFrame, biotac_batch_to_msg, biotac_msg_to_chunk, skin_frame_to_msg,
+        skin_msg_to_chunk)
+
+    b = BioTacBatch(stamp_ns=10, pac=np.array([1, 2], np.uint16), pac_offset_ns=np.array([0, 5]),
+                    frame_offset_ns=np.array([0, 5]), pdc=np.array([300, INVALID_COUNT], np.uint16),
+                    tac=np.array([7, 8], np.uint16), tdc=np.array([2000, 2001], np.uint16),
+                    electrodes=np.full((2, 19), 1000, np.uint16))
+    msg = biotac_batch_to_msg(b, sensor_name="s", body_part="index", chip_select=1, pdc_tare_counts=100.0,
+                              electrode_tare_counts=np.arange(19.0))
+    ch = biotac_msg_to_chunk(msg, ("pdc", "tdc", "tac"))
+    np.testing.assert_array_equal(ch.extra[:, 0], [200.0, 2000.0, 7.0])  # PDC tared like the force
+    assert math.isnan(ch.extra[0, 1]) and ch.extra[2, 1] == 8.0
+    np.testing.assert_array_equal(ch.deformation_tare, np.arange(19.0))
+    assert biotac_msg_to_chunk(msg).extra is None
+    f = SkinFrame(stamp_ns=0, accel=np.zeros((3, 4), np.int16), accel_offset_ns=np.arange(4),
+                  force=np.full((3, 2), 500, np.uint16), force_offset_ns=np.arange(2),
+                  proximity=np.array([900, INVALID_COUNT], np.uint16), temperature_c=30.25)
+    sk = skin_msg_to_chunk(skin_frame_to_msg(f, cell_id=1, body_part="left_hand", force_tare_counts=(1, 2, 3)),
+                           ("proximity", "temperature"))
+    assert sk.extra[0, 0] == 900.0 and math.isnan(sk.extra[0, 1]) and list(sk.extra[1]) == [30.25, 30.25]
+    np.testing.assert_array_equal(sk.deformation_tare, [1.0, 2.0, 3.0])
+    f.proximity = np.zeros(0, np.uint16)
+    f.temperature_c = float("nan")
+    none = skin_msg_to_chunk(skin_frame_to_msg(f, cell_id=1, body_part="left_hand"), ("proximity", "temperature"))
+    assert np.isnan(none.extra).all()  # missing stays missing: the levels group flags it, never zeros

@@ -58,8 +58,8 @@ def test_predict_then_learn_online(graph):
     first = _explore(g, stream, 40.0)
     assert first.exploration_id == 1 and not first.has_model and first.class_name == ""
     d = g["out"]["desc"][-1]
-    assert d.body_parts == ["index"] and d.contact == [True] and len(d.values) == 8
-    assert d.window_mode == "exploration" and d.labels[0] == "index/paper/A_pac"
+    assert d.body_parts == ["index"] and d.contact == [True] and len(d.values) == 261  # the shipped groups
+    assert d.window_mode == "exploration" and d.labels[0] == "index/per_channel/A_pac"
     g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
     assert spin_until(g["ex"], lambda: g["classifier"].model is not None and g["classifier"].model.pa.updates == 1)
     second = _explore(g, stream, 300.0)
@@ -121,6 +121,7 @@ def test_layout_mismatch_refused(graph, tmp_path, ros_context):
         g["ex"].spin_once(timeout_sec=0.005)
     assert spin_until(g["ex"], lambda: c.counts["layout_mismatch"] >= 1)
     assert len(g["out"]["pred"]) == n
+    assert "feature groups per_channel+bands+levels+statistics (261 values" in c.layout_error
     st = next(s for s in c.diagnostics.statuses() if s.name.endswith("classifier"))
     assert st.level == b"\x02"
 
