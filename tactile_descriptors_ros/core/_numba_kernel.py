@@ -529,3 +529,36 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cov
                     qc |= flat_flag
         quality[c] = qc
     return OK, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
+
+
+@_jit
+def central_moments(x, out):  # pragma: no cover - compiled
+    """Per row of integer ``x`` (rows, n >= 1): mean, m2, m3, m4 (biased central moments), max |x| into ``out``.
+
+    Two passes in row order, sequential sums (no reassociation): the
+    ``statistics`` group's skewness and kurtosis without the float copies
+    and temporaries of the numpy formulation (:func:`.features.moments`).
+    """
+    n = x.shape[1]
+    for r in range(x.shape[0]):
+        s = 0.0
+        peak = 0.0
+        for i in range(n):
+            v = float(x[r, i])
+            s += v
+            peak = max(peak, abs(v))
+        mean = s / n
+        s2 = 0.0
+        s3 = 0.0
+        s4 = 0.0
+        for i in range(n):
+            d = float(x[r, i]) - mean
+            d2 = d * d
+            s2 += d2
+            s3 += d2 * d
+            s4 += d2 * d2
+        out[r, 0] = mean
+        out[r, 1] = s2 / n
+        out[r, 2] = s3 / n
+        out[r, 3] = s4 / n
+        out[r, 4] = peak

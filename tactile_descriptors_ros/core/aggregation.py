@@ -44,6 +44,7 @@ from .features import (
     check_groups,
     groups_of_channels,
     level_values,
+    power_spectrum,
     selection_labels,
     selection_name,
     statistics_values,
@@ -891,12 +892,15 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
     for rows in batches.values():
         vib = _stack([sigs[k].vibration for k in rows])
         dfm = _stack([sigs[k].deformation for k in rows])
+        spectrum = None  # the vibration's power spectrum, shared by bands and statistics
         for g in groups:
             with np.errstate(all="ignore"):  # non-finite samples give non-finite values: _cells_mean drops them
+                if g in ("bands", "statistics") and spectrum is None:
+                    spectrum = power_spectrum(vib)
                 if g == "bands":
-                    vals = band_hjorth(vib, fs_s)
+                    vals = band_hjorth(vib, fs_s, spectrum)
                 elif g == "statistics":
-                    vals = statistics_values(vib, fs_s, dfm, fs_v)
+                    vals = statistics_values(vib, fs_s, dfm, fs_v, spectrum)
                 else:
                     vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
                                         _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
@@ -941,18 +945,28 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
         touching = _touching(part_ids, cells, threshold_n)
         ids = [cid for t in touching for cid in t]
         rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids)
-        start = 0
         for p, t in enumerate(touching):
             if len(t) != first[p].cells_in_contact:
                 raise SignalError(f"body part {first[p].name}: contact gate disagreement ({len(t)} vs "
                                   f"{first[p].cells_in_contact} cells)")
-            for g in others:
-                if t:
-                    vals, bad = _cells_mean(rows[g][start:start + len(t)])
+        counts = [len(t) for t in touching]
+        for g in others:
+            r = rows[g]
+            if all(c <= 1 for c in counts) and np.isfinite(r).all():  # one cell per body part (a hand)
+                k = 0
+                for p, c in enumerate(counts):
+                    if c:
+                        per_part[p][g] = r[k]
+                        k += 1
+                continue
+            start = 0
+            for p, c in enumerate(counts):
+                if c:
+                    vals, bad = _cells_mean(r[start:start + c])
                     per_part[p][g] = vals
                     if bad:
                         flags[p] |= _INVALID if g.startswith("levels") else int(Quality.NONFINITE)
-            start += len(t)
+                start += c
     out = []
     for p, bp in enumerate(first):
         if not bp.contact:

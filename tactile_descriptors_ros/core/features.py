@@ -24,10 +24,11 @@ Groups (labels for a BioTac: S = ``pac``, V = ``e1..e19``, extra channels
     BioTac, 36 per skin cell); the legacy ``channels: per_channel``.
 ``bands``
     Hjorth Activity, Mobility, Complexity (eq. 1-3) of each vibration
-    channel band-passed into :func:`vibration_bands` (``A_pac_20-50Hz``,
-    ``M_ax_100-200Hz``, ...): how the texture's vibration energy and its
-    frequency spread are distributed over the spectrum (multi-band Hjorth,
-    as in EEG analysis).
+    channel band-limited to each band of :func:`vibration_bands`
+    (``A_pac_20-50Hz``, ``M_ax_100-200Hz``, ...): how the texture's
+    vibration energy and its frequency spread are distributed over the
+    spectrum (multi-band Hjorth, as in EEG analysis).  From the spectral
+    moments of one FFT per channel (:func:`band_hjorth`).
 ``levels``
     Mean of every slow channel over the window: the deformation channels
     (minus their tare, when the driver reports one) and the extra channels
@@ -41,10 +42,10 @@ Groups (labels for a BioTac: S = ``pac``, V = ``e1..e19``, extra channels
     The hand-made features of the related work (Fishel & Loeb 2012; Jamali &
     Sammut 2011): log variance (``log1p``), skewness and excess kurtosis of
     each vibration and deformation channel, and log band powers (``log1p``
-    of Welch's estimate, 1 s Hann segments) of each vibration channel in
-    :func:`vibration_bands` and of each deformation channel in
-    :func:`deformation_bands` (``logvar_pac``, ``skew_e3``, ``kurt_ax``,
-    ``logbp_pac_20-50Hz``, ``logbp_e1_0-2Hz``).
+    of the window's power spectrum summed over a band, :func:`band_powers`)
+    of each vibration channel in :func:`vibration_bands` and of each
+    deformation channel in :func:`deformation_bands` (``logvar_pac``,
+    ``skew_e3``, ``kurt_ax``, ``logbp_pac_20-50Hz``, ``logbp_e1_0-2Hz``).
 
 ``paper`` and ``per_channel`` come from the descriptor kernel
 (:mod:`.fast`, :mod:`.aggregation`); the other groups from the functions of
@@ -57,10 +58,10 @@ import functools
 from collections.abc import Iterable, Sequence
 
 import numpy as np
-from scipy import signal
+from scipy import fft as sfft
 
 from ..errors import ConfigError
-from .descriptors import hjorth
+from . import fast
 from .robot import CellType
 
 __all__ = [
@@ -78,6 +79,7 @@ __all__ = [
     "selection_labels",
     "selection_name",
     "groups_in_labels",
+    "power_spectrum",
     "band_hjorth",
     "moments",
     "band_powers",
@@ -105,7 +107,7 @@ VIBRATION_BANDS_HZ: tuple[tuple[float, float], ...] = (
 #: deformation signal gets one more band up to its Nyquist frequency.
 DEFORMATION_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.0, 2.0), (2.0, 10.0), (10.0, 50.0))
 
-_NYQUIST_MARGIN = 0.98  # band edges stay below 0.98 x Nyquist (a Butterworth band-pass needs hi < Nyquist)
+_NYQUIST_MARGIN = 0.98  # vibration band edges stay below 0.98 x Nyquist
 
 
 def groups_of_channels(channels: str) -> tuple[str, ...]:
@@ -255,46 +257,118 @@ def groups_in_labels(labels: Sequence[str]) -> tuple[str, ...]:
 
 
 # ------------------------------------------------------------------ groups
-@functools.lru_cache(maxsize=32)
-def _bandpass(rate_hz: float) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
-    """4th-order Butterworth band-passes of :func:`vibration_bands` and their step-response initial states."""
+def power_spectrum(x: np.ndarray) -> np.ndarray:
+    """One-sided power spectrum of each signal (last axis), scaled so that a band's sum is its variance share.
+
+    ``P_k = w_k |X_k|^2 / n^2`` with ``X = rfft(x)`` (:func:`scipy.fft.rfft`) and ``P_0 = 0`` (the mean removed),
+    ``w_k = 2`` for bins that stand for a conjugate pair and 1 for the DC and
+    Nyquist bins: ``sum_k P_k`` is the variance of ``x`` (Parseval), and the
+    sum over a band is the variance of ``x`` band-limited to it (an ideal
+    band-pass over the window, taken as one period).
+
+    Returns
+    -------
+    numpy.ndarray, shape ``x.shape[:-1] + (n // 2 + 1,)``
+    """
+    x = np.asarray(x)
+    n = x.shape[-1]
+    X = sfft.rfft(x, axis=-1)
+    # |X|^2 from the interleaved real and imaginary parts, in place (the live path's cost: 348 spectra per
+    # NAO window); the mean only moves the DC bin, which is set to 0 instead of centring every sample
+    v = X.view(np.float64)
+    np.square(v, out=v)
+    p = v[..., 0::2] + v[..., 1::2]
+    p[..., 0] = 0.0
+    p *= _pair_weights(n)
+    return p
+
+
+@functools.lru_cache(maxsize=64)
+def _pair_weights(n: int) -> np.ndarray:
+    w = np.full(n // 2 + 1, 2.0 / (float(n) * n))
+    w[0] = 1.0 / (float(n) * n)
+    if n % 2 == 0:
+        w[-1] = 1.0 / (float(n) * n)
+    return w
+
+
+@functools.lru_cache(maxsize=256)
+def _band_bins(n: int, rate_hz: float, bands: tuple[tuple[float, float], ...]) -> tuple[tuple[int, int], ...]:
+    """``[k_lo, k_hi)`` of the rfft bins with ``lo <= f_k < hi`` (``f_k = k rate / n``); a band reaching Nyquist includes it."""
     out = []
-    for lo, hi in vibration_bands(rate_hz):
-        sos = signal.butter(4, [lo, hi], btype="bandpass", fs=rate_hz, output="sos")
-        out.append((sos, signal.sosfilt_zi(sos)))
+    for lo, hi in bands:
+        k_lo = int(np.ceil(lo * n / rate_hz - 1e-9))
+        k_hi = n // 2 + 1 if hi >= rate_hz / 2 else int(np.ceil(hi * n / rate_hz - 1e-9))
+        out.append((min(k_lo, n // 2 + 1), min(max(k_hi, k_lo), n // 2 + 1)))
     return tuple(out)
 
 
-def band_hjorth(vibration: np.ndarray, rate_hz: float) -> np.ndarray:
-    """The ``bands`` group of a stack of cells.
+def _band_sums(p: np.ndarray, bins: tuple[tuple[int, int], ...]) -> np.ndarray:
+    """Sums of ``p`` over each band's bins (last axis), shape ``p.shape[:-1] + (n_bands,)``."""
+    out = np.zeros(p.shape[:-1] + (len(bins),))
+    contiguous = all(bins[i][1] == bins[i + 1][0] for i in range(len(bins) - 1))
+    if bins and contiguous and all(lo < hi for lo, hi in bins):
+        # one pass: np.add.reduceat over the band starts of the bins up to the last band's end
+        out[...] = np.add.reduceat(p[..., :bins[-1][1]], [lo for lo, _ in bins], axis=-1)
+        return out
+    for b, (lo, hi) in enumerate(bins):
+        if hi > lo:
+            out[..., b] = p[..., lo:hi].sum(axis=-1)
+    return out
 
-    Each channel, its mean removed, is filtered by a causal 4th-order
-    Butterworth band-pass per band (:func:`scipy.signal.sosfilt`, started in
-    the steady state of its first sample), and Hjorth Activity, Mobility,
-    Complexity (eq. 1-3, :func:`.descriptors.hjorth`) are taken of each
-    filtered signal.
+
+@functools.lru_cache(maxsize=64)
+def _difference_gain(n: int, rate_hz: float) -> np.ndarray:
+    """``|2 sin(pi k / n) rate|^2``: the power gain of the first difference times the rate at bin k."""
+    return (2.0 * rate_hz * np.sin(np.pi * np.arange(n // 2 + 1) / n)) ** 2
+
+
+def band_hjorth(vibration: np.ndarray, rate_hz: float, spectrum: np.ndarray | None = None) -> np.ndarray:
+    """The ``bands`` group of a stack of cells: Hjorth parameters per vibration band, from one FFT.
+
+    Each channel is band-limited to each band of :func:`vibration_bands` by
+    an ideal band-pass over the window (the window taken as one period:
+    only the FFT bins of the band kept), and Hjorth Activity, Mobility and
+    Complexity (eq. 1-3) are those of the band-limited signal with the
+    derivative taken as the circular first difference times the rate.  All
+    come from the spectral moments of one power spectrum
+    (:func:`power_spectrum`): with ``G_k = |2 sin(pi k / n) rate|^2`` the
+    gain of that difference, ``var(y) = sum P_k``, ``var(y') = sum P_k G_k``,
+    ``var(y'') = sum P_k G_k^2`` over the band's bins.  Equal (float
+    rounding) to the time-domain computation on ``irfft`` of the masked
+    spectrum; one FFT per channel instead of a filter per band (the
+    descriptor's live cost, docs/performance.md).
 
     Parameters
     ----------
     vibration : array_like, shape (n_cells, n_channels, n_samples)
     rate_hz : float
+    spectrum : numpy.ndarray, optional
+        :func:`power_spectrum` of ``vibration`` when already computed.
 
     Returns
     -------
     numpy.ndarray, shape (n_cells, 3 * n_channels * n_bands)
         In the order of :func:`group_labels` (quantity, channel, band).
+        A band without power has Mobility and Complexity 0 (as
+        :func:`.descriptors.hjorth` for a flat signal).
     """
-    x = np.asarray(vibration, dtype=np.float64)
+    x = np.asarray(vibration)
     n_cells, n_ch, n = x.shape
-    x = (x - x.mean(axis=-1, keepdims=True)).reshape(n_cells * n_ch, n)
-    filters = _bandpass(float(rate_hz))
-    out = np.empty((3, n_cells * n_ch, len(filters)))
-    for b, (sos, zi) in enumerate(filters):
-        y, _ = signal.sosfilt(sos, x, axis=-1, zi=zi[:, None, :] * x[None, :, :1])
-        h = hjorth(y, rate_hz)
-        out[0, :, b], out[1, :, b], out[2, :, b] = h.activity, h.mobility, h.complexity
-    # (quantity, cell, channel, band) -> (cell, quantity, channel, band)
-    return out.reshape(3, n_cells, n_ch, len(filters)).transpose(1, 0, 2, 3).reshape(n_cells, -1)
+    p = power_spectrum(x) if spectrum is None else spectrum
+    bins = _band_bins(n, float(rate_hz), vibration_bands(rate_hz))
+    g = _difference_gain(n, float(rate_hz))
+    pg = p * g
+    s0 = _band_sums(p, bins)
+    s1 = _band_sums(pg, bins)
+    pg *= g
+    s2 = _band_sums(pg, bins)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mob = np.where(s0 > 0, np.sqrt(s1 / np.where(s0 > 0, s0, 1.0)), 0.0)
+        mob_d = np.where(s1 > 0, np.sqrt(s2 / np.where(s1 > 0, s1, 1.0)), 0.0)
+        com = np.where(mob > 0, mob_d / np.where(mob > 0, mob, 1.0), 0.0)
+    # (cell, channel, band) x quantity -> (cell, quantity, channel, band)
+    return np.stack([s0, mob, com], axis=1).reshape(n_cells, -1)
 
 
 def moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -302,19 +376,29 @@ def moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     Skewness ``m3 / m2**1.5`` and kurtosis ``m4 / m2**2 - 3`` from the
     biased central moments, as :func:`scipy.stats.skew` and
-    :func:`scipy.stats.kurtosis` with their defaults; computed here in one
-    pass over the centred signal because the live path needs them for every
-    channel of every cell in a fraction of a millisecond.  A flat signal
+    :func:`scipy.stats.kurtosis` with their defaults; computed here (integer
+    counts by the compiled kernel when numba is installed, two passes
+    without temporaries) because the live path needs them for every channel
+    of every cell of a 116-cell skin within milliseconds.  A flat signal
     (variance at most 1e-12 of its squared magnitude) has no shape: skewness
     and kurtosis 0, never NaN.
     """
-    x = np.asarray(x, dtype=np.float64)
-    d = x - x.mean(axis=-1, keepdims=True)
-    d2 = d * d
-    m2 = d2.mean(axis=-1)
-    m3 = np.einsum("...i,...i->...", d2, d) / x.shape[-1]
-    m4 = np.einsum("...i,...i->...", d2, d2) / x.shape[-1]
-    flat = m2 <= 1e-12 * np.maximum(1.0, np.abs(x).max(axis=-1)) ** 2
+    x = np.asarray(x)
+    kernel = fast._kernel() if x.dtype in (np.int32, np.int64) and x.size and x.shape[-1] else None
+    if kernel is not None:  # integer counts (live and recorded data): the compiled two-pass sums
+        out = np.empty((x.size // x.shape[-1], 5))
+        kernel.central_moments(np.ascontiguousarray(x).reshape(-1, x.shape[-1]), out)
+        out = out.reshape(x.shape[:-1] + (5,))
+        m2, m3, m4, peak = out[..., 1], out[..., 2], out[..., 3], out[..., 4]
+    else:
+        x = np.asarray(x, dtype=np.float64)
+        d = x - x.mean(axis=-1, keepdims=True)
+        d2 = d * d
+        m2 = d2.mean(axis=-1)
+        m3 = np.einsum("...i,...i->...", d2, d) / x.shape[-1]
+        m4 = np.einsum("...i,...i->...", d2, d2) / x.shape[-1]
+        peak = np.abs(x).max(axis=-1)
+    flat = m2 <= 1e-12 * np.maximum(1.0, peak) ** 2
     safe = np.where(flat, 1.0, m2)
     with np.errstate(all="ignore"):
         skew = np.where(flat, 0.0, m3 / safe**1.5)
@@ -322,32 +406,26 @@ def moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.log1p(m2), skew, kurt
 
 
-def band_powers(x: np.ndarray, rate_hz: float, bands: Sequence[tuple[float, float]]) -> np.ndarray:
-    """Log band powers (``log1p``) along the last axis, from Welch's estimate.
+def band_powers(x: np.ndarray, rate_hz: float, bands: Sequence[tuple[float, float]],
+                spectrum: np.ndarray | None = None) -> np.ndarray:
+    """Log band powers (``log1p``) along the last axis, from the window's power spectrum.
 
-    :func:`scipy.signal.welch` with Hann segments of 1 s (or the whole
-    signal when shorter, at least 8 samples), half overlap and the mean of
-    each segment removed; a band ``[lo, hi)`` sums the density times the
-    bin width (a band reaching Nyquist includes it).
+    The power of a band ``[lo, hi)`` is the sum of :func:`power_spectrum`
+    over its bins (a band reaching Nyquist includes it): the variance of the
+    signal band-limited to it, so the powers of bands covering the spectrum
+    add up to the variance.
 
     Returns
     -------
     numpy.ndarray, shape ``x.shape[:-1] + (len(bands),)``
     """
-    x = np.asarray(x, dtype=np.float64)
-    nper = int(min(x.shape[-1], max(8, round(rate_hz))))
-    f, p = signal.welch(x, fs=rate_hz, nperseg=nper, axis=-1)
-    df = f[1] - f[0] if f.size > 1 else 1.0
-    out = np.zeros(x.shape[:-1] + (len(bands),))
-    for k, (lo, hi) in enumerate(bands):
-        sel = (f >= lo) & (f < hi) if hi < rate_hz / 2 else (f >= lo)
-        if sel.any():
-            out[..., k] = np.log1p(p[..., sel].sum(axis=-1) * df)
-    return out
+    x = np.asarray(x)
+    p = power_spectrum(x) if spectrum is None else spectrum
+    return np.log1p(_band_sums(p, _band_bins(x.shape[-1], float(rate_hz), tuple(bands))))
 
 
 def statistics_values(vibration: np.ndarray, vibration_rate_hz: float, deformation: np.ndarray,
-                      deformation_rate_hz: float) -> np.ndarray:
+                      deformation_rate_hz: float, vibration_spectrum: np.ndarray | None = None) -> np.ndarray:
     """The ``statistics`` group of a stack of cells.
 
     Parameters
@@ -356,20 +434,22 @@ def statistics_values(vibration: np.ndarray, vibration_rate_hz: float, deformati
     vibration_rate_hz : float
     deformation : array_like, shape (n_cells, n_v, n_slow)
     deformation_rate_hz : float
+    vibration_spectrum : numpy.ndarray, optional
+        :func:`power_spectrum` of ``vibration`` when already computed (the
+        ``bands`` group shares it).
 
     Returns
     -------
     numpy.ndarray, shape (n_cells, n_values)
         In the order of :func:`group_labels`.
     """
-    s = np.asarray(vibration, dtype=np.float64)
-    v = np.asarray(deformation, dtype=np.float64)
+    s = np.asarray(vibration)
+    v = np.asarray(deformation)
     n = s.shape[0]
     lv_s, sk_s, ku_s = moments(s)
     lv_v, sk_v, ku_v = moments(v)
-    bp_s = band_powers(s - s.mean(axis=-1, keepdims=True), vibration_rate_hz, vibration_bands(vibration_rate_hz))
-    bp_v = band_powers(v - v.mean(axis=-1, keepdims=True), deformation_rate_hz,
-                       deformation_bands(deformation_rate_hz))
+    bp_s = band_powers(s, vibration_rate_hz, vibration_bands(vibration_rate_hz), vibration_spectrum)
+    bp_v = band_powers(v, deformation_rate_hz, deformation_bands(deformation_rate_hz))
     return np.concatenate([lv_s, lv_v, sk_s, sk_v, ku_s, ku_v, bp_s.reshape(n, -1), bp_v.reshape(n, -1)], axis=1)
 
 

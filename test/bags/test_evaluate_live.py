@@ -29,7 +29,7 @@ def _offline(n: int = 4) -> OfflineReplay:
 
 def test_compare_accepts_equal_runs_and_scores_only_test_windows():
     off = _offline()
-    out = compare(off, off.values + 1e-13, ("index/A_pac", "index/M_pac", "index/L_e1"), list(off.predictions))
+    out = compare(off, off.values + 1e-13, ("index/per_channel/A_pac", "index/per_channel/M_pac", "index/per_channel/L_e1"), list(off.predictions))
     assert out["descriptors_match"] and out["predictions_match"] and out["prediction_agreement"] == 1.0
     assert (out["train_windows"], out["test_windows"]) == (2, 2)
     assert out["live_accuracy"] == 0.5 == out["offline_accuracy"]  # test windows: c0 predicted c1, c1 predicted c1
@@ -41,7 +41,7 @@ def test_compare_reports_a_moved_value_and_a_different_prediction():
     live[2, 1] *= 1 + 1e-6
     preds = list(off.predictions)
     preds[3] = "c0"
-    out = compare(off, live, ("index/A_pac", "index/M_pac", "index/L_e1"), preds)
+    out = compare(off, live, ("index/per_channel/A_pac", "index/per_channel/M_pac", "index/per_channel/L_e1"), preds)
     assert not out["descriptors_match"] and out["max_relative_descriptor_difference"] == pytest.approx(1e-6)
     assert not out["predictions_match"] and out["prediction_agreement"] == 0.75
     assert [(m["material"], m["trial"]) for m in out["mismatched_windows"]] == [(1, 2), (2, 2)]
@@ -50,7 +50,7 @@ def test_compare_reports_a_moved_value_and_a_different_prediction():
 def test_compare_refuses_another_layout():
     off = _offline()
     with pytest.raises(ConfigError, match="layout"):
-        compare(off, off.values, ("index/A_pac", "index/C_pac", "index/L_e1"), list(off.predictions))
+        compare(off, off.values, ("index/per_channel/A_pac", "index/per_channel/C_pac", "index/per_channel/L_e1"), list(off.predictions))
 
 
 def test_plan_puts_every_trial_in_one_split_in_import_order():
