@@ -236,14 +236,14 @@ def _naive_cell(sig: CellSignals, fs_s: float, fs_v: float) -> tuple[np.ndarray,
 
 def naive_describe(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
                    channels: str | None = None, force_threshold_n: float | None = None) -> np.ndarray:
-    """The robot descriptor (concatenated body parts) computed signal by signal.
+    """The paper's robot descriptor (concatenated body parts) computed signal by signal.
 
     The naive baseline: a Python loop over cells and signals, a plain numpy
     Hjorth per signal and ``scipy.stats.pearsonr``/``spearmanr`` per (S, V)
     pair on the zero-order-hold-expanded series; then the same contact gate
     and averages as the package (:func:`~.aggregation.reduce_body_part`).
     """
-    channels = channels or robot.descriptor.channels
+    channels = channels or "averaged"  # the paper's descriptor (the kernel's cases time it)
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else force_threshold_n
     values = []
     for part in robot.body_parts:

@@ -35,7 +35,16 @@ def test_bench_command_json_smoke(capsys):
             assert case["package_numpy"]["cpu_ms"] > 0 and case["kernel_numpy"]["cpu_ms"] > 0
             assert case["max_abs_diff_numpy"] < 1e-6
     targets = report["targets"]
-    assert set(targets) == {"shadow_hand_time", "nao_time", "nao_speedup", "skin_10000_time", "latency"}
+    assert set(targets) == {"shadow_hand_time", "nao_time", "nao_speedup", "skin_10000_time", "latency",
+                            "shadow_hand_best_mode_time", "nao_best_mode_time"}
+    # the shipped feature groups, checked against the evaluation's values before they were timed
+    best = {b["key"]: b for b in report["best_mode"]}
+    assert best["shadow_hand"]["groups"] == ["per_channel", "bands", "levels", "statistics"]
+    assert best["shadow_hand"]["n_values"] == 5 * 261 and best["nao"]["n_values"] == 7 * 131
+    for key, limit in (("shadow_hand", 2.0), ("nao", 10.0)):
+        t = targets[f"{key}_best_mode_time"]
+        assert t["cpu_ms"] == best[key]["package"]["cpu_ms"] and t["met"] == (t["cpu_ms"] <= limit)
+        assert t["checked_max_abs_diff"] < 1e-6
     assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 1.0)
     assert targets["nao_speedup"]["speedup_cpu"] == pytest.approx(report["cases"][1]["speedup_cpu"])
     assert targets["skin_10000_time"]["met"] is None and targets["latency"]["met"] is None  # not measured
@@ -104,3 +113,20 @@ def test_text_report_prints_the_latency_fields(monkeypatch, capsys):
     assert "window end stamp -> last Prediction of that window" in out
     assert "window node CPU per message 250 us (58 % of one core)" in out
     assert "deserialize 60, convert 50" in out and "NOT met" in out
+
+
+def test_best_mode_check_refuses_a_live_call_that_differs_from_the_evaluation(monkeypatch):
+    robot = bench.load_robot("shadow_hand")
+    cells = bench.biotac_window(robot, 0.5)
+    assert bench.check_against_evaluation(robot, cells, robot.descriptor.groups) < 1e-9
+    real = bench.describe_window
+
+    def skewed(robot_, cells_, **kw):
+        d = real(robot_, cells_, **kw)
+        if len(robot_.body_parts) == 5 and kw.get("groups") == robot.descriptor.groups:
+            d.body_parts[2].values[100] *= 1.01  # one band value of one finger
+        return d
+
+    monkeypatch.setattr(bench, "describe_window", skewed)
+    with pytest.raises(bench.BenchMismatch, match="middle: live call and evaluation disagree at bands/"):
+        bench.check_against_evaluation(robot, cells, robot.descriptor.groups)
