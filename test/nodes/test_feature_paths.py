@@ -109,3 +109,31 @@ def test_model_of_one_selection_refuses_another_naming_both():
     sample = DescriptorSample(1, 0, np.zeros(len(rich)), rich, True, "exploration", "shadow_hand", ("index",))
     text = layout_mismatch(sample, paper)
     assert "per_channel+bands+levels+statistics (261 values" in text and "trained on feature groups paper (8" in text
+
+
+@pytest.mark.parametrize("groups, match", [
+    (["per_channel", "levels:temperature"], r"'levels:temperature'.*'biotac'.*'temperature'"),
+    (["paper", "wavelets"], "unknown feature group 'wavelets'"),
+])
+def test_window_node_refuses_groups_its_cell_type_cannot_feed_at_start_up(ros_context, groups, match):
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.errors import ConfigError
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    with pytest.raises(ConfigError, match=match):
+        WindowNode(context=ros_context, parameter_overrides=[
+            Parameter("robot", value="shadow_hand"), Parameter("descriptor.groups", value=groups)])
+
+
+def test_extra_channel_no_message_carries_is_refused():
+    import dataclasses
+
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.errors import ConfigError
+    from tactile_descriptors_ros.nodes.window_node import message_kind
+
+    ct = load_robot("shadow_hand").cell_types["biotac"]
+    assert message_kind(ct) == "biotac"
+    with pytest.raises(ConfigError, match="'humidity'.*BioTacFrameBatch"):
+        message_kind(dataclasses.replace(ct, extra_channels=("pdc", "humidity")))
