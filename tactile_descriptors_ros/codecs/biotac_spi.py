@@ -1,6 +1,6 @@
 """SynTouch BioTac SPI words and frames: bytes in, typed samples and counted errors out.
 
-Wire format (SPI mode 0, MSB first; SPEC section 3, SynTouch's public
+Wire format (SPI mode 0, MSB first; SynTouch's public
 Cheetah example code):
 
 * **Command byte** ``1SSSSSSP``: bit 7 set, a 6-bit channel number in bits

@@ -1,6 +1,6 @@
 """Skin-cell samples and their payload encoding, shared by the CAN and serial framings.
 
-A skin cell (TUM Cellular skin / HEX-o-SKIN style, SPEC section 3) has a
+A skin cell (TUM Cellular skin / HEX-o-SKIN style) has a
 3-axis accelerometer (1 kHz, +-2 g, 10-bit signed), three normal-force
 sensors (250 Hz, 0..10 N, 12-bit), a proximity sensor (250 Hz) and a
 temperature sensor.  Each modality travels in its own frame with a

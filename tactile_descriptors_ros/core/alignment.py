@@ -5,7 +5,7 @@ at different rates (BioTac PAC 2.2 kHz vs electrodes 50-100 Hz; skin
 accelerometer 1 kHz vs force 250 Hz).  The correlations of paper eq. 4-5 and
 9-10 need pairs of samples, so we correlate on the faster signal's time base
 with the slower one *held*: each slow sample keeps its value until the next
-one arrives, by the message time stamps (SPEC section 1).  Hold invents no
+one arrives, by the message time stamps.  Hold invents no
 values between samples and keeps integer data integer.
 """
 

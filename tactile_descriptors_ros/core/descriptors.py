@@ -404,7 +404,7 @@ def spearman(a: np.ndarray, b: np.ndarray, axis: int = -1, *, return_quality: bo
     """Spearman's rank correlation, ties by average rank (paper eq. 5, 10).
 
     Computed as Pearson's r of average ranks, which equals eq. 5 when there
-    are no ties and stays exact when there are (SPEC section 1).
+    are no ties and stays exact when there are.
 
     Parameters
     ----------

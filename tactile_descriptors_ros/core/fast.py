@@ -5,7 +5,7 @@ deformation signal V onto the fast vibration time base (zero-order hold,
 :mod:`.alignment`), broadcasts every S channel against every V channel
 (``n_s x n_v x n`` copies) and ranks the expanded series by sorting.  On a
 NAO window (116 cells, 2 s) that costs tens to hundreds of milliseconds, and
-ranking is most of it (SPEC section 7).  This module computes the *same*
+ranking is most of it.  This module computes the *same*
 numbers without any of that:
 
 * **Held V is piecewise constant.**  Fast samples ``i`` holding slow sample

@@ -39,7 +39,7 @@ these two lift one-pass online accuracy from about 85 % to about 94 %
 
 Scikit-learn's PassiveAggressiveClassifier is being deprecated and costs
 about 25 ms per single-sample update for 120 classes; this numpy version
-costs microseconds (SPEC section 7).
+costs microseconds.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Online feature scaling of descriptors: log-Activity and running standardisation.
 
 Raw Activity spans decades between materials and sensors while Mobility and
-Complexity do not, and the paper says nothing about scaling (SPEC section 1).
+Complexity do not, and the paper says nothing about scaling.
 Our choice, usable online (one sample at a time, no second pass):
 
 1. Activity values (labels whose quantity is ``A``) are replaced by

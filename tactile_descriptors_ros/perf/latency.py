@@ -46,7 +46,7 @@ import numpy as np
 
 __all__ = ["measure_latency", "message_cost", "TARGET_MS"]
 
-#: Target of issue 8: sensor stamp -> prediction, median, at NAO full rate.
+#: Target: sensor stamp -> prediction, median, at NAO full rate.
 TARGET_MS = 20.0
 
 

@@ -4,7 +4,7 @@ Data-driven haptic texture rendering (Culbertson, Kuchenbecker et al.) models
 the vibration a probe picks up while sliding over a texture as an
 autoregressive (AR) process whose spectrum scales with speed and whose power
 scales with force.  We fit the same kind of model to the public BioTac
-sliding recordings (``../shared/data/biotac_slide_20_50``; SPEC section 5):
+sliding recordings (``../shared/data/biotac_slide_20_50``):
 
 * **PAC** (vibration S of the descriptor, paper eq. 17): an AR(p) model
   ``x[n] = sum_k a_k x[n-k] + e[n]``, ``e ~ N(0, sigma^2)``, fitted by
