@@ -206,29 +206,32 @@ def check_value(name: str, value: Any, default: Any, *, choices: Sequence[Any] |
     return value
 
 
-def _interrupt_once() -> None:
-    """Make SIGINT raise ``KeyboardInterrupt`` once; ignore the ones that follow.
+def _interrupt_once() -> Callable[[], bool]:
+    """Make SIGINT raise ``KeyboardInterrupt`` once and ignore the ones that follow; return "was it?".
 
     A Ctrl-C in a terminal reaches a node twice: from the terminal (the whole
     process group) and from ``ros2 launch``, which forwards it.  A second
     ``KeyboardInterrupt`` would cut the clean-up short (a traceback from a
     thread join or a service's destruction).  Installed before ``rclpy.init``,
-    whose handler shuts the context down and then calls this one.
+    whose handler wakes the executor and then calls this one.  The returned
+    function tells whether SIGINT came: the interrupt can surface as another
+    exception (pybind11 turns it into a ``RuntimeError`` when it lands inside a
+    call such as ``take_message``).
     """
     import signal
     import threading
 
+    interrupted = threading.Event()
     if threading.current_thread() is not threading.main_thread():
-        return  # signal handlers can be set only from the main thread (tests run nodes in threads)
-    interrupted = False
+        return interrupted.is_set  # signal handlers can be set only from the main thread
 
     def handler(signum, frame):
-        nonlocal interrupted
-        if not interrupted:
-            interrupted = True
+        if not interrupted.is_set():
+            interrupted.set()
             raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, handler)
+    return interrupted.is_set
 
 
 class ParameterSetter:
@@ -415,7 +418,7 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    _interrupt_once()
+    interrupted = _interrupt_once()
     rclpy.init(args=list(args) if args is not None else sys.argv)
     node = None
     code = 0
@@ -431,7 +434,7 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
         print(f"[FATAL] [{name}]: {exc}", file=sys.stderr, flush=True)
         code = 2
     except Exception:
-        if rclpy.ok():
+        if rclpy.ok() and not interrupted():
             raise
         # a callback was cut short by Ctrl-C (e.g. publishing after the context shut down): a clean stop
     finally:
