@@ -1,5 +1,6 @@
-"""launch/*.launch.py are real ROS 2 launch files; launch_ros is not installable here, so stub it
-and check that their Node actions are exactly graph.py's NodeSpecs."""
+"""launch/*.launch.py build exactly graph.py's NodeSpecs as launch_ros Node actions, for every argument
+combination (launch and launch_ros stubbed, so this runs without them; test_ros2_launch.py runs the files
+under the real ros2 launch)."""
 
 from __future__ import annotations
 

@@ -1,0 +1,293 @@
+"""The graph under the real ``ros2 launch`` and driven with the real ``ros2`` CLI, as a user runs it.
+
+For each robot with a simulated scene: ``ros2 launch`` until the first
+Prediction, ``ros2 topic echo --once`` on every topic with default QoS,
+``ros2 param describe/get/set``, the tare, save and reset services, lifecycle
+transitions, the README's label command, and Ctrl-C (every process gone, no
+traceback); also Ctrl-C with one window node per body part.
+
+``ros2 launch`` is started the way a terminal starts it: in its own process
+group with SIGINT at its default (a background job of a non-interactive shell
+would ignore it), and Ctrl-C is SIGINT to the whole group, so each node gets it
+from the "terminal" and once more from ``ros2 launch``.  Every ``ros2`` verb
+runs with ``--no-daemon``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tactile_descriptors_ros.core.robot import load_robot
+from tactile_descriptors_ros.launching.graph import build_graph
+
+pytestmark = [pytest.mark.ros, pytest.mark.ros2cli, pytest.mark.slow, pytest.mark.timeout(1800)]
+
+PKG = "tactile_descriptors_ros"
+SCENES = {"shadow_hand": "demo_shadow_hand", "nao": "demo_nao"}
+BIN = Path(sys.prefix) / "bin"
+#: Generous bounds for a loaded 2-core machine: they stop a hung test, they measure nothing.
+FIRST_PREDICTION_S = 240.0
+CLI_S = 60.0
+#: ros2 launch escalates a node to SIGTERM this long after SIGINT (its default sigterm_timeout).
+SIGTERM_AFTER_S = 5
+MSG_TYPES = {"biotac": "tactile_descriptors_msgs/msg/BioTacFrameBatch",
+             "skin": "tactile_descriptors_msgs/msg/SkinCellFrame"}
+
+
+def _ros_env(ros_home: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
+    env["ROS_HOME"] = str(ros_home)  # the classifier's default model file goes here, not into ~/.ros
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _sigint_default() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@dataclass
+class Graph:
+    robot: str
+    proc: subprocess.Popen
+    log: Path
+    env: dict[str, str]
+    ros_home: Path
+    first_prediction: str
+
+    def ros2(self, *args: str, timeout: float = CLI_S, check: bool = True) -> str:
+        """Run ``ros2 ARGS``; return its stdout (raise with its output when it fails and ``check``)."""
+        out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
+                             timeout=timeout)
+        if check and out.returncode != 0:
+            raise AssertionError(f"ros2 {' '.join(args)} exited {out.returncode}:\n{out.stdout}\n{out.stderr}"
+                                 f"\n--- launch log:\n{self.output()[-4000:]}")
+        return out.stdout
+
+    def output(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def wait_for_output(self, pattern: str) -> None:
+        """Until the launch output has a line matching ``pattern`` (polled, bounded)."""
+        deadline = time.monotonic() + CLI_S
+        while not re.search(pattern, self.output()):
+            assert time.monotonic() < deadline, f"no {pattern!r} in the launch output:\n{self.output()[-3000:]}"
+            time.sleep(0.2)  # polling the log file: the event is the line appearing
+
+    def wait_for_nodes(self, names: set[str]) -> None:
+        """Poll ``ros2 node list`` until every node in ``names`` is discovered."""
+        deadline = time.monotonic() + CLI_S
+        seen: set[str] = set()
+        while time.monotonic() < deadline:
+            seen = set(self.ros2("node", "list", "--no-daemon", "--spin-time", "2").split())
+            if names <= seen:
+                return
+        raise AssertionError(f"nodes {sorted(names - seen)} not discovered; saw {sorted(seen)}")
+
+
+def start_launch(robot: str, tmp: Path, *extra: str) -> tuple[subprocess.Popen, Path, dict[str, str]]:
+    """``ros2 launch tactile_descriptors_ros <robot>.launch.py sim:=<scene> EXTRA`` in its own process group."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    env = _ros_env(tmp / "ros_home")
+    log = tmp / "launch.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, f"{robot}.launch.py", f"sim:={SCENES[robot]}",
+                                 *extra], stdout=fh, stderr=subprocess.STDOUT, env=env,
+                                preexec_fn=_sigint_default, start_new_session=True)
+    return proc, log, env
+
+
+def node_processes(proc: subprocess.Popen) -> list:
+    import psutil
+
+    return [psutil.Process(proc.pid), *psutil.Process(proc.pid).children(recursive=True)]
+
+
+def ctrl_c(proc: subprocess.Popen, log: Path) -> tuple[list, str]:
+    """SIGINT to the launch's process group (a terminal's Ctrl-C); return processes still alive and the log."""
+    import psutil
+
+    procs = node_processes(proc)
+    assert len(procs) > 1, "ros2 launch started no nodes"
+    os.killpg(proc.pid, signal.SIGINT)
+    _, alive = psutil.wait_procs(procs, timeout=4 * SIGTERM_AFTER_S)
+    proc.wait(timeout=10)
+    return alive, log.read_text(errors="replace")
+
+
+def assert_clean_shutdown(alive: list, text: str, executables: list[str]) -> None:
+    assert not alive, f"still running after Ctrl-C: {alive}\n{text[-3000:]}"
+    # A node that did not end on SIGINT within SIGTERM_AFTER_S is escalated and logged so.
+    assert "escalating to 'SIGTERM'" not in text and "escalating to 'SIGKILL'" not in text, text[-3000:]
+    for bad in ("Traceback", "RCLError", "KeyboardInterrupt", "process has died"):
+        assert bad not in text, f"{bad!r} in the launch output:\n{text[-4000:]}"
+    # ros2 launch names a process <executable>-<n>
+    finished = sorted(re.findall(r"\[INFO\] \[(\w+)-\d+\]: process has finished cleanly", text))
+    assert finished == sorted(executables), f"finished cleanly: {finished}, expected {sorted(executables)}"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def compiled_kernel():
+    """The descriptor kernel compiled into its cache before any node starts (as make setup does)."""
+    from tactile_descriptors_ros.core.fast import warm_up
+
+    warm_up()
+
+
+@pytest.fixture(scope="module", params=sorted(SCENES))
+def graph(request, tmp_path_factory) -> Iterator[Graph]:
+    robot = request.param
+    tmp = tmp_path_factory.mktemp(f"launch_{robot}")
+    proc, log, env = start_launch(robot, tmp)
+    g = Graph(robot, proc, log, env, tmp / "ros_home", "")
+    try:
+        # The type is given so that echo waits for the publisher instead of failing on an unknown topic.
+        g.first_prediction = g.ros2("topic", "echo", "--once", "--no-daemon", "/tactile/prediction",
+                                    "tactile_descriptors_msgs/msg/Prediction", timeout=FIRST_PREDICTION_S)
+        g.wait_for_nodes({f"/{s.name}" for s in build_graph(robot, sim_scene=SCENES[robot])})
+        yield g
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(timeout=4 * SIGTERM_AFTER_S)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+
+
+def test_launch_reaches_first_prediction(graph):
+    assert re.search(r"^exploration_id: [1-9]\d*$", graph.first_prediction, re.M), graph.first_prediction
+    assert graph.proc.poll() is None
+
+
+def _topics(robot: str) -> dict[str, str]:
+    """Every topic the graph publishes -> its type (frames of each body part, descriptor, prediction, diagnostics)."""
+    from tactile_descriptors_ros.nodes.window_node import message_kind
+
+    desc = load_robot(robot)
+    topics = {f"/tactile/{p.name}/frames": MSG_TYPES[message_kind(desc.cell_types[p.cell_type])]
+              for p in desc.body_parts}
+    topics.update({"/tactile/descriptor": "tactile_descriptors_msgs/msg/Descriptor",
+                   "/tactile/prediction": "tactile_descriptors_msgs/msg/Prediction",
+                   "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"})
+    return topics
+
+
+def test_every_topic_echoes_once_with_default_qos(graph):
+    topics = _topics(graph.robot)
+    echoes = {t: subprocess.Popen([str(BIN / "ros2"), "topic", "echo", "--once", "--no-daemon", "--no-arr", t, ty],
+                                  env=graph.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+              for t, ty in topics.items()}
+    failed = {}
+    for topic, p in echoes.items():
+        try:
+            out, err = p.communicate(timeout=FIRST_PREDICTION_S)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, err = p.communicate()
+        if p.returncode != 0 or not out.rstrip().endswith("---"):
+            failed[topic] = (p.returncode, out[-300:], err[-300:])
+    assert not failed, failed
+    listed = set(graph.ros2("topic", "list", "--no-daemon", "--spin-time", "3").split())
+    assert set(topics) <= listed | set(failed)
+
+
+def test_param_describe_get(graph):
+    window = "/window_node"
+    text = graph.ros2("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
+                      window, "window.length_s")
+    assert "Type: double" in text, text
+    value = graph.ros2("param", "get", "--no-daemon", "--spin-time", "3", "--timeout", "20",
+                       "/classifier_node", "eta")
+    assert re.match(r"Double value is: \d", value), value
+    robot = graph.ros2("param", "get", "--no-daemon", "--spin-time", "3", "--timeout", "20", window, "robot")
+    assert re.match(rf"String value is: \S*\b{graph.robot}(\.yaml)?$", robot.strip()), robot
+
+
+def _readme_label_command(repo_dir: Path) -> str:
+    lines = [line for line in (repo_dir / "README.md").read_text().splitlines()
+             if line.startswith("ros2 topic pub --once /tactile/label ")]
+    assert len(lines) == 1, lines
+    return lines[0]
+
+
+def _trigger(graph: Graph, service: str) -> tuple[bool, str]:
+    text = graph.ros2("service", "call", service, "std_srvs/srv/Trigger", timeout=CLI_S)
+    m = re.search(r"Trigger_Response\(success=(True|False), message='(.*)'\)", text)
+    assert m, text
+    return m.group(1) == "True", m.group(2)
+
+
+def test_readme_label_command_teaches_the_classifier(graph, repo_dir):
+    assert "has_model: false" in graph.first_prediction  # a fresh ROS_HOME: no model yet
+    subprocess.run(["bash", "-c", _readme_label_command(repo_dir)], env=graph.env, check=True, timeout=CLI_S,
+                   capture_output=True)
+    graph.wait_for_output(r"\[classifier_node\]: learned exploration \d+: 'cork'")
+    ok, message = _trigger(graph, "/classifier_node/save")
+    assert ok, message
+    assert re.search(r"saved 1 class", message), message
+    model = graph.ros_home / PKG / "classifier_node.json"
+    assert model.is_file() and '"cork"' in model.read_text()
+
+
+def test_tare_save_reset_services(graph):
+    driver = "/biotac_driver" if graph.robot == "shadow_hand" else "/skin_driver"
+    ok, message = _trigger(graph, f"{driver}/tare")
+    # The tare is refused while a sensor is touched; either way the driver answers with its reason.
+    assert message, "tare answered with no message"
+    if not ok:
+        assert "contact" in message or "force" in message, message
+    ok, message = _trigger(graph, "/classifier_node/reset")
+    assert ok, message
+    ok, message = _trigger(graph, "/classifier_node/save")
+    assert ok and "saved 0 classes" in message, message
+
+
+def test_driver_lifecycle_transitions(graph):
+    driver = "/biotac_driver" if graph.robot == "shadow_hand" else "/skin_driver"
+    lifecycle = ("lifecycle",)
+
+    def state() -> str:
+        return graph.ros2(*lifecycle, "get", "--no-daemon", "--spin-time", "3", driver).split()[0]
+
+    assert state() == "active"
+    assert "Transitioning successful" in graph.ros2(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
+                                                    driver, "deactivate")
+    assert state() == "inactive"
+    assert "Transitioning successful" in graph.ros2(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
+                                                    driver, "activate")
+    assert state() == "active"
+
+
+def test_ctrl_c_stops_every_process_cleanly(graph):
+    executables = [s.executable for s in build_graph(graph.robot, sim_scene=SCENES[graph.robot])]
+    alive, text = ctrl_c(graph.proc, graph.log)
+    assert_clean_shutdown(alive, text, executables)
+
+
+def test_ctrl_c_with_split_window_nodes(tmp_path):
+    robot = "shadow_hand"
+    proc, log, env = start_launch(robot, tmp_path, "split_window_nodes:=true")
+    specs = build_graph(robot, sim_scene=SCENES[robot], split_window_nodes=True)
+    g = Graph(robot, proc, log, env, tmp_path / "ros_home", "")
+    try:
+        g.ros2("topic", "echo", "--once", "--no-daemon", "--no-arr", "/tactile/descriptor",
+               "tactile_descriptors_msgs/msg/Descriptor", timeout=FIRST_PREDICTION_S)
+        g.wait_for_nodes({f"/{s.name}" for s in specs})
+        alive, text = ctrl_c(proc, log)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert_clean_shutdown(alive, text, [s.executable for s in specs])
