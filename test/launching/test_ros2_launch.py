@@ -217,7 +217,7 @@ def test_param_describe_get(graph):
 
 def _readme_label_command(repo_dir: Path) -> str:
     lines = [line for line in (repo_dir / "README.md").read_text().splitlines()
-             if line.startswith("ros2 topic pub --once /tactile/label ")]
+             if line.startswith("ros2 topic pub --once") and " /tactile/label " in line]
     assert len(lines) == 1, lines
     return lines[0]
 

@@ -21,6 +21,8 @@ import pytest
 pytestmark = [pytest.mark.ros, pytest.mark.ros2cli, pytest.mark.slow, pytest.mark.timeout(1800)]
 
 BIN = Path(sys.prefix) / "bin"
+#: the graph's namespace: no other graph on the machine publishes there
+NAMESPACE = f"colcon_test_{os.getpid()}"
 #: bounds that stop a hung step on a loaded 2-core machine; they measure nothing
 BUILD_S = 900.0
 LAUNCH_S = 240.0
@@ -73,12 +75,12 @@ def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir
     log = tmp_path / "launch.log"
     with open(log, "w") as fh:
         launch = subprocess.Popen(["bash", "-c", sourced + "exec ros2 launch tactile_descriptors_ros nao.launch.py "
-                                   "sim:=demo_nao"], cwd=ws, env=env, stdout=fh, stderr=subprocess.STDOUT,
+                                   f"sim:=demo_nao namespace:={NAMESPACE}"], cwd=ws, env=env, stdout=fh, stderr=subprocess.STDOUT,
                                   preexec_fn=_sigint_default, start_new_session=True)
     lib = ws / "install" / "tactile_descriptors_ros" / "lib" / "tactile_descriptors_ros"
     try:
         echo = subprocess.run(["bash", "-c", sourced + "ros2 topic echo --once --no-daemon --no-arr "
-                               "/tactile/descriptor tactile_descriptors_msgs/msg/Descriptor"],
+                               f"/{NAMESPACE}/tactile/descriptor tactile_descriptors_msgs/msg/Descriptor"],
                               cwd=ws, env=env, capture_output=True, text=True, timeout=LAUNCH_S)
         assert echo.returncode == 0 and "robot: nao" in echo.stdout, echo.stdout[-2000:] + log.read_text()[-3000:]
         nodes = [p.cmdline() for p in _children(launch.pid) if "--ros-args" in p.cmdline()]
