@@ -48,7 +48,8 @@ SKIP: dict[tuple[str, str], str] = {
         "a latency measurement of minutes; test/perf/test_latency.py measures a short one",
     ("docs/performance.md", "tactile bench --model-save"):
         "a benchmark of 100 durable saves of a 1,000-class model; test/perf/test_model_save_bench.py runs a small one",
-    ("docs/simulator.md", "tactile fit-textures ../shared/data/biotac_slide_20_50   # regenerate sim/models/*.json"):
+    ("docs/simulator.md", "tactile fit-textures ../shared/data/biotac_slide_20_50 -o texture_models   "
+                          "# fit the texture models (default ./texture_models)"):
         "fits all 20 materials of the real recordings (minutes) and rewrites the shipped models; "
         "test/sim/test_textures.py fits and checks them",
 }
