@@ -66,13 +66,14 @@ class Graph:
     first_prediction: str
 
     def ros2(self, *args: str, timeout: float = CLI_S, check: bool = True) -> str:
-        """Run ``ros2 ARGS``; return its stdout (raise with its output when it fails and ``check``)."""
+        """Run ``ros2 ARGS``; return its stdout (raise with its output when it fails and ``check``;
+        without ``check``, return stdout and stderr together)."""
         out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
                              timeout=timeout)
         if check and out.returncode != 0:
             raise AssertionError(f"ros2 {' '.join(args)} exited {out.returncode}:\n{out.stdout}\n{out.stderr}"
                                  f"\n--- launch log:\n{self.output()[-4000:]}")
-        return out.stdout
+        return out.stdout if check else out.stdout + out.stderr
 
     def output(self) -> str:
         return self.log.read_text(errors="replace")
@@ -203,6 +204,15 @@ def test_every_topic_echoes_once_with_default_qos(graph):
     assert set(topics) <= listed | set(failed)
 
 
+def test_param_set_validated(graph):
+    args = ("--no-daemon", "--spin-time", "3", "--timeout", "20")
+    assert "Set parameter successful" in graph.ros2("param", "set", *args, "/classifier_node", "eta", "0.5")
+    assert graph.ros2("param", "get", *args, "/classifier_node", "eta").strip() == "Double value is: 0.5"
+    refused = graph.ros2("param", "set", *args, "/classifier_node", "eta", "-1.0", check=False)
+    assert "Setting parameter failed" in refused, refused
+    assert graph.ros2("param", "get", *args, "/classifier_node", "eta").strip() == "Double value is: 0.5"
+
+
 def test_param_describe_get(graph):
     window = "/window_node"
     text = graph.ros2("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
@@ -237,7 +247,8 @@ def test_readme_label_command_teaches_the_classifier(graph, repo_dir):
     ok, message = _trigger(graph, "/classifier_node/save")
     assert ok, message
     assert re.search(r"saved 1 class", message), message
-    model = graph.ros_home / PKG / "classifier_node.json"
+    model = Path(message.rsplit(" to ", 1)[1])
+    assert model.is_relative_to(graph.ros_home), message  # the default model file lives under $ROS_HOME
     assert model.is_file() and '"cork"' in model.read_text()
 
 
