@@ -617,7 +617,7 @@ class BenchReport:
 
 
 def targets(report: BenchReport) -> dict:
-    """Issue 8's targets, each with the measured value and ``met`` (None: not measured).
+    """The targets, each with the measured value and ``met`` (None: not measured).
 
     Times are the package's median CPU time per window on one core (the
     descriptor path the window node runs), after the agreement check.
