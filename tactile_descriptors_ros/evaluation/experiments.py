@@ -23,19 +23,14 @@ from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
 from ..core.robot import load_robot
 from ..core.scaling import activity_mask, log_activity
 from .features import DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, select_features
-from .windows import (
-    WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
+from .windows import (  # DEFAULT_BLOCK_*: re-exported
+    DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
     draw_windows, window_lengths,
 )
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S", "evaluate", "evaluate_many", "trial_folds", "trial_cv", "descriptor_seconds",
            "draw_spec_windows", "describe_windows"]
 
-#: Block averaging of the descriptor (seconds): a window is described by the mean over its 1 s blocks,
-#: at most 0.5 s apart, so that what a model learns on one touch length holds on others
-#: (docs/evaluation.md, "Touch length").
-DEFAULT_BLOCK_S: float = 1.0
-DEFAULT_BLOCK_HOP_S: float = 0.5
 
 #: Learners of ``tactile evaluate --classifier``.
 CLASSIFIERS: tuple[str, ...] = ("svm", "pa", "gmm")

@@ -41,7 +41,15 @@ from ..datasets.recording import BiotacRecording
 from ..datasets.sources import read_source
 from ..errors import ConfigError
 
+#: Block averaging of the descriptor (seconds): a window is described by the mean over its 1 s blocks,
+#: at most 0.5 s apart, so that what a model learns on one touch length holds on others
+#: (docs/evaluation.md, "Touch length"); here, free of scikit-learn, so that the CLI
+#: can show them without importing the evaluation stack.
+DEFAULT_BLOCK_S: float = 1.0
+DEFAULT_BLOCK_HOP_S: float = 0.5
+
 __all__ = [
+    "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S",
     "parse_trials",
     "format_trials",
     "common_length_frames",

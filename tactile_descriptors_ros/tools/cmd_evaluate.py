@@ -109,7 +109,7 @@ def check_pac_rate(recordings) -> None:
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
-    from ..evaluation.experiments import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
+    from ..evaluation.windows import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
     from ..evaluation.features import DEFAULT_MODE, DESCRIPTOR_MODES
     from ..evaluation.modes import SCALINGS
 
