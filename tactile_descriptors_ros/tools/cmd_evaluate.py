@@ -20,8 +20,7 @@ processes, a teacher publishing the labels of the training trials, and the
 live descriptors and predictions are compared with this evaluation's, one
 window per trial (its first ``--window`` seconds).  Example::
 
-    tactile evaluate --live --train ../shared/data/biotac_slide_20_50 --test ../shared/data/biotac_slide_20_50 \\
-        --channels per_channel --json
+    tactile evaluate --live --train ../shared/data/biotac_slide_20_50 --test ../shared/data/biotac_slide_20_50 --json
 """
 
 from __future__ import annotations
@@ -261,8 +260,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-#: Descriptor modes the window node computes, and its ``descriptor.channels`` value for each.
-_LIVE_CHANNELS = {"paper": "averaged", "averaged": "averaged", "per_channel": "per_channel"}
 
 
 def run_live(args: argparse.Namespace) -> int:
@@ -283,10 +280,13 @@ def run_live(args: argparse.Namespace) -> int:
     if bad:
         raise ConfigError(f"--live scores one window per trial (its first --window seconds) with the nodes' "
                           f"descriptor, the contact gate off: leave out --{bad[0]}", key=bad[0])
-    channels = _LIVE_CHANNELS.get(args.channels)
-    if channels is None:
-        raise ConfigError(f"the window node does not compute descriptor mode {args.channels!r}; --live takes "
-                          f"{', '.join(sorted(_LIVE_CHANNELS))}", key="channels")
+    from ..evaluation.features import DESCRIPTOR_MODES, mode_groups
+
+    groups = list(mode_groups(args.channels))
+    if "subwindows" in groups:
+        live_modes = [m for m, g in DESCRIPTOR_MODES.items() if "subwindows" not in g]
+        raise ConfigError(f"the window node does not compute the subwindows group of mode {args.channels!r}; "
+                          f"--live takes {', '.join(['averaged', *live_modes])}", key="channels")
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     both = None if train_trials is None or test_trials is None else sorted(set(train_trials) | set(test_trials))
@@ -309,7 +309,7 @@ def run_live(args: argparse.Namespace) -> int:
             raise ConfigError("the bag's trial order differs from the replay plan")
         run = run_live_replay(
             bag, [t.start_ns for t in report.trials], [s.train for s in steps], [s.class_name for s in steps],
-            [t.end_ns for t in report.trials], window_parameters={"descriptor.channels": channels},
+            [t.end_ns for t in report.trials], window_parameters={"descriptor.groups": groups},
             classifier_parameters={"pa_update": args.pa_update, "pa_average": bool(args.pa_average),
                                    "log_activity": args.scaling == "log_standardize",
                                    "standardize": args.scaling != "none"},

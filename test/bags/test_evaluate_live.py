@@ -108,13 +108,13 @@ def test_evaluate_live_gives_the_offline_descriptors_and_predictions(biotac_data
     env = dict(os.environ)
     cmd = [sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "evaluate", "--live", "--json",
            "--train", str(biotac_data_dir), "--test", str(biotac_data_dir), "--train-trials", "1-3",
-           "--test-trials", "4-5", "--materials", "2,9,14,16", "--channels", "per_channel", "--window", "2",
+           "--test-trials", "4-5", "--materials", "2,9,14,16", "--window", "2",
            "--cache", "", "--jobs", "1", "--timeout", "60"]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert (out["windows"], out["train_windows"], out["test_windows"]) == (20, 12, 8)
-    assert out["labels_taught"] == 12 and out["n_features"] == 98
+    assert out["labels_taught"] == 12 and out["mode"] == "combined" and out["n_features"] == 261  # shipped groups
     assert out["descriptors_match"] and out["max_relative_descriptor_difference"] < 1e-9
     assert out["predictions_match"] and out["live_accuracy"] == out["offline_accuracy"]
     assert out["window_node_faults"].get("lost_frames", 0) == 0
