@@ -203,11 +203,19 @@ class DescriptorSpec:
         ``groups``.
     groups : tuple of str
         Feature groups in descriptor order (:data:`.features.GROUPS`).
+    block_s : float
+        Block averaging (:mod:`.blocks`): a window is described by the mean of
+        the descriptors of its blocks of this many seconds; 0 (the default,
+        the paper's) describes the whole window at once.
+    block_hop_s : float
+        Largest step between consecutive blocks (seconds).
     """
 
     layout: str = "concat"
     channels: str = "averaged"
     groups: tuple[str, ...] = ("paper",)
+    block_s: float = 0.0
+    block_hop_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -486,11 +494,17 @@ def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts:
         if channels not in CHANNEL_MODES:
             raise dr.error("channels", f"must be one of {CHANNEL_MODES}, got {channels!r}")
         groups = groups_of_channels(channels)
+    block_s = dr.number("block_s", 0.0)
+    block_hop_s = dr.number("block_hop_s", min(0.5, block_s) if block_s else 0.5)
+    from .blocks import check_blocks
     dr.check_unknown()
+    used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
+    check_blocks(block_s, block_hop_s, key=dr.path("block_s").rsplit(".", 1)[0], source=dr.source,
+                 rates_hz=[ct.deformation.rate_hz for ct in used])
     used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
     for ct in used:  # every group must be computable from every cell type in use, at load time
         check_groups(ct, groups, key=dr.path("groups"), source=dr.source)
-    return DescriptorSpec(layout=layout, channels=channels, groups=groups)
+    return DescriptorSpec(layout=layout, channels=channels, groups=groups, block_s=block_s, block_hop_s=block_hop_s)
 
 
 def _validate_nodes(robot: RobotDescription, source: str) -> None:

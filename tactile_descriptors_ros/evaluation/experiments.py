@@ -21,7 +21,7 @@ from ..datasets.recording import BiotacRecording
 from ..errors import ConfigError
 from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
 from ..core.robot import load_robot
-from ..core.scaling import activity_mask, log_activity
+from ..core.blocks import block_mean
 from .features import DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, select_features
 from .windows import (  # DEFAULT_BLOCK_*: re-exported
     DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
@@ -156,8 +156,10 @@ def describe_windows(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
 
     With ``block_frames`` a window's row is the *mean over its blocks*
     (:func:`~.windows.block_windows`, ``hop_frames`` apart) of the blocks'
-    rows, Activity averaged as ``log1p`` and mapped back by ``expm1`` (so
-    the log scaling of the learners sees the mean log Activity), force the
+    rows, by the core's :func:`~..core.blocks.block_mean` (Activity averaged
+    as ``log1p`` and mapped back by ``expm1``, so the log scaling of the
+    learners sees the mean log Activity) -- the values the window node's
+    :func:`~..core.blocks.describe_blocks` publishes for the same window; force the
     blocks' mean and the contact gate that mean against F_t; compute times
     add up.  Every quantity is then an average of statistics of
     equal-length stretches, whose expectation does not depend on how long
@@ -211,12 +213,10 @@ def _block_mean_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
         np.add.at(out, owner_a, values[take])
         return out / counts.reshape((-1,) + (1,) * (values.ndim - 1))
 
-    groups = {}
-    for g, values in bank.groups.items():
-        mask = activity_mask(bank.labels[g])
-        m = mean_rows(log_activity(values, mask))
-        m[:, mask] = np.expm1(m[:, mask])
-        groups[g] = m
+    # the core's block mean (Activity in log), as the window node averages its blocks
+    ends = np.cumsum(counts.astype(np.int64))[:-1]  # a window's blocks are consecutive in ``pieces``
+    groups = {g: np.stack([block_mean(rows, bank.labels[g]) for rows in np.split(values[take], ends)])
+              for g, values in bank.groups.items()}
     threshold = kwargs.get("force_threshold_n")
     if threshold is None:
         threshold = load_robot("shadow_hand").contact.force_threshold_n

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.blocks import block_starts
 from ..datasets.recording import BiotacRecording
 from ..datasets.sources import read_source
 from ..errors import ConfigError
@@ -303,27 +304,19 @@ def draw_mixed_windows(recordings: Sequence[BiotacRecording], lengths_frames: Se
 
 
 def block_windows(window: Window, block_frames: int, hop_frames: int) -> list[Window]:
-    """The equal-length blocks a window is described by (block averaging).
+    """The blocks a window is described by (block averaging): the core's :func:`~..core.blocks.block_starts`.
 
-    A window no longer than a block is its own single block.  A longer one
-    gets ``ceil((n - block) / hop) + 1`` blocks whose starts are spread
-    evenly from its first to its last possible start (so consecutive blocks
-    are at most ``hop_frames`` apart and the first and last frames are
-    covered).
+    A window no longer than a block is its own single block.
 
     Raises
     ------
     ConfigError
         For a block shorter than 3 frames or a hop that is not in ``1..block_frames``.
     """
-    if block_frames < 3 or not 1 <= hop_frames <= block_frames:
-        raise ConfigError(f"blocks of {block_frames} frames every {hop_frames} frames: need a block of >= 3 "
-                          "frames and a hop between 1 frame and the block", key="block")
-    if window.n_frames <= block_frames:
+    starts = block_starts(window.n_frames, block_frames, hop_frames)
+    if starts.size == 1:
         return [window]
-    n = int(np.ceil((window.n_frames - block_frames) / hop_frames)) + 1
-    starts = np.round(np.linspace(0, window.n_frames - block_frames, n)).astype(int)
-    return [Window(window.material, window.trial, window.start + int(s), block_frames) for s in starts]
+    return [Window(window.material, window.trial, window.start + int(s), block_frames) for s in starts.tolist()]
 
 
 def load_split(data_dir: str | Path, trials: Sequence[int] | None,

@@ -62,7 +62,8 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
     },
     "window_node": {
         "robot": "string", "body_parts": "string_array", "window.mode": "string", "descriptor.layout": "string",
-        "descriptor.channels": "string", "descriptor.groups": "string_array", "window.length_s": "double",
+        "descriptor.channels": "string", "descriptor.groups": "string_array", "descriptor.block_s": "double",
+        "descriptor.block_hop_s": "double", "window.length_s": "double",
         "window.hop_s": "double",
         "window.min_duration_s": "double", "window.max_duration_s": "double", "window.release_s": "double",
         "window.lateness_s": "double", "contact.force_threshold_n": "double",

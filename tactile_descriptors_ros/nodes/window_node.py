@@ -44,7 +44,7 @@ from collections.abc import Callable, Sequence
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
-from ..core.aggregation import describe_window
+from ..core.blocks import check_blocks, describe_blocks
 from ..core.features import check_groups, groups_of_channels, selection_name
 from ..core.fast import warm_up
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
@@ -133,6 +133,13 @@ class WindowNode(Node):
         mode = declare(self, "window.mode", w.mode, "window mode", choices=WINDOW_MODES)
         self.layout = declare(self, "descriptor.layout", d.layout, "descriptor layout", choices=LAYOUT_MODES)
         self.groups = self._declare_groups()
+        self.block_s, self.block_hop_s = check_blocks(
+            declare(self, "descriptor.block_s", d.block_s, "block averaging: describe a window by the mean over "
+                    "its blocks of this many seconds (Activity in log); 0 = one descriptor of the whole window",
+                    minimum=0.0),
+            declare(self, "descriptor.block_hop_s", d.block_hop_s, "largest step between blocks [s], at most "
+                    "descriptor.block_s", minimum=1e-3),
+            rates_hz=[ct.deformation.rate_hz for ct in self.robot.cell_types.values()])
         # What a user tunes on a running robot: checked together by the windower, applied from the next
         # window (length, hop) or onset/release decision (thresholds) on.
         tune = self._retune_windower
@@ -227,7 +234,8 @@ class WindowNode(Node):
         self.get_logger().info(
             f"robot {self.robot.name}: {len(self.robot.body_parts)} body parts "
             f"({', '.join(p.name for p in self.robot.body_parts)}), {self.windower.mode} windows, "
-            f"{self.layout} descriptors of feature groups {selection_name(self.groups)} on {self.pub.topic_name}")
+            f"{self.layout} descriptors of feature groups {selection_name(self.groups)} on {self.pub.topic_name}"
+            + (f", mean over {self.block_s:g} s blocks" if self.block_s else ""))
 
     def _declare_groups(self) -> tuple[str, ...]:
         """``descriptor.groups`` (or the legacy ``descriptor.channels``), checked against every served cell type.
@@ -424,8 +432,8 @@ class WindowNode(Node):
 
     def _publish(self, window: Window) -> None:
         try:
-            desc = describe_window(self.robot, window.cells, layout=self.layout, groups=self.groups,
-                                   force_threshold_n=self.force_threshold_n)
+            desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
+                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n)
         except SignalError as exc:
             self.faults["describe_failed"] += 1
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")

@@ -44,7 +44,7 @@ def recording(biotac_data_dir):
     return load_recordings(biotac_data_dir, trials=[3], materials=[12])[0]
 
 
-def _node_descriptor(ros_context, rec, groups):
+def _node_descriptor(ros_context, rec, groups, block_s=0.0):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -59,7 +59,8 @@ def _node_descriptor(ros_context, rec, groups):
         Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
         Parameter("window.mode", value="fixed"), Parameter("window.length_s", value=length_ns / 1e9),
         Parameter("window.hop_s", value=100.0), Parameter("window.lateness_s", value=0.0),
-        Parameter("descriptor.groups", value=list(groups)), Parameter("qos.frames.reliability", value="reliable")])
+        Parameter("descriptor.groups", value=list(groups)), Parameter("descriptor.block_s", value=block_s),
+        Parameter("qos.frames.reliability", value="reliable")])
     io = rclpy.create_node("io", context=ros_context)
     got = []
     io.create_subscription(Descriptor, "tactile/descriptor", got.append, 10)
@@ -97,6 +98,29 @@ def test_window_node_publishes_the_evaluation_values(ros_context, recording, mod
     np.testing.assert_allclose(np.asarray(msg.values), want[0], rtol=1e-9, atol=1e-9)
 
 
+def test_window_node_publishes_block_averaged_descriptors_of_the_core_function(ros_context, recording):
+    from tactile_descriptors_ros.core.blocks import describe_blocks
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.evaluation.experiments import describe_windows
+    from tactile_descriptors_ros.evaluation.features import finger_robot, mode_groups, recording_cells, select_features
+    from tactile_descriptors_ros.evaluation.windows import Window
+
+    groups = mode_groups("combined")
+    msg = _node_descriptor(ros_context, recording, groups, block_s=1.0)  # hop 0.5 s: 3 blocks of a 2 s window
+    cells = recording_cells(recording.crop_frames(START, START + N_FRAMES))
+    core = describe_blocks(finger_robot(), cells, block_s=1.0, block_hop_s=0.5, layout="concat", groups=groups)
+    assert core.extra["blocks"] == 3
+    single = describe_blocks(finger_robot(), cells, block_s=0.0, block_hop_s=0.5, layout="concat", groups=groups)
+    assert np.max(np.abs(single.values - core.values) / (np.abs(core.values) + 1e-9)) > 1e-3  # blocks are on
+    np.testing.assert_allclose(np.asarray(msg.values), core.values, rtol=1e-9, atol=1e-9)
+    # and the evaluation's block-averaged bank of the same window
+    bank = describe_windows([recording], [Window(recording.material, recording.trial, START, N_FRAMES)],
+                            block_frames=100, hop_frames=50,
+                            force_threshold_n=load_robot("shadow_hand").contact.force_threshold_n)
+    want, _ = select_features(bank, "combined", gate=True)
+    np.testing.assert_allclose(np.asarray(msg.values), want[0], rtol=1e-9, atol=1e-9)
+
+
 def test_model_of_one_selection_refuses_another_naming_both():
     from tactile_descriptors_ros.core.features import selection_labels
     from tactile_descriptors_ros.core.robot import load_robot
@@ -124,6 +148,22 @@ def test_window_node_refuses_groups_its_cell_type_cannot_feed_at_start_up(ros_co
     with pytest.raises(ConfigError, match=match):
         WindowNode(context=ros_context, parameter_overrides=[
             Parameter("robot", value="shadow_hand"), Parameter("descriptor.groups", value=groups)])
+
+
+@pytest.mark.parametrize("block_s, hop_s, key", [(-1.0, 0.5, "descriptor.block_s"),
+                                                 (1.0, 2.0, "descriptor.block_hop_s"),
+                                                 (0.02, 0.01, "descriptor.block_s")])
+def test_window_node_refuses_a_bad_block_setting_naming_the_parameter(ros_context, block_s, hop_s, key):
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.errors import ConfigError
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    with pytest.raises(ConfigError) as err:
+        WindowNode(context=ros_context, parameter_overrides=[
+            Parameter("robot", value="shadow_hand"), Parameter("descriptor.block_s", value=block_s),
+            Parameter("descriptor.block_hop_s", value=hop_s)])
+    assert key in str(err.value)
 
 
 def test_extra_channel_no_message_carries_is_refused():

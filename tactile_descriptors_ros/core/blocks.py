@@ -1,0 +1,240 @@
+"""Block averaging: a window described by the mean of the descriptors of its blocks.
+
+A touch lasts what it lasts, and some quantities of a window depend on how
+long it is (the Activity of a drifting electrode level grows with the
+window, a spectrum's resolution with its length).  Block averaging cuts a
+window into equal blocks of ``block_s`` seconds, at most ``block_hop_s``
+apart, describes every block with the same feature engine
+(:func:`~.aggregation.describe_window`: eq. 11-18, 28 and the feature groups
+of :mod:`.features`) and averages the blocks' values.  Every value is then
+an average of statistics of equal-length stretches, whose expectation does
+not depend on the window's length, so a model trained on one touch length
+holds on others.  Activity values are averaged as ``log1p`` and mapped back
+by ``expm1`` (:func:`.scaling.log_activity`): the learners scale Activity by
+``log1p``, so they see the mean log Activity.
+
+A window no longer than one block is one block, described exactly as
+:func:`~.aggregation.describe_window` describes it.
+
+The split is by time on the slow (deformation) timeline: the frame period is
+the median step of the cells' deformation stamps, a block is ``round(block_s
+/ period)`` frames and the block starts (:func:`block_starts`) are spread
+evenly from the window's first to its last possible start.  A block holds
+the deformation samples and extra channels of its frames and the vibration
+samples from its first frame up to the next frame (each frame's vibration
+samples lie between its stamp and the next one's).  Force samples follow
+the deformation samples when there are as many, else they are split in
+proportion.
+
+Per body part, the average runs over the blocks in which the part was in
+contact (eq. 13 on the block); a part in contact in no block is zeros and
+flagged ``NO_CONTACT``, as :func:`~.aggregation.describe_window` does.  The
+quality flags of the blocks are OR-ed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import ConfigError
+from .aggregation import BodyPartDescriptor, CellSignals, RobotDescriptor, describe_window, pool_body_parts
+from .descriptors import Quality
+from .robot import RobotDescription
+from .scaling import activity_mask, log_activity
+
+__all__ = ["check_blocks", "block_starts", "block_mean", "split_cells", "describe_blocks"]
+
+
+def check_blocks(block_s: float, block_hop_s: float, *, key: str = "descriptor", source: str | None = None,
+                 rates_hz: Sequence[float] = ()) -> tuple[float, float]:
+    """Check a block setting: ``block_s`` >= 0 (0 = off) and ``0 < block_hop_s <= block_s``.
+
+    ``rates_hz`` are the deformation rates of the cell types in use: a block
+    must hold at least 3 frames of each.
+
+    Returns
+    -------
+    (float, float)
+        The setting as floats.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``<key>.block_s`` or ``<key>.block_hop_s``.
+    """
+    try:
+        block, hop = float(block_s), float(block_hop_s)
+    except (TypeError, ValueError):
+        raise ConfigError(f"block_s and block_hop_s must be numbers, got {block_s!r} and {block_hop_s!r}",
+                          key=f"{key}.block_s", source=source) from None
+    if not np.isfinite(block) or block < 0.0:
+        raise ConfigError(f"must be >= 0 seconds (0 = one descriptor of the whole window), got {block_s!r}",
+                          key=f"{key}.block_s", source=source)
+    if block and not (np.isfinite(hop) and 0.0 < hop <= block):
+        raise ConfigError(f"must be > 0 and at most block_s ({block:g} s), got {block_hop_s!r}",
+                          key=f"{key}.block_hop_s", source=source)
+    for rate in rates_hz:
+        if block and round(block * float(rate)) < 3:
+            raise ConfigError(f"a block of {block:g} s holds fewer than 3 frames at {float(rate):g} Hz",
+                              key=f"{key}.block_s", source=source)
+    return block, hop
+
+
+def block_starts(n_frames: int, block_frames: int, hop_frames: int) -> np.ndarray:
+    """First frame of every block of a window of ``n_frames`` frames.
+
+    A window no longer than a block is one block (start 0).  A longer one
+    gets ``ceil((n - block) / hop) + 1`` blocks whose starts are spread
+    evenly (rounded) from 0 to ``n - block``, so consecutive blocks are at
+    most ``hop_frames`` apart and the first and last frames are covered.
+
+    Raises
+    ------
+    ConfigError
+        For a block shorter than 3 frames or a hop outside ``1..block_frames``.
+    """
+    if block_frames < 3 or not 1 <= hop_frames <= block_frames:
+        raise ConfigError(f"blocks of {block_frames} frames every {hop_frames} frames: need a block of >= 3 "
+                          "frames and a hop between 1 frame and the block", key="descriptor.block_s")
+    if n_frames <= block_frames:
+        return np.zeros(1, dtype=np.int64)
+    n = int(np.ceil((n_frames - block_frames) / hop_frames)) + 1
+    return np.round(np.linspace(0, n_frames - block_frames, n)).astype(np.int64)
+
+
+def block_mean(values: np.ndarray, labels: Sequence[str]) -> np.ndarray:
+    """Mean over the blocks (axis 0) of ``values``, Activity averaged as ``log1p`` then ``expm1``.
+
+    Parameters
+    ----------
+    values : numpy.ndarray, shape (n_blocks, n_values)
+    labels : sequence of str
+        One per value; Activity is recognised by :func:`.scaling.activity_mask`.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape[0] == 1:  # one block is the window's own descriptor, bit for bit
+        return values[0].copy()
+    mask = activity_mask(labels)
+    mean = log_activity(values, mask).mean(axis=0)
+    mean[mask] = np.expm1(mean[mask])
+    return mean
+
+
+def _frame_period_ns(cells: Mapping[int, CellSignals]) -> int | None:
+    steps = [np.diff(np.asarray(c.deformation_t_ns, dtype=np.int64)) for c in cells.values()]
+    steps = [s for s in steps if s.size]
+    if not steps:
+        return None
+    period = int(np.median(np.concatenate(steps)))
+    return period if period > 0 else None
+
+
+def _cut(sig: CellSignals, lo_ns: int, hi_ns: int) -> CellSignals:
+    """The samples of one cell in the block ``[lo_ns, hi_ns)`` of the slow timeline."""
+    t_v = np.asarray(sig.deformation_t_ns, dtype=np.int64)
+    a, b = np.searchsorted(t_v, [lo_ns, hi_ns], side="left")
+    t_f = np.asarray(sig.vibration_t_ns, dtype=np.int64)
+    f_lo = np.searchsorted(t_f, t_v[a], side="left") if a < t_v.size else t_f.size
+    f_hi = np.searchsorted(t_f, t_v[b], side="left") if b < t_v.size else t_f.size
+    force = np.asarray(sig.force_n)
+    if force.shape[0] == t_v.size:
+        fa, fb = a, b
+    else:  # force at its own rate: the same share of the window
+        n = max(t_v.size, 1)
+        fa, fb = (int(round(x * force.shape[0] / n)) for x in (a, b))
+    extra = None if sig.extra is None else np.asarray(sig.extra)[:, a:b]
+    return dataclasses.replace(sig, vibration=np.asarray(sig.vibration)[:, f_lo:f_hi], vibration_t_ns=t_f[f_lo:f_hi],
+                               deformation=np.asarray(sig.deformation)[:, a:b], deformation_t_ns=t_v[a:b],
+                               force_n=force[fa:fb], extra=extra)
+
+
+def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: float
+                ) -> list[dict[int, CellSignals]]:
+    """The blocks of a window's cell signals (see the module text); one block when the window is short.
+
+    Raises
+    ------
+    ConfigError
+        For a bad block setting (:func:`check_blocks`), or a block shorter than 3 frames.
+    """
+    block_s, block_hop_s = check_blocks(block_s, block_hop_s)
+    period = _frame_period_ns(cells)
+    if not block_s or period is None:
+        return [dict(cells)]
+    t0 = min(int(c.deformation_t_ns[0]) for c in cells.values() if len(c.deformation_t_ns))
+    t_last = max(int(c.deformation_t_ns[-1]) for c in cells.values() if len(c.deformation_t_ns))
+    n_frames = int(round((t_last - t0) / period)) + 1
+    block_frames = int(round(block_s * 1e9 / period))
+    hop_frames = max(1, int(round(block_hop_s * 1e9 / period)))
+    starts = block_starts(n_frames, block_frames, min(hop_frames, block_frames))
+    if starts.size == 1:
+        return [dict(cells)]
+    half = period // 2  # frame k of the block owns the stamps within half a period of t0 + k * period
+    out = []
+    for s in starts.tolist():
+        lo, hi = t0 + s * period - half, t0 + (s + block_frames) * period - half
+        out.append({cid: _cut(sig, lo, hi) for cid, sig in cells.items()})
+    return out
+
+
+def _mean_part(blocks: list[BodyPartDescriptor]) -> BodyPartDescriptor:
+    first = blocks[0]
+    touching = [bp for bp in blocks if bp.contact]
+    quality = 0
+    for bp in blocks:
+        quality |= int(bp.quality)
+    if touching:
+        values = block_mean(np.stack([bp.values for bp in touching]), first.labels)
+        quality &= ~int(Quality.NO_CONTACT)
+    else:
+        values = np.zeros(len(first.labels))
+        quality |= int(Quality.NO_CONTACT)
+    return BodyPartDescriptor(
+        name=first.name, cell_type=first.cell_type, values=values, labels=first.labels, contact=bool(touching),
+        cells_in_contact=max(bp.cells_in_contact for bp in blocks), cells_total=first.cells_total,
+        mean_force_n=float(np.mean([bp.mean_force_n for bp in blocks])), quality=quality)
+
+
+def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *, block_s: float,
+                    block_hop_s: float, layout: str | None = None, channels: str | None = None,
+                    groups: tuple[str, ...] | None = None, force_threshold_n: float | None = None
+                    ) -> RobotDescriptor:
+    """The robot's descriptor of one window as the mean over its blocks (block averaging).
+
+    Parameters
+    ----------
+    robot, cells, layout, channels, groups, force_threshold_n
+        As :func:`~.aggregation.describe_window`, which describes each block.
+    block_s : float
+        Block length in seconds; 0 describes the whole window at once.
+    block_hop_s : float
+        Largest step between consecutive blocks, ``0 < block_hop_s <= block_s``.
+
+    Returns
+    -------
+    RobotDescriptor
+        Per body part the :func:`block_mean` of its blocks in contact;
+        ``extra["blocks"]`` is the number of blocks.
+
+    Raises
+    ------
+    ConfigError
+        For a bad block setting, and whatever :func:`~.aggregation.describe_window` raises.
+    """
+    pieces = split_cells(cells, block_s, block_hop_s)
+    kw = {"layout": layout, "channels": channels, "groups": groups, "force_threshold_n": force_threshold_n}
+    descs = [describe_window(robot, piece, **kw) for piece in pieces]
+    if len(descs) == 1:
+        descs[0].extra["blocks"] = 1
+        return descs[0]
+    first = descs[0]
+    parts = tuple(_mean_part([d.body_parts[i] for d in descs]) for i in range(len(first.body_parts)))
+    if first.layout == "pooled":
+        values, labels = pool_body_parts(robot, parts)
+    else:
+        values, labels = np.concatenate([bp.values for bp in parts]), first.labels
+    return RobotDescriptor(first.robot, first.layout, first.channels, parts, values, labels,
+                           extra={"blocks": len(descs)})
