@@ -5,9 +5,10 @@ nodes, one window per trial (its first ``n_frames`` frames, the whole
 common-length crop with ``--window whole``).  This module computes what the
 nodes must produce, with the evaluation's own code and no ROS:
 
-* descriptors: :func:`~.features.compute_bank` and
+* descriptors: :func:`~.experiments.describe_windows` and
   :func:`~.features.select_features` of those windows, exactly as
-  ``tactile evaluate`` describes any window (the contact gate off, as there);
+  ``tactile evaluate`` describes any window (the contact gate off, as there;
+  block averaging as ``--block``, the window node's ``descriptor.block_s``);
 * predictions: the classifier node's online protocol over the windows in
   replay order -- every descriptor updates the running feature statistics and
   is predicted (:meth:`~..core.learning.OnlineClassifier.observe`, then
@@ -30,7 +31,8 @@ from ..core.labels import LEARN, LabelProtocol
 from ..core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
 from ..datasets.biotac_slide import BiotacRecording
 from ..errors import ConfigError
-from .features import compute_bank, mode_groups, select_features
+from .experiments import describe_windows
+from .features import mode_groups, select_features
 from .windows import Window
 
 __all__ = ["LiveStep", "OfflineReplay", "plan_steps", "check_segmentable", "offline_replay", "compare",
@@ -118,7 +120,8 @@ def check_segmentable(recordings: Sequence[BiotacRecording], steps: Sequence[Liv
 
 def offline_replay(recordings: Sequence[BiotacRecording], steps: Sequence[LiveStep], n_frames: int, mode: str, *,
                    pa_update: str = RECOMMENDED_PA_UPDATE, pa_average: bool = RECOMMENDED_PA_AVERAGE,
-                   scaling: str = "log_standardize", cache_dir: str | None = None, jobs: int = 1) -> OfflineReplay:
+                   scaling: str = "log_standardize", cache_dir: str | None = None, jobs: int = 1,
+                   block_s: float = 0.0, block_hop_s: float = 0.5) -> OfflineReplay:
     """Descriptors of each step's window (frames ``0:n_frames``) and the node protocol's predictions.
 
     Parameters
@@ -135,12 +138,17 @@ def offline_replay(recordings: Sequence[BiotacRecording], steps: Sequence[LiveSt
         The classifier node's ``pa_update`` and ``pa_average``.
     scaling : {"log_standardize", "standardize", "none"}
         The classifier node's ``log_activity`` and ``standardize``.
+    block_s, block_hop_s : float
+        Block averaging, the window node's ``descriptor.block_s`` and
+        ``descriptor.block_hop_s`` (0: one descriptor of the whole window).
     """
     if not steps:
         raise ConfigError("nothing to replay")
     windows = [Window(s.material, s.trial, 0, int(n_frames)) for s in steps]
-    bank = compute_bank(recordings, windows, cache_dir=cache_dir, jobs=jobs,
-                        subwindows="subwindows" in mode_groups(mode))
+    blocks = ({"block_frames": int(round(block_s * 100.0)), "hop_frames": int(round(block_hop_s * 100.0))}
+              if block_s else {})
+    bank = describe_windows(recordings, windows, cache_dir=cache_dir, jobs=jobs,
+                            subwindows="subwindows" in mode_groups(mode), **blocks)
     X, labels = select_features(bank, mode, gate=False)
     # The classifier node's model (eta 1, its default) and its label protocol: each window is exploration
     # k + 1, as the window node numbers them, and a training window's label names it.

@@ -189,13 +189,7 @@ def run(args: argparse.Namespace) -> int:
     materials = parse_classes(args.materials) if args.materials else None
     if args.train_windows < 1 or args.test_windows < 1 or args.cv_repeats < 1:
         raise ConfigError("--train-windows, --test-windows and --cv-repeats must be >= 1")
-    if args.block is None:
-        from ..evaluation.experiments import DEFAULT_BLOCK_S
-
-        args.block = DEFAULT_BLOCK_S
-    if args.block < 0 or not args.block_hop > 0 or (args.block and args.block_hop > args.block):
-        raise ConfigError(f"--block {args.block:g} / --block-hop {args.block_hop:g}: need a block >= 0 "
-                          "(0 = off) and a hop > 0 no longer than the block", key="block")
+    _block_setting(args)
     classifiers = CLASSIFIERS if args.classifier == "all" else (args.classifier,)
     drop = tuple(q.strip() for q in args.drop.split(",") if q.strip())
     test_mapping = args.test_mapping or args.mapping
@@ -262,6 +256,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 
+def _block_setting(args: argparse.Namespace) -> None:
+    """Resolve ``--block`` (default :data:`~..evaluation.windows.DEFAULT_BLOCK_S`) and check it with ``--block-hop``."""
+    if args.block is None:
+        from ..evaluation.windows import DEFAULT_BLOCK_S
+
+        args.block = DEFAULT_BLOCK_S
+    if args.block < 0 or not args.block_hop > 0 or (args.block and args.block_hop > args.block):
+        raise ConfigError(f"--block {args.block:g} / --block-hop {args.block_hop:g}: need a block >= 0 "
+                          "(0 = off) and a hop > 0 no longer than the block", key="block")
+
+
 def run_live(args: argparse.Namespace) -> int:
     """``--live``: offline and live on the same windows; exit 1 unless descriptors and predictions agree."""
     import tempfile
@@ -275,7 +280,7 @@ def run_live(args: argparse.Namespace) -> int:
     if Path(args.train).resolve() != Path(args.test).resolve() or (args.test_mapping or args.mapping) != args.mapping:
         raise ConfigError("--live replays one source: give the same source to --train and --test", key="test")
     refusals = {"test-window": args.test_window not in (None, args.window), "gate": args.gate, "drop": args.drop,
-                "windows": args.windows != "random", "block": bool(args.block)}
+                "windows": args.windows != "random"}
     bad = [k for k, v in refusals.items() if v]
     if bad:
         raise ConfigError(f"--live scores one window per trial (its first --window seconds) with the nodes' "
@@ -299,9 +304,10 @@ def run_live(args: argparse.Namespace) -> int:
     n_frames = window_frames(args.window, 100.0, common)
     steps = plan_steps(recs, train_trials, test_trials)
     check_segmentable(recs, steps, n_frames)
+    _block_setting(args)  # the window node averages the same blocks (descriptor.block_s / block_hop_s)
     offline = offline_replay(recs, steps, n_frames, args.channels, pa_update=args.pa_update,
                              pa_average=args.pa_average, scaling=args.scaling, cache_dir=args.cache or None,
-                             jobs=args.jobs)
+                             jobs=args.jobs, block_s=args.block, block_hop_s=args.block_hop)
     with tempfile.TemporaryDirectory(prefix="tactile_evaluate_live_") as tmp:
         bag = Path(tmp) / "bag"
         report = import_recordings(recs, bag, options=ImportOptions(max_frames=n_frames, order="trial"))
@@ -309,13 +315,15 @@ def run_live(args: argparse.Namespace) -> int:
             raise ConfigError("the bag's trial order differs from the replay plan")
         run = run_live_replay(
             bag, [t.start_ns for t in report.trials], [s.train for s in steps], [s.class_name for s in steps],
-            [t.end_ns for t in report.trials], window_parameters={"descriptor.groups": groups},
+            [t.end_ns for t in report.trials], window_parameters={"descriptor.groups": groups, "descriptor.block_s": float(args.block),
+                                                         "descriptor.block_hop_s": float(args.block_hop)},
             classifier_parameters={"pa_update": args.pa_update, "pa_average": bool(args.pa_average),
                                    "log_activity": args.scaling == "log_standardize",
                                    "standardize": args.scaling != "none"},
             timeout_s=args.timeout)
     out = compare(offline, run.values, run.labels, run.predictions)
     out.update({"mode": args.channels, "window_frames": n_frames, "window_s": n_frames / 100.0,
+                "block_s": float(args.block), "block_hop_s": float(args.block_hop),
                 "train_trials": sorted(train_trials), "test_trials": sorted(test_trials),
                 "classes": sorted({s.class_name for s in steps}), "labels_taught": run.labels_taught,
                 "n_features": len(run.labels), "window_node_faults": run.window_node_faults,

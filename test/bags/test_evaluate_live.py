@@ -115,6 +115,7 @@ def test_evaluate_live_gives_the_offline_descriptors_and_predictions(biotac_data
     out = json.loads(proc.stdout.strip().splitlines()[-1])
     assert (out["windows"], out["train_windows"], out["test_windows"]) == (20, 12, 8)
     assert out["labels_taught"] == 12 and out["mode"] == "combined" and out["n_features"] == 261  # shipped groups
+    assert (out["block_s"], out["block_hop_s"]) == (1.0, 0.5)  # evaluate's default: block averaging on
     assert out["descriptors_match"] and out["max_relative_descriptor_difference"] < 1e-9
     assert out["predictions_match"] and out["live_accuracy"] == out["offline_accuracy"]
     assert out["window_node_faults"].get("lost_frames", 0) == 0
