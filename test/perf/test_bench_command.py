@@ -45,6 +45,11 @@ def test_bench_command_json_smoke(capsys):
         t = targets[f"{key}_best_mode_time"]
         assert t["cpu_ms"] == best[key]["package"]["cpu_ms"] and t["met"] == (t["cpu_ms"] <= limit)
         assert t["checked_max_abs_diff"] < 1e-6
+    # the window node's path: the Shadow Hand averages 1 s blocks (timed beside one descriptor), the NAO does not
+    hand = best["shadow_hand"]
+    assert (hand["block_s"], hand["block_hop_s"]) == (1.0, 0.5) and hand["blocks"]["cpu_ms"] > 0
+    assert hand["ratio_blocks_to_single_cpu"] == pytest.approx(hand["blocks"]["cpu_ms"] / hand["package"]["cpu_ms"])
+    assert best["nao"]["blocks"] is None and best["nao"]["ratio_blocks_to_single_cpu"] is None
     assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 1.0)
     assert targets["nao_speedup"]["speedup_cpu"] == pytest.approx(report["cases"][1]["speedup_cpu"])
     assert targets["skin_10000_time"]["met"] is None and targets["latency"]["met"] is None  # not measured
