@@ -141,8 +141,8 @@ def register(subparsers) -> None:
     p.add_argument("--block", type=float, default=None,
                    help="describe a window by the mean over its blocks of this many seconds, at most "
                    f"--block-hop apart (default {DEFAULT_BLOCK_S:g}; keeps a model trained on one touch length "
-                   "right on others, docs/evaluation.md); 0 = one descriptor of the whole window (what the window "
-                   "node computes, and what --live compares)")
+                   "right on others, docs/evaluation.md); 0 = one descriptor of the whole window; the window node "
+                   "averages the same blocks (descriptor.block_s), --live on both sides")
     p.add_argument("--block-hop", type=float, default=DEFAULT_BLOCK_HOP_S,
                    help=f"largest step between blocks in seconds (default {DEFAULT_BLOCK_HOP_S:g})")
     p.add_argument("--channels", "--mode", dest="channels", default=DEFAULT_MODE,
