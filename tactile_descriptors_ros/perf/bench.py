@@ -451,9 +451,14 @@ class BestModeResult:
     block_hop_s: float = 0.0
     blocks: Timing | None = None  # the window node's path with the shipped block averaging (None: off)
 
+    @property
+    def shipped(self) -> Timing:
+        """The path the window node runs with the shipped description: blocks when they are on."""
+        return self.blocks if self.blocks is not None else self.package
+
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["met"] = bool(self.package.cpu_ms <= self.target_ms)
+        d["met"] = bool(self.shipped.cpu_ms <= self.target_ms)
         d["ratio_to_paper_cpu"] = self.package.cpu_ms / self.paper.cpu_ms if self.paper.cpu_ms > 0 else math.inf
         d["ratio_blocks_to_single_cpu"] = (None if self.blocks is None or self.package.cpu_ms <= 0
                                            else self.blocks.cpu_ms / self.package.cpu_ms)
@@ -652,12 +657,14 @@ def targets(report: BenchReport) -> dict:
     for key, limit_ms in BEST_MODE_TARGETS.items():
         b = best.get(key)
         out[f"{key}_best_mode_time"] = {
-            "target": f"<= {limit_ms:g} ms CPU per window, shipped feature groups",
+            "target": f"<= {limit_ms:g} ms CPU per window, shipped feature groups and block averaging",
             "groups": None if b is None else list(b.groups),
-            "cpu_ms": None if b is None else b.package.cpu_ms,
-            "wall_ms": None if b is None else b.package.wall_ms,
+            "block_s": None if b is None else b.block_s,
+            "cpu_ms": None if b is None else b.shipped.cpu_ms,
+            "wall_ms": None if b is None else b.shipped.wall_ms,
+            "single_window_cpu_ms": None if b is None else b.package.cpu_ms,
             "checked_max_abs_diff": None if b is None else b.max_abs_diff,
-            "met": None if b is None else bool(b.package.cpu_ms <= limit_ms)}
+            "met": None if b is None else bool(b.shipped.cpu_ms <= limit_ms)}
     lat = report.latency
     median = (lat or {}).get("e2e", {}).get("median_ms") if lat else None
     out["latency"] = {"target": f"sensor stamp -> prediction <= {LATENCY_TARGET_MS:g} ms at NAO full rate "

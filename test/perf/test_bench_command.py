@@ -42,8 +42,12 @@ def test_bench_command_json_smoke(capsys):
     assert best["shadow_hand"]["groups"] == ["per_channel", "bands", "levels", "statistics"]
     assert best["shadow_hand"]["n_values"] == 5 * 261 and best["nao"]["n_values"] == 7 * 131
     for key, limit in (("shadow_hand", 2.0), ("nao", 10.0)):
+        # judged on the path the window node runs: block averaging where the description ships it
         t = targets[f"{key}_best_mode_time"]
-        assert t["cpu_ms"] == best[key]["package"]["cpu_ms"] and t["met"] == (t["cpu_ms"] <= limit)
+        shipped = best[key]["blocks"] if best[key]["blocks"] is not None else best[key]["package"]
+        assert t["cpu_ms"] == shipped["cpu_ms"] and t["met"] == (t["cpu_ms"] <= limit)
+        assert t["single_window_cpu_ms"] == best[key]["package"]["cpu_ms"]
+        assert best[key]["met"] == t["met"]
         assert t["checked_max_abs_diff"] < 1e-6
     # the window node's path: the Shadow Hand averages 1 s blocks (timed beside one descriptor), the NAO does not
     hand = best["shadow_hand"]
