@@ -190,6 +190,7 @@ class _CellState:
         self.tare: np.ndarray | None = None  # latest deformation tare reported
         self.force = SampleStream(1, np.float64)
         self.last_force_n = 0.0  # mean over the last ``smooth_s`` of force samples
+        self.hot_until_ns: int | None = None  # last stamp of a chunk with a force at or above release
         self.below_since_ns: int | None = None
 
 
@@ -264,7 +265,8 @@ class Windower:
         self._onset_ns: int | None = None
         self._emitted_current = False
         self._released_since: int | None = None
-        self._now_ns = 0  # the watermark of the current exploration poll
+        self._now_ns = 0  # the time of the current exploration step
+        self._swept_ns: int | None = None  # the watermark the state machine has run to
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
@@ -447,6 +449,8 @@ class Windower:
                 st.force.append(t_f[keep], f[None, keep])
             if self._exploration:  # onset and release only; fixed windows never read it
                 self._update_last_force(st)
+                if f.size and np.fmax.reduce(f) >= self.release_n:  # fmax: NaN never hides a touch
+                    st.hot_until_ns = int(t_f[-1])
         end = int(t_v[-1])
         self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
         return True
@@ -472,6 +476,7 @@ class Windower:
             st.last_force_n = float(finite.mean())
 
     def _reset_time(self) -> None:
+        self._swept_ns = None
         self._next_start_ns = None
         self._onset_ns = None
         self._emitted_current = False
@@ -549,10 +554,106 @@ class Windower:
         return max(forces) >= self.onset_n, max(forces) < self.release_n
 
     def _poll_exploration(self) -> list[Window]:
+        """Run the exploration state machine up to the watermark, stopping at every moment it could change.
+
+        Between the previous poll's watermark and this one the machine is
+        stepped at each time where onset, release, re-contact, the end of the
+        release time or the longest duration falls (found on the smoothed
+        force of the cells that touched), then at the watermark: the windows
+        are those of a poll after every sample, whatever the batches were.
+        """
         out: list[Window] = []
         now = self._watermark()
         if now is None:
             return out
+        if self._swept_ns is None:  # from the first force sample held
+            t = min(int(st.force._t[st.force._lo]) for st in self._cells.values() if len(st.force)) - 1
+        else:
+            t = min(self._swept_ns, now)
+        while True:
+            nxt = self._next_event(t, now)
+            if nxt is None:
+                break
+            out += self._step(nxt)
+            t = nxt
+        out += self._step(now)
+        self._swept_ns = now
+        return out
+
+    def _next_event(self, after_ns: int, until_ns: int) -> int | None:
+        """The first time in ``(after_ns, until_ns)`` where a step could change the state (None: none before).
+
+        Only cells with a force at or above release since ``after_ns - smooth_s``
+        can move the smoothed force across a threshold; while one of them
+        stays above release on every raw sample, no release can happen, so a
+        long touch costs one check of its strongest cell per poll.
+        """
+        if after_ns >= until_ns:
+            return None
+        since = after_ns - self.smooth_ns
+        hot = [st for st in self._cells.values() if st.hot_until_ns is not None and st.hot_until_ns >= since]
+        candidates = []
+        if self._onset_ns is None:  # idle: an onset needs a cell whose raw force reached onset
+            level_cells = [st for st in hot if self._raw(st, since, until_ns, np.fmax) >= self.onset_n]
+            first = self._first_crossing(level_cells, after_ns, until_ns, lambda c: c >= self.onset_n)
+            if first is not None:
+                candidates.append(first)
+        else:
+            if not self._emitted_current:
+                candidates.append(self._onset_ns + self.max_ns)
+            if self._released_since is None:  # open: a release needs every cell below release
+                if not hot:
+                    candidates.append(after_ns + 1)  # nobody touches: released from here on
+                else:
+                    strongest = max(hot, key=lambda st: st.last_force_n)
+                    if not self._raw(strongest, since, until_ns, np.minimum) >= self.release_n:  # NaN: look closer
+                        first = self._first_crossing(hot, after_ns, until_ns, lambda c: c < self.release_n)
+                        if first is not None:
+                            candidates.append(first)
+            else:  # released: a new contact needs a cell at or above release, else the release time ends
+                level_cells = [st for st in hot if self._raw(st, since, until_ns, np.fmax) >= self.release_n]
+                first = self._first_crossing(level_cells, after_ns, until_ns, lambda c: c >= self.release_n)
+                if first is not None:
+                    candidates.append(first)
+                candidates.append(self._released_since + self.release_ns)
+        candidates = [c for c in candidates if after_ns < c < until_ns]
+        return min(candidates) if candidates else None
+
+    @staticmethod
+    def _raw(st: _CellState, start_ns: int, end_ns: int, reduce) -> float:
+        """``reduce`` (np.fmax, np.minimum) of the cell's raw force samples in ``[start_ns, end_ns]`` (NaN if none)."""
+        _, f, _ = st.force.between(start_ns, end_ns + 1)
+        return float(reduce.reduce(f[0])) if f.shape[1] else math.nan
+
+    def _first_crossing(self, cells: list[_CellState], after_ns: int, until_ns: int, test) -> int | None:
+        """The first force stamp of ``cells`` in ``(after_ns, until_ns)`` where the highest smoothed force passes ``test``."""
+        if not cells:
+            return None
+        grid = np.unique(np.concatenate([st.force.between(after_ns + 1, until_ns)[0] for st in cells]))
+        if not grid.size:
+            return None
+        level = np.max([self._smoothed_at(st, grid) for st in cells], axis=0)
+        hit = np.flatnonzero(test(level))
+        return int(grid[hit[0]]) if hit.size else None
+
+    def _smoothed_at(self, st: _CellState, times_ns: np.ndarray) -> np.ndarray:
+        """:meth:`_force_at` at many times at once (mean of the finite force samples in the ``smooth_s`` up to each)."""
+        t, f, _ = st.force.between(int(times_ns[0]) - self.smooth_ns, int(times_ns[-1]) + 1)
+        v = f[0]
+        ok = np.isfinite(v)
+        csum = np.concatenate(([0.0], np.cumsum(np.where(ok, v, 0.0))))
+        count = np.concatenate(([0], np.cumsum(ok)))
+        i = np.searchsorted(t, times_ns - self.smooth_ns, side="left")
+        j = np.searchsorted(t, times_ns, side="right")
+        n = count[j] - count[i]
+        mean = (csum[j] - csum[i]) / np.maximum(n, 1)
+        if np.all(n > 0):
+            return mean
+        return np.array([m if k > 0 else self._force_at(st, int(q)) for m, k, q in zip(mean, n, times_ns)])
+
+    def _step(self, now: int) -> list[Window]:
+        """One step of the exploration state machine at ``now`` (at or before the watermark)."""
+        out: list[Window] = []
         self._now_ns = now
         touching, released = self._contact_at(now)
         if self._onset_ns is None:

@@ -225,3 +225,27 @@ def _feed_from(w: Windower, t: int, schedule, rng, cell_id: int = 1):
             out += w.poll()
             t += 100 * MS
     return out + w.flush()
+
+
+@pytest.mark.parametrize("batch", [1, 3, 7, 1000])
+def test_exploration_windows_do_not_depend_on_how_many_chunks_a_poll_sees(batch):
+    """Polling after every chunk or after a burst of them (a node catching up, a replay without pacing) gives
+    the same windows: a whole touch, a release and a short re-touch inside one burst are all seen."""
+    robot = load_robot("shadow_hand")
+    schedule = [(1.0, 0.0), (3.0, 1.0), (0.5, 0.0), (0.2, 1.0), (0.3, 0.0), (2.5, 2.0), (1.0, 0.0),
+                (12.0, 1.0), (1.0, 0.0)]
+    rng = np.random.default_rng(4)
+    chunks, t = [], 0
+    for duration_s, force in schedule:
+        for _ in range(int(round(duration_s * 10))):
+            chunks.append(_chunk(t, force, rng))
+            t += 100 * MS
+    w = Windower(robot, mode="exploration", min_duration_s=0.1, max_duration_s=10.0)
+    wins = []
+    for k in range(0, len(chunks), batch):
+        w.add_many([(1, c) for c in chunks[k:k + batch]])
+        wins += w.poll()
+    wins += w.flush()
+    got = [(x.exploration_id, x.start_ns // MS, x.end_ns // MS) for x in wins]
+    # touch 1.0-4.0 s, re-touch 4.5-4.7 s, touch 5.0-7.5 s, 8.5 s onwards cut at the longest duration
+    assert got == [(1, 1000, 4000), (2, 4500, 4700), (3, 5000, 7500), (4, 8500, 18500)]
