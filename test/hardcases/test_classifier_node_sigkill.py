@@ -168,7 +168,9 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
             assert spin_until(lambda: version() >= eid, 60.0, first), \
                 f"label {eid} not saved within 60 s (file version {version()}):\n{first.tail()}"
         assert version() == _N_CONFIRMED
-        assert {p.exploration_id for p in preds} >= set(range(1, _N_CONFIRMED + 1))
+        # the node predicts before it learns, but its predictions may still be on their way to this executor
+        assert spin_until(lambda: {p.exploration_id for p in preds} >= set(range(1, _N_CONFIRMED + 1)), 30.0,
+                          first), f"predictions {sorted({p.exploration_id for p in preds})}:\n{first.tail()}"
 
         before_kill = endpoint_gids()
 
