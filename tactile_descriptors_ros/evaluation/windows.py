@@ -39,7 +39,7 @@ import numpy as np
 
 from ..core.blocks import block_starts
 from ..datasets.recording import BiotacRecording
-from ..datasets.sources import read_source
+from ..datasets.sources import format_numbers, read_source
 from ..errors import ConfigError
 
 #: Block averaging of the descriptor (seconds): a window is described by the mean over its 1 s blocks,
@@ -107,18 +107,7 @@ def parse_trials(text: str | Sequence[int] | None) -> list[int] | None:
 
 def format_trials(trials: Sequence[int] | None) -> str:
     """Inverse of :func:`parse_trials` (compact ``a-b,c`` form)."""
-    if trials is None:
-        return "all"
-    t = sorted(trials)
-    parts, start, prev = [], t[0], t[0]
-    for x in t[1:] + [None]:
-        if x is not None and x == prev + 1:
-            prev = x
-            continue
-        parts.append(f"{start}-{prev}" if prev > start else f"{start}")
-        if x is not None:
-            start = prev = x
-    return ",".join(parts)
+    return "all" if trials is None else format_numbers(trials)
 
 
 def common_length_frames(recordings: Sequence[BiotacRecording]) -> int:
