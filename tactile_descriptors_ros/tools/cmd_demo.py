@@ -210,6 +210,9 @@ def run_demo(robot: str, scene: str | None = None, speed: float = 1.0, split_win
         pass
     finally:
         procs.stop()
+        # the executor before the context: left to the garbage collector after the context's shutdown,
+        # its SIGINT guard condition raises InvalidHandle at exit
+        executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         tmp.cleanup()
