@@ -85,6 +85,21 @@ class Graph:
             assert time.monotonic() < deadline, f"no {pattern!r} in the launch output:\n{self.output()[-3000:]}"
             time.sleep(0.2)  # polling the log file: the event is the line appearing
 
+    def ros2_node(self, *args: str) -> str:
+        """``ros2 ARGS`` for a verb that looks its node up once per call (``ros2 lifecycle``): asked
+        again while the CLI's own discovery has not yet seen the node ("Node not found"), which on a
+        loaded machine can take longer than one ``--spin-time``; any other failure raises at once."""
+        deadline = time.monotonic() + CLI_S
+        while True:
+            out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
+                                 timeout=CLI_S)
+            if out.returncode == 0:
+                return out.stdout
+            text = out.stdout + out.stderr
+            if "Node not found" not in text or time.monotonic() > deadline:
+                raise AssertionError(f"ros2 {' '.join(args)} exited {out.returncode}:\n{text}"
+                                     f"\n--- launch log:\n{self.output()[-4000:]}")
+
     def wait_for_nodes(self, names: set[str]) -> None:
         """Poll ``ros2 node list`` until every node in ``names`` is discovered."""
         deadline = time.monotonic() + CLI_S
@@ -293,14 +308,14 @@ def test_driver_lifecycle_transitions(graph):
     lifecycle = ("lifecycle",)
 
     def state() -> str:
-        return graph.ros2(*lifecycle, "get", "--no-daemon", "--spin-time", "3", driver).split()[0]
+        return graph.ros2_node(*lifecycle, "get", "--no-daemon", "--spin-time", "3", driver).split()[0]
 
     assert state() == "active"
-    assert "Transitioning successful" in graph.ros2(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
-                                                    driver, "deactivate")
+    assert "Transitioning successful" in graph.ros2_node(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
+                                                         driver, "deactivate")
     assert state() == "inactive"
-    assert "Transitioning successful" in graph.ros2(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
-                                                    driver, "activate")
+    assert "Transitioning successful" in graph.ros2_node(*lifecycle, "set", "--no-daemon", "--spin-time", "3",
+                                                         driver, "activate")
     assert state() == "active"
 
 
