@@ -24,39 +24,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from descriptor_msgs import LABELS, descriptor_msg
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 _REPO = Path(__file__).resolve().parents[2]
-_LABELS = [f"index/{n}" for n in ("A_pac", "M_pac", "C_pac", "A_pdc", "M_pdc", "C_pdc", "L_cor", "N_cor")]
 _N_CONFIRMED = 4  # labels whose save we wait for before the kill
 
 
 def _class(eid: int) -> str:
     return f"mat_{eid}"  # one class per exploration: a label's presence is its class's presence
-
-
-def _descriptor(eid: int, rng: np.random.Generator):
-    from tactile_descriptors_msgs.msg import Descriptor
-
-    msg = Descriptor()
-    msg.robot = "shadow_hand"
-    msg.exploration_id = eid
-    msg.window_mode = Descriptor.WINDOW_EXPLORATION
-    msg.layout_mode = Descriptor.MODE_CONCAT
-    msg.channel_mode = Descriptor.CHANNELS_AVERAGED
-    msg.window_start.sec = 10 * eid
-    msg.window_end.sec = 10 * eid + 2
-    msg.header.stamp = msg.window_end
-    msg.body_parts = ["index"]
-    msg.contact = [True]
-    msg.cells_in_contact = [1]
-    msg.cells_total = [1]
-    msg.mean_force_n = [2.0]
-    msg.quality = [0]
-    msg.labels = _LABELS
-    msg.values = rng.uniform(0.5, 5.0, len(_LABELS)).tolist()  # positive: Activity values are logged
-    return msg
 
 
 def _file_state(path: Path) -> dict | None:
@@ -163,7 +140,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         # ---- first life: N labels, each confirmed saved (the file's version reaches it)
         connected(first, {})
         for eid in range(1, _N_CONFIRMED + 1):
-            pub_desc.publish(_descriptor(eid, rng))
+            pub_desc.publish(descriptor_msg(eid, rng))
             pub_label.publish(Label(exploration_id=eid, class_name=_class(eid)))
             assert spin_until(lambda: version() >= eid, 60.0, first), \
                 f"label {eid} not saved within 60 s (file version {version()}):\n{first.tail()}"
@@ -176,7 +153,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
 
         # ---- one more label, then SIGKILL at once: it may or may not have been learned and saved
         last = _N_CONFIRMED + 1
-        pub_desc.publish(_descriptor(last, rng))
+        pub_desc.publish(descriptor_msg(last, rng))
         pub_label.publish(Label(exploration_id=last, class_name=_class(last)))
         # kill the moment the node reports the label (or after 5 s without a report): a node that logged before
         # its save finished would lose a reported label here
@@ -198,14 +175,14 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         assert model.pa.updates == v and len(model.classes) == v
         assert model.classes == [_class(e) for e in range(1, v + 1)]  # all confirmed; the last fully or not at all
         assert {_class(e) for e in reported} <= set(model.classes)  # no reported label lost
-        assert model.labels == tuple(_LABELS)
+        assert model.labels == tuple(LABELS)
 
         # ---- second life: loads that model, predicts with it, keeps learning and saving
         preds.clear()
         second = _Node(ns, model_path, env, tmp_path / "second.log", load_model=True)
         connected(second, before_kill)
         probe = 100
-        probe_msg = _descriptor(probe, rng)
+        probe_msg = descriptor_msg(probe, rng)
         deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline and not any(p.exploration_id == probe for p in preds):
             pub_desc.publish(probe_msg)  # unlabelled and the same exploration: repeating it changes no label
@@ -220,7 +197,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         pub_label.publish(Label(exploration_id=probe, class_name="after_restart"))
         assert spin_until(lambda: version() >= v + 1, 60.0, second), \
             f"the restarted node did not save its new label (file version {version()}):\n{second.tail()}"
-        pub_desc.publish(_descriptor(probe + 1, rng))
+        pub_desc.publish(descriptor_msg(probe + 1, rng))
         assert spin_until(lambda: any(p.exploration_id == probe + 1 for p in preds), 60.0, second)
         p2 = next(p for p in preds if p.exploration_id == probe + 1)
         assert list(p2.class_names) == model.classes + ["after_restart"] and p2.updates == v + 1

@@ -4,35 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
+from descriptor_msgs import descriptor_msg
 from helpers import spin_until
 
 pytestmark = pytest.mark.ros
-
-_LABELS = [f"index/{n}" for n in ("A_pac", "M_pac", "C_pac", "A_pdc", "M_pdc", "C_pdc", "L_cor", "N_cor")]
-
-
-def _descriptor(eid: int, rng: np.random.Generator):
-    from tactile_descriptors_msgs.msg import Descriptor
-
-    msg = Descriptor()
-    msg.robot = "shadow_hand"
-    msg.exploration_id = eid
-    msg.window_mode = Descriptor.WINDOW_EXPLORATION
-    msg.layout_mode = Descriptor.MODE_CONCAT
-    msg.channel_mode = Descriptor.CHANNELS_AVERAGED
-    msg.window_start.sec = 10 * eid
-    msg.window_end.sec = 10 * eid + 2
-    msg.header.stamp = msg.window_end
-    msg.body_parts = ["index"]
-    msg.contact = [True]
-    msg.cells_in_contact = [1]
-    msg.cells_total = [1]
-    msg.mean_force_n = [2.0]
-    msg.quality = [0]
-    msg.labels = _LABELS
-    msg.values = rng.uniform(0.5, 5.0, len(_LABELS)).tolist()
-    return msg
 
 
 @pytest.fixture
@@ -69,7 +44,7 @@ def _describe(g, eids, rng) -> None:
     for k in range(0, len(eids), 25):
         n = len(g["preds"])
         for eid in eids[k:k + 25]:
-            g["desc"].publish(_descriptor(eid, rng))
+            g["desc"].publish(descriptor_msg(eid, rng))
         want = n + len(eids[k:k + 25])
         assert spin_until(g["ex"], lambda: len(g["preds"]) >= want, 60), f"{len(g['preds'])} of {want} predictions"
 
