@@ -394,6 +394,20 @@ def _random_values(rng: random.Random, m: Modality) -> tuple[int, ...]:
     return (rng.randrange(-32767, 32768),)
 
 
+def _next_known_sample(rng: random.Random, state: dict) -> tuple[tuple[tuple[int, int], int], SkinSample]:
+    """A valid sample of a known cell and a random modality, with that stream's next sequence number.
+
+    ``state`` holds each (cell, modality) stream's unwrapped counter (started at a random value a few
+    wraps in); the key ``((cell, modality), counter)`` names the sample in the truth table.
+    """
+    cell = rng.choice(_KNOWN_CELLS)
+    m = Modality(rng.randrange(1, 5))
+    key = (cell, int(m))
+    u = state.setdefault(key, rng.randrange(0, 256) + 256 * 4)
+    state[key] = u + 1
+    return (key, u), SkinSample(cell, m, u % 256, _random_values(rng, m))
+
+
 class _SkinSerialCodec(_StreamCodec):
     name = "skin_serial"
     sync = skin_serial.SYNC
@@ -407,13 +421,8 @@ class _SkinSerialCodec(_StreamCodec):
     def make_items(self, rng, state, n):
         items = []
         for _ in range(n):
-            cell = rng.choice(_KNOWN_CELLS)
-            m = Modality(rng.randrange(1, 5))
-            key = (cell, int(m))
-            u = state.setdefault(key, rng.randrange(0, 256) + 256 * 4)
-            state[key] = u + 1
-            s = SkinSample(cell, m, u % 256, _random_values(rng, m))
-            items.append(_Item((key, u), s, skin_serial.encode_skin_frame(s)))
+            name, s = _next_known_sample(rng, state)
+            items.append(_Item(name, s, skin_serial.encode_skin_frame(s)))
         return items
 
     def invalid_item(self, rng):
@@ -621,14 +630,9 @@ def _can_batch(report: FuzzReport, rng: random.Random, n_inputs: int) -> None:
         report.mutations[kind] += 1
         new: list[tuple[Any, can.Message]] = []
         for _ in range(rng.randrange(1, 4)):
-            cell = rng.choice(_KNOWN_CELLS)
-            m = Modality(rng.randrange(1, 5))
-            key = (cell, int(m))
-            u = state.setdefault(key, rng.randrange(0, 256) + 256 * 4)
-            state[key] = u + 1
-            s = SkinSample(cell, m, u % 256, _random_values(rng, m))
-            truth[(key, u)] = s
-            new.append(((key, u), skin_can.encode_can_message(s)))
+            name, s = _next_known_sample(rng, state)
+            truth[name] = s
+            new.append((name, skin_can.encode_can_message(s)))
         i = rng.randrange(0, len(new))
         if kind == "drop":
             new.pop(i)
