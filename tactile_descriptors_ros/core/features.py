@@ -55,7 +55,7 @@ this module over the cells' stacked signals.
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 from scipy import fft as sfft
@@ -73,6 +73,9 @@ __all__ = [
     "groups_of_channels",
     "parse_group",
     "check_groups",
+    "group_channels",
+    "feedable_groups",
+    "check_present",
     "vibration_bands",
     "deformation_bands",
     "group_labels",
@@ -201,6 +204,65 @@ def check_groups(cell_type: CellType, groups: tuple[str, ...], *, key: str = "de
                                   f"declares no slow channel {missing[0]!r} (it has {', '.join(slow)})",
                                   key=key, source=source)
     return groups
+
+
+def group_channels(cell_type: CellType, group: str) -> tuple[str, ...]:
+    """The channels a feature group reads: S and V for every group but ``levels``, which reads the slow
+    channels (V and the extra channels, or those ``levels:<ch>,...`` names)."""
+    name, chans = parse_group(group)
+    if name == "levels":
+        return _level_channels(cell_type, chans)
+    return cell_type.vibration.channels + cell_type.deformation.channels
+
+
+def feedable_groups(cell_type: CellType, present: Iterable[str]) -> tuple[str, ...]:
+    """The groups of :data:`GROUPS` a recording holding only the channels ``present`` can feed.
+
+    ``levels`` restricted to the present slow channels (``levels:pdc,tdc,tac``)
+    stands in for ``levels`` when some slow channel is absent.
+    """
+    have = set(present)
+    out = [g for g in GROUPS if all(c in have for c in group_channels(cell_type, g))]
+    if "levels" not in out:
+        slow = [c for c in _level_channels(cell_type, None) if c in have]
+        if slow:
+            out.append("levels:" + ",".join(slow))
+    return tuple(out)
+
+
+def check_present(cell_type: CellType, groups: Iterable[str], present: Iterable[str], *, where: str,
+                  why: Mapping[str, str] | None = None, key: str = "descriptor.groups") -> None:
+    """Refuse a selection with a group that reads a channel the recordings do not hold.
+
+    Parameters
+    ----------
+    cell_type : CellType
+    groups : iterable of str
+        The selection.
+    present : iterable of str
+        Channels the recordings hold (at the cell type's rates).
+    where : str
+        The recordings (a file), named first in the message.
+    why : mapping of str to str, optional
+        Why a channel is absent (``"pac"`` -> ``"PAC at 200 Hz, not 2200 Hz"``).
+
+    Raises
+    ------
+    ConfigError
+        Naming the first group that cannot be fed, its missing channel, and
+        the groups these recordings can feed.
+    """
+    have = set(present)
+    for g in groups:
+        missing = [c for c in group_channels(cell_type, g) if c not in have]
+        if missing:
+            reason = (why or {}).get(missing[0])
+            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+            able = feedable_groups(cell_type, have)
+            raise ConfigError(
+                f"{where}: feature group {g!r} needs channel {missing[0]!r}{more}, which these recordings do not "
+                f"hold{f' ({reason})' if reason else ''}; the groups they can feed: "
+                f"{', '.join(able) if able else 'none'}", key=key)
 
 
 def _band_name(lo: float, hi: float) -> str:
