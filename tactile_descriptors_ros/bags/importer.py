@@ -55,7 +55,7 @@ import numpy as np
 from ..core.robot import RobotDescription, load_robot
 from ..datasets.bagfiles import TRIALS_KEY
 from ..datasets.recording import N_ELECTRODES, BiotacRecording
-from ..datasets.sources import LoadReport, read_source
+from ..datasets.sources import LoadReport, read_source, resolve_mapping
 from ..errors import BagError, ConfigError, DataFormatError
 from .io import BagWriter
 from .qos import make_qos
@@ -413,6 +413,11 @@ def import_source(
     if Path(bag_path).exists():
         raise BagError(f"{bag_path} exists already; bags are never overwritten")
     _biotac_part(opts)  # bad options fail before any data is read
+    cell_mapping = resolve_mapping(Path(source), mapping)
+    if cell_mapping.cell is not None:
+        raise ConfigError(f"{cell_mapping.source}: tactile import writes BioTac frames; recordings of cell type "
+                          f"{cell_mapping.cell_type!r} are evaluated straight from their tables (tactile evaluate "
+                          "--train SOURCE --test SOURCE --mapping MAPPING)", key="cell_type")
     load = LoadReport(source=str(source), mapping="")
     recs = read_source(source, mapping, trials=trials, classes=classes, class_name=class_name, tare=tare,
                        report=load)

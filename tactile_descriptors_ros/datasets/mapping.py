@@ -18,6 +18,7 @@ from typing import Any
 
 import yaml
 
+from ..core.robot import CellType
 from ..errors import ConfigError
 
 __all__ = ["Mapping", "NameRule", "Stamps", "FORMATS", "TARE_MODES", "shipped_mappings", "load_mapping",
@@ -31,7 +32,7 @@ _FROM = {"class": ("folder", "file", "group", "column", "option", "message"),
          "trial": ("folder", "file", "group", "column", "order")}
 _UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 _TOP_KEYS = ("format", "files", "groups", "class", "trial", "samples_per_frame", "channels", "stamps", "tare",
-             "sensor", "topic", "description")
+             "sensor", "topic", "robot", "cell_type", "description")
 _RULE_KEYS = ("from", "pattern", "column", "value", "names")
 _CHANNEL_KEYS = ("pac", "pdc", "tac", "tdc", "electrodes")
 _STAMP_KEYS = ("column", "unit", "rate_hz")
@@ -108,6 +109,13 @@ class Mapping:
     topic: str | None = None
     source: str = "<mapping>"
     description: str = ""
+    robot: str = "shadow_hand"
+    cell: CellType | None = None
+
+    @property
+    def cell_type(self) -> str:
+        """The cell type of the recordings (``biotac`` unless the mapping names another)."""
+        return "biotac" if self.cell is None else self.cell.name
 
 
 def shipped_mappings() -> dict[str, Path]:
@@ -172,15 +180,22 @@ def parse_mapping(data: Any, source: str = "<mapping>") -> Mapping:
     spf = d.get("samples_per_frame", 22)
     if not isinstance(spf, int) or isinstance(spf, bool) or spf < 1:
         raise ConfigError(f"must be a positive integer, got {spf!r}", key="samples_per_frame", source=source)
-    channels = _check_keys(d.get("channels", {}), _CHANNEL_KEYS, "channels", source)
-    if fmt != "bag":
-        for k in _CHANNEL_KEYS:
-            if k not in channels:
-                raise ConfigError("missing channel", key=f"channels.{k}", source=source)
-            v = channels[k]
-            if not (isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))):
-                raise ConfigError("must be a column name, a name with {i}, or a list of names",
-                                  key=f"channels.{k}", source=source)
+    robot, cell = _cell(d, fmt, source)
+    if cell is None:
+        channels = _check_keys(d.get("channels", {}), _CHANNEL_KEYS, "channels", source)
+        required = _CHANNEL_KEYS if fmt != "bag" else ()
+    else:
+        channels = _check_keys(d.get("channels", {}), cell.channels, "channels", source)
+        required = cell.vibration.channels + cell.deformation.channels
+        if "samples_per_frame" not in d:
+            spf = max(1, int(round(cell.vibration.rate_hz / cell.deformation.rate_hz)))
+    for k in required:
+        if k not in channels:
+            raise ConfigError("missing channel", key=f"channels.{k}", source=source)
+    for k, v in channels.items():
+        if not (isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))):
+            raise ConfigError("must be a column name, a name with {i}, or a list of names",
+                              key=f"channels.{k}", source=source)
     stamps_d = _check_keys(d.get("stamps", {"rate_hz": 100.0}), _STAMP_KEYS, "stamps", source)
     unit = stamps_d.get("unit", "s")
     if unit not in _UNITS_NS:
@@ -205,7 +220,45 @@ def parse_mapping(data: Any, source: str = "<mapping>") -> Mapping:
                    stamps=Stamps(column=stamps_d.get("column"), unit=unit,
                                  rate_hz=None if rate is None else float(rate)),
                    tare=tare, groups=d.get("groups"), sensor=sensor, topic=d.get("topic"), source=source,
-                   description=str(d.get("description", "")))
+                   description=str(d.get("description", "")), robot=robot, cell=cell)
+
+
+def _cell(d: dict, fmt: str, source: str) -> tuple[str, CellType | None]:
+    """``robot`` and ``cell_type``: the robot description declaring the recordings' cell type.
+
+    No ``robot`` and no ``cell_type``, or the BioTac: ``None`` (the BioTac
+    channels ``pac pdc tac tdc electrodes``).  Otherwise the cell type, whose
+    channel names the ``channels`` keys are.
+    """
+    from ..core.robot import load_robot
+
+    if "robot" not in d and "cell_type" not in d:
+        return "shadow_hand", None
+    name = d.get("robot", "shadow_hand" if d.get("cell_type") == "biotac" else None)
+    if not isinstance(name, str) or not name:
+        raise ConfigError("name the robot description that declares the cell type (a shipped robot such as nao, "
+                          "or a robot description file)", key="robot", source=source)
+    if not Path(name).is_absolute() and name.endswith((".yaml", ".yml")):
+        name = str(Path(source).parent / name)  # a robot file beside the mapping
+    try:
+        robot = load_robot(name)
+    except ConfigError as exc:
+        raise ConfigError(str(exc), key="robot", source=source) from None
+    ct_name = d.get("cell_type")
+    if ct_name is None:
+        if len(robot.cell_types) != 1:
+            raise ConfigError(f"robot {robot.name!r} declares cell types {', '.join(robot.cell_types)}: "
+                              "name one", key="cell_type", source=source)
+        ct_name = next(iter(robot.cell_types))
+    if ct_name not in robot.cell_types:
+        raise ConfigError(f"robot {robot.name!r} declares no cell type {ct_name!r} (it has "
+                          f"{', '.join(robot.cell_types)})", key="cell_type", source=source)
+    if ct_name == "biotac":
+        return name, None
+    if fmt == "bag":
+        raise ConfigError(f"bags hold BioTac messages; cell type {ct_name!r} is read from tables (csv, npz, hdf5)",
+                          key="cell_type", source=source)
+    return name, robot.cell_types[ct_name]
 
 
 def load_mapping(name_or_path: str | Path) -> Mapping:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import DataFormatError
 
-__all__ = ["BiotacRecording", "N_ELECTRODES", "spread_pac_stamps", "UNTARED_REST_COUNTS", "rest_level",
+__all__ = ["BiotacRecording", "CellRecording", "N_ELECTRODES", "spread_pac_stamps", "UNTARED_REST_COUNTS", "rest_level",
            "tare_recording"]
 
 #: Impedance electrodes of a BioTac.
@@ -59,6 +59,9 @@ class BiotacRecording:
         The file on disk holding the trial (for caches keyed by size and modification time).
     tare_counts : tuple of float
         PDC tare subtracted on reading (empty when the data were already tared).
+    absent : tuple of str
+        Channels the source does not hold (their arrays are zeros): the
+        electrodes ``e1`` .. ``e19`` of an old driver's messages without them.
     """
 
     material: int
@@ -75,6 +78,7 @@ class BiotacRecording:
     pac_per_frame: int = 22
     source_file: str = ""
     tare_counts: tuple[float, ...] = ()
+    absent: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.class_name:
@@ -109,6 +113,99 @@ class BiotacRecording:
     def force_n(self, n_per_count: float) -> np.ndarray:
         """Normal force of every frame, PDC x ``n_per_count`` (the contact gate's input, eq. 13)."""
         return self.pdc.astype(np.float64) * float(n_per_count)
+
+
+@dataclass(frozen=True)
+class CellRecording:
+    """One trial of one cell of any cell type a robot description declares (a skin cell, ...).
+
+    The channels are the cell type's (:class:`~..core.robot.CellType`): the
+    vibration channels S (``samples_per_frame`` samples a frame), the
+    deformation channels V and the extra channels (one value a frame).  A
+    frame is one V sample.
+
+    Attributes
+    ----------
+    material, trial : int
+        As :class:`BiotacRecording`'s.
+    frame_t_ns : numpy.ndarray of int64, shape (n_frames,)
+        V sample (frame) time stamps in ns.
+    vibration : numpy.ndarray of int64, shape (n_s, n_frames * samples_per_frame)
+        S counts in time order, one row a vibration channel.
+    vibration_t_ns : numpy.ndarray of int64, shape (n_frames * samples_per_frame,)
+    deformation : numpy.ndarray of int64, shape (n_v, n_frames)
+        V counts, as recorded (a tare is kept apart, in ``deformation_tare``).
+    extra : numpy.ndarray of float64, shape (n_extra, n_frames)
+        The extra channels (proximity counts, temperature in degC, ...); NaN
+        for a channel listed in ``absent``.
+    force_counts : numpy.ndarray of float64, shape (n_frames,)
+        Mean of the force channels minus their tare, in counts (the contact gate's input).
+    deformation_tare : numpy.ndarray of float64, shape (n_v,)
+        Tare of each deformation channel (zeros when untared); subtracted by
+        the ``levels`` group only, as a driver's reported tare.
+    path : str
+    robot : str
+        The robot description declaring the cell type (a shipped name or a file).
+    cell_type : str
+    class_name : str
+    samples_per_frame : int
+    source_file : str
+    tare_counts : tuple of float
+        The force channels' tare (empty when untared).
+    absent : tuple of str
+        Channels the source does not hold.
+    """
+
+    material: int
+    trial: int
+    frame_t_ns: np.ndarray
+    vibration: np.ndarray
+    vibration_t_ns: np.ndarray
+    deformation: np.ndarray
+    extra: np.ndarray
+    force_counts: np.ndarray
+    deformation_tare: np.ndarray
+    path: str
+    robot: str
+    cell_type: str
+    class_name: str = ""
+    samples_per_frame: int = 1
+    source_file: str = ""
+    tare_counts: tuple[float, ...] = ()
+    absent: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.class_name:
+            object.__setattr__(self, "class_name", f"mat{self.material}")
+        if not self.source_file:
+            object.__setattr__(self, "source_file", self.path.split("#", 1)[0])
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frame_t_ns.shape[0])
+
+    @property
+    def frame_rate_hz(self) -> float:
+        """Frame (V sample) rate estimated from the time stamps."""
+        if self.n_frames < 2:
+            return 0.0
+        return float(1e9 * (self.n_frames - 1) / (self.frame_t_ns[-1] - self.frame_t_ns[0]))
+
+    @property
+    def material_name(self) -> str:
+        return self.class_name
+
+    def crop_frames(self, start: int, stop: int) -> "CellRecording":
+        """Frames ``start:stop`` (and their S samples) as a new recording."""
+        s, e = max(0, start), min(self.n_frames, stop)
+        k = self.samples_per_frame
+        return replace(self, frame_t_ns=self.frame_t_ns[s:e], vibration=self.vibration[:, s * k:e * k],
+                       vibration_t_ns=self.vibration_t_ns[s * k:e * k], deformation=self.deformation[:, s:e],
+                       extra=self.extra[:, s:e], force_counts=self.force_counts[s:e])
+
+    def force_n(self, n_per_count: float) -> np.ndarray:
+        """Normal force of every frame (tared force counts x ``n_per_count``; eq. 27)."""
+        return self.force_counts * float(n_per_count)
 
 
 def spread_pac_stamps(frame_t_ns: np.ndarray, pac_per_frame: int, where: str) -> np.ndarray:

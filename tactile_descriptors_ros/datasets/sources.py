@@ -26,8 +26,11 @@ import numpy as np
 from ..errors import ConfigError, DataFormatError
 from .bagfiles import find_bags, is_bag, read_bag_frames
 from .mapping import Mapping, NameRule, load_mapping, parse_mapping
-from .recording import UNTARED_REST_COUNTS, BiotacRecording, rest_level, spread_pac_stamps, tare_recording
-from .tables import Table, Unit, find_units, frame_stamps_ns, read_table, split_runs, table_channels
+from .recording import (
+    REST_PERCENTILE, UNTARED_REST_COUNTS, BiotacRecording, CellRecording, rest_level, spread_pac_stamps,
+    tare_recording,
+)
+from .tables import Table, Unit, cell_channels, find_units, frame_stamps_ns, read_table, split_runs, table_channels
 
 __all__ = ["DEFAULT_MAPPING", "BAG_MAPPING", "LoadReport", "read_source", "resolve_mapping", "check_selection",
            "format_numbers", "align_classes"]
@@ -47,11 +50,16 @@ class LoadReport:
     mapping: str
     tared: list[tuple[str, int, float]] = field(default_factory=list)
     untared_detected: bool = False
+    cell_type: str = "biotac"
 
     def tare_lines(self) -> list[str]:
         if not self.tared:
             return []
         levels = [lvl for _, _, lvl in self.tared]
+        if self.cell_type != "biotac":
+            why = "resting force at or above F_t: untared" if self.untared_detected else "tare: per_trial"
+            return [f"tared {len(self.tared)} trials per trial ({why}; resting force {min(levels):.0f}.."
+                    f"{max(levels):.0f} counts; each force channel loses its resting median)"]
         why = "resting PDC far from zero: untared" if self.untared_detected else "tare: per_trial"
         return [f"tared {len(self.tared)} trials per trial ({why}; PDC rest {min(levels):.0f}..{max(levels):.0f} "
                 f"counts subtracted, electrodes by their resting medians)"]
@@ -168,7 +176,7 @@ def _table_trials(unit: Unit, mapping: Mapping, class_value: str | None, trial_v
                 cv = v
             else:
                 tv = v
-        ch = table_channels(sub, mapping)
+        ch = table_channels(sub, mapping) if mapping.cell is None else cell_channels(sub, mapping)
         ch["frame_t_ns"] = frame_stamps_ns(sub, mapping, sub.n_rows)
         where = unit.path if not keys else f"{unit.path} rows {int(sel[0]) + 2}..{int(sel[-1]) + 2}"
         out.append(_Trial(str(cv), tv, f"{unit.path}:{int(sel[0]):09d}", ch, where, str(unit.file)))
@@ -213,6 +221,7 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
     tare_mode = tare or m.tare
     if report is not None:
         report.mapping = m.source
+        report.cell_type = m.cell_type
     rules = [m.class_rule, m.trial_rule]
     raw: list[_Trial] = []
     unread: list[int] = []
@@ -295,6 +304,8 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
         for t, num in zip(ts, numbers):
             recs.append(_recording(t, cnum[cv], num, name, m))
     recs.sort(key=lambda r: (r.material, r.trial))
+    if m.cell is not None:
+        return [_tare_cell(r, m, tare_mode, report) for r in recs]
     out = []
     for r in recs:
         untared = rest_level(r.pdc) > UNTARED_REST_COUNTS
@@ -307,8 +318,10 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
     return out
 
 
-def _recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> BiotacRecording:
+def _recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> BiotacRecording | CellRecording:
     fr = t.frames
+    if m.cell is not None:
+        return _cell_recording(t, material, trial, name, m)
     pac2 = np.asarray(fr["pac"], dtype=np.int64)
     k = int(pac2.shape[1])
     frame_t = np.asarray(fr["frame_t_ns"], dtype=np.int64)
@@ -320,7 +333,71 @@ def _recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> B
                            pdc=np.asarray(fr["pdc"], dtype=np.int64), tac=np.asarray(fr["tac"], dtype=np.int64),
                            tdc=np.asarray(fr["tdc"], dtype=np.int64),
                            electrodes=np.asarray(fr["electrodes"], dtype=np.int64), path=t.where,
-                           class_name=name, pac_per_frame=k, source_file=t.source_file)
+                           class_name=name, pac_per_frame=k, source_file=t.source_file,
+                           absent=tuple(fr.get("absent", ())))
+
+
+def _cell_recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> CellRecording:
+    fr, ct = t.frames, m.cell
+    assert ct is not None
+    frame_t = np.asarray(fr["frame_t_ns"], dtype=np.int64)
+    k = m.samples_per_frame
+    vib_t = spread_pac_stamps(frame_t, k, t.where)
+    dfm, extra = fr["deformation"], fr["extra"]
+    force = _force_channels(ct, dfm, extra).mean(axis=0)
+    return CellRecording(material=material, trial=trial, frame_t_ns=frame_t, vibration=fr["vibration"],
+                         vibration_t_ns=vib_t, deformation=dfm, extra=extra, force_counts=force,
+                         deformation_tare=np.zeros(dfm.shape[0]), path=t.where, robot=m.robot, cell_type=ct.name,
+                         class_name=name, samples_per_frame=k, source_file=t.source_file, absent=fr["absent"])
+
+
+def _force_channels(ct, deformation: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """The force channels' values (n_force, n_frames), from the deformation or the extra channels."""
+    rows = []
+    for c in ct.force.channels:
+        if c in ct.deformation.channels:
+            rows.append(deformation[ct.deformation.channels.index(c)].astype(np.float64))
+        else:
+            rows.append(np.asarray(extra[ct.extra_channels.index(c)], dtype=np.float64))
+    return np.stack(rows)
+
+
+def _tare_cell(r: CellRecording, m: Mapping, tare_mode: str, report: LoadReport | None) -> CellRecording:
+    """Tare a cell's force channels when its resting force is not near zero (``tare: auto``) or always.
+
+    The resting level is the :data:`~.recording.REST_PERCENTILE` th percentile
+    of the mean force; a trial resting at or above F_t of the cell type's
+    robot (the contact gate would pass every frame) is untared.  Each force
+    channel's tare is its median over the resting frames; the counts stay as
+    recorded, the tare goes to ``deformation_tare`` (subtracted by the
+    ``levels`` group, as a driver's reported tare) and to the force.
+    """
+    from ..core.robot import load_robot
+
+    if tare_mode == "none":
+        return r
+    ct = m.cell
+    assert ct is not None
+    robot = load_robot(m.robot)
+    npc = ct.force.n_per_count
+    finite = np.isfinite(r.force_counts)
+    if not finite.any():
+        raise DataFormatError(f"{r.path}: the force channels {', '.join(ct.force.channels)} hold no value")
+    level = float(np.percentile(r.force_counts[finite], REST_PERCENTILE))
+    if tare_mode == "auto" and level * npc < robot.contact.force_threshold_n:
+        return r
+    forces = _force_channels(ct, r.deformation, r.extra)
+    resting = finite & (r.force_counts <= level)
+    tare = np.median(forces[:, resting], axis=1)
+    d_tare = np.zeros(r.deformation.shape[0])
+    for c, v in zip(ct.force.channels, tare):
+        if c in ct.deformation.channels:
+            d_tare[ct.deformation.channels.index(c)] = v
+    if report is not None:
+        report.tared.append((r.class_name, r.trial, float(level)))
+        report.untared_detected |= tare_mode == "auto"
+    return replace(r, force_counts=(forces - tare[:, None]).mean(axis=0), deformation_tare=d_tare,
+                   tare_counts=tuple(float(v) for v in tare))
 
 
 def align_classes(*splits: Sequence[BiotacRecording]) -> list[list[BiotacRecording]]:

@@ -22,7 +22,8 @@ from ..errors import ConfigError, DataFormatError
 from .mapping import Mapping, expand_channel
 from .recording import N_ELECTRODES
 
-__all__ = ["Unit", "Table", "find_units", "read_table", "table_channels", "frame_stamps_ns", "seconds_to_ns"]
+__all__ = ["Unit", "Table", "find_units", "read_table", "table_channels", "cell_channels", "frame_stamps_ns",
+           "seconds_to_ns"]
 
 
 @dataclass(frozen=True)
@@ -237,6 +238,57 @@ def table_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
     if len(set(n.values())) != 1:
         raise DataFormatError(f"{table.where}: channels have different frame counts {n}")
     return out
+
+
+def _values(table: Table, mapping: Mapping, key: str) -> np.ndarray:
+    """One value a frame of channel ``key`` as float (an extra channel: proximity counts, degrees C, ...)."""
+    names = expand_channel(mapping.channels[key], 1)
+    if len(names) != 1:
+        raise ConfigError(f"{len(names)} columns listed, 1 expected", key=f"channels.{key}", source=mapping.source)
+    col = table.column(names[0], f"channels.{key}")
+    try:
+        v = np.asarray(col).astype(np.float64)
+    except ValueError as exc:
+        raise DataFormatError(f"{table.where}: column {names[0]!r} (mapping key channels.{key}): not numbers "
+                              f"({exc})") from None
+    if v.ndim != 1:
+        raise DataFormatError(f"{table.where}: {names[0]!r} (mapping key channels.{key}) has shape {v.shape}, "
+                              "expected one value a frame")
+    return v
+
+
+def cell_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
+    """The channels of a mapping's cell type (``mapping.cell``, a skin cell ...) from one table.
+
+    Returns
+    -------
+    dict
+        ``vibration`` (n_s, n_frames * samples_per_frame) int64 counts, one
+        row a vibration channel, samples in time order; ``deformation``
+        (n_v, n_frames) int64 counts; ``extra`` (n_extra, n_frames) float64,
+        NaN for an extra channel the mapping does not name; ``absent`` the
+        extra channels it does not name.
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, the column and the mapping key of a channel the
+        table lacks, or whose values are not integer counts.
+    """
+    ct = mapping.cell
+    assert ct is not None
+    k = mapping.samples_per_frame
+    vib = np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
+    dfm = np.stack([_channel(table, mapping, c, 1)[:, 0] for c in ct.deformation.channels])
+    n = dfm.shape[1]
+    absent = tuple(c for c in ct.extra_channels if c not in mapping.channels)
+    extra = np.full((len(ct.extra_channels), n), np.nan)
+    for i, c in enumerate(ct.extra_channels):
+        if c not in absent:
+            extra[i] = _values(table, mapping, c)
+    if vib.shape[1] != n * k:
+        raise DataFormatError(f"{table.where}: {vib.shape[1]} vibration samples for {n} frames of {k}")
+    return {"vibration": vib, "deformation": dfm, "extra": extra, "absent": absent}
 
 
 def seconds_to_ns(text: str, ns_per_unit: int = 1_000_000_000) -> int:
