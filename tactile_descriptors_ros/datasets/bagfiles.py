@@ -104,8 +104,9 @@ def read_bag_frames(path: Path, sensor: int = 0, topic: str | None = None) -> li
     list of dict
         Each with ``frame_t_ns`` (n,), ``pac`` (n, k), ``pdc``, ``tac``,
         ``tdc`` (n,), ``electrodes`` (19, n), ``pac_t_ns`` (n * k or None),
-        ``label`` (class name from the bag, or None), ``trial`` (or None)
-        and ``where``.  A Shadow or UPenn bag gives one; an imported or
+        ``label`` (class name from the bag, or None), ``trial`` (or None),
+        ``where`` and ``absent`` (``e1`` .. ``e19`` when the messages carry
+        no electrodes, as some old Shadow drivers'; their values are zeros).  A Shadow or UPenn bag gives one; an imported or
         recorded ``BioTacFrameBatch`` bag one per trial.
 
     Raises
@@ -138,6 +139,7 @@ def read_bag_frames(path: Path, sensor: int = 0, topic: str | None = None) -> li
 
 def _read_frames(reader, conns, msgtype: str, sensor: int, path: Path) -> dict[str, Any]:
     t, pac, pdc, tac, tdc, ele = [], [], [], [], [], []
+    no_electrodes = False
     where = f"{path}#{conns[0].topic}"
     for i, (conn, log_ns, raw) in enumerate(reader.messages(connections=conns)):
         msg = reader.deserialize(raw, conn.msgtype)
@@ -163,8 +165,13 @@ def _read_frames(reader, conns, msgtype: str, sensor: int, path: Path) -> dict[s
         if pac and p.shape[0] != pac[0].shape[0]:
             raise DataFormatError(f"{where}: message {i} has {p.shape[0]} PAC samples, the first had "
                                   f"{pac[0].shape[0]}: frames of varying PAC length cannot be windowed")
-        if e.shape[0] != N_ELECTRODES:
-            raise DataFormatError(f"{where}: message {i} has {e.shape[0]} electrodes, not {N_ELECTRODES}")
+        if e.shape[0] == 0 and not ele:
+            no_electrodes = True  # an old driver's messages without electrodes: absent, not zero
+        if no_electrodes and e.shape[0] == 0:
+            e = np.zeros(N_ELECTRODES, dtype=np.int64)
+        elif e.shape[0] != N_ELECTRODES or no_electrodes:
+            raise DataFormatError(f"{where}: message {i} has {e.shape[0]} electrodes, not "
+                                  f"{0 if no_electrodes else N_ELECTRODES} as the first")
         t.append(stamp)
         pac.append(p)
         pdc.append(int(d))
@@ -176,7 +183,8 @@ def _read_frames(reader, conns, msgtype: str, sensor: int, path: Path) -> dict[s
     return {"frame_t_ns": np.array(t, dtype=np.int64), "pac": np.stack(pac), "pac_t_ns": None,
             "pdc": np.array(pdc, dtype=np.int64), "tac": np.array(tac, dtype=np.int64),
             "tdc": np.array(tdc, dtype=np.int64), "electrodes": np.stack(ele, axis=1),
-            "label": None, "trial": None, "where": where}
+            "label": None, "trial": None, "where": where,
+            "absent": tuple(f"e{j + 1}" for j in range(N_ELECTRODES)) if no_electrodes else ()}
 
 
 def _read_batches(reader, conns, label_conns, path: Path) -> list[dict[str, Any]]:

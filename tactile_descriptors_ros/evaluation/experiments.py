@@ -22,7 +22,9 @@ from ..errors import ConfigError
 from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
 from ..core.robot import load_robot
 from ..core.blocks import block_mean
-from .features import DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, select_features
+from .features import (
+    DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, recordings_cell_type, select_features,
+)
 from .windows import (  # DEFAULT_BLOCK_*: re-exported
     DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
     draw_windows, window_lengths,
@@ -113,7 +115,7 @@ class EvalConfig:
 
 def descriptor_seconds(bank, mode: str) -> float:
     """Median compute time per window of a mode's feature groups (each group timed on its own)."""
-    return float(np.median(sum(bank.seconds[g] for g in mode_groups(mode))))
+    return float(np.median(sum(bank.seconds[g.partition(":")[0]] for g in dict.fromkeys(mode_groups(mode)))))
 
 
 def draw_spec_windows(recordings: Sequence[BiotacRecording], window: str, rate_hz: float, common: int,
@@ -136,8 +138,8 @@ def _draw(recordings: Sequence[BiotacRecording], spec: str, rate_hz: float, comm
     lengths = window_lengths(spec, rate_hz, common)
     if len(lengths) != 1:
         raise ConfigError(f"contact windows take one length, not the range {spec!r}", key="windows")
-    robot = load_robot("shadow_hand")
-    npc, ft = robot.cell_types["biotac"].force.n_per_count, robot.contact.force_threshold_n
+    npc = recordings_cell_type(recordings).force.n_per_count
+    ft = load_robot("shadow_hand").contact.force_threshold_n
     wins, miss = draw_contact_windows(recordings, lengths[0], per_trial, seed, npc, ft)
     without += [f"{r.class_name} trial {r.trial}" for r in miss]
     if not wins:
@@ -289,7 +291,8 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     # Each split's windows are looked up in that split's recordings only: (material, trial) names a
     # recording uniquely inside one folder, not across two.
     sub = "subwindows" in mode_groups(cfg.mode)
-    bank_kw = {"cache_dir": cfg.cache_dir, "jobs": cfg.jobs, "progress": cfg.progress, "subwindows": sub}
+    bank_kw = {"cache_dir": cfg.cache_dir, "jobs": cfg.jobs, "progress": cfg.progress, "subwindows": sub,
+               "cell_type": recordings_cell_type(list(train) + list(test))}
     if cfg.block_s:
         bank_kw["block_frames"] = int(round(cfg.block_s * rate))
         bank_kw["hop_frames"] = int(round((cfg.block_hop_s or cfg.block_s) * rate))

@@ -60,12 +60,14 @@ from ..core.features import (
     DEFORMATION_BANDS_HZ,
     GROUPS,
     VIBRATION_BANDS_HZ,
+    feedable_groups,
+    parse_group,
     piece_summary,
     selection_labels,
 )
 from ..core.robot import BodyPart, Cell, CellType, RobotDescription, load_robot
 from ..datasets.biotac_slide import PAC_PER_FRAME
-from ..datasets.recording import BiotacRecording
+from ..datasets.recording import BiotacRecording, CellRecording
 from ..errors import ConfigError
 from .windows import Window
 
@@ -88,7 +90,14 @@ __all__ = [
     "subwindow_starts",
     "drop_quantities",
     "mode_groups",
+    "recordings_cell_type",
+    "recording_channels",
+    "PAC_RATE_TOLERANCE",
 ]
+
+#: A BioTac's PAC counts as present when its rate (samples a frame x frame rate) is within this fraction of
+#: the cell type's vibration rate; a cell's vibration and deformation channels likewise.
+PAC_RATE_TOLERANCE: float = 0.05
 
 #: PAC frequency bands of ``bands`` and ``statistics`` (the core's vibration bands; Hz).
 PAC_BANDS_HZ: tuple[tuple[float, float], ...] = VIBRATION_BANDS_HZ
@@ -132,11 +141,21 @@ def mode_groups(mode: str) -> tuple[str, ...]:
     """
     if mode == "averaged":
         mode = "paper"
-    try:
+    if mode in DESCRIPTOR_MODES:
         return DESCRIPTOR_MODES[mode]
-    except KeyError:
+    # a selection of groups, named as the core names it: "levels", "per_channel+levels", "levels:pdc,tdc,tac"
+    tokens = tuple(t.strip() for t in str(mode).split("+") if t.strip())
+    try:
+        for t in tokens:
+            if t != "subwindows":
+                parse_group(t, key="channels")
+    except ConfigError:
+        tokens = ()
+    if not tokens or len(set(tokens)) != len(tokens):
         raise ConfigError(f"unknown descriptor mode {mode!r}; choose from "
-                          f"{', '.join(['averaged', *DESCRIPTOR_MODES])}", key="channels") from None
+                          f"{', '.join(['averaged', *DESCRIPTOR_MODES])}, or feature groups joined by '+' "
+                          f"({', '.join(GROUPS)}, levels:<ch>,<ch>)", key="channels")
+    return tokens
 
 
 def biotac_cell_type(robot: RobotDescription | None = None) -> CellType:
@@ -165,7 +184,56 @@ def finger_robot(cell_type: CellType | None = None) -> RobotDescription:
     return robot
 
 
-def recording_cells(rec: BiotacRecording, cell_type: CellType | None = None) -> dict[int, CellSignals]:
+def recordings_cell_type(recordings: Sequence[BiotacRecording | CellRecording]) -> CellType:
+    """The one cell type of a set of recordings (the BioTac's for :class:`BiotacRecording`).
+
+    Raises
+    ------
+    ConfigError
+        When the recordings hold cells of different types.
+    """
+    kinds = {(r.robot, r.cell_type) if isinstance(r, CellRecording) else ("shadow_hand", "biotac")
+             for r in recordings}
+    if len(kinds) != 1:
+        raise ConfigError(f"the recordings hold cells of several types ({', '.join(sorted(k[1] for k in kinds))}): "
+                          "train and test on one cell type", key="cell_type")
+    robot, name = kinds.pop()
+    return load_robot(robot).cell_types[name]
+
+
+def recording_channels(rec: BiotacRecording | CellRecording, cell_type: CellType
+                       ) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The channels a recording holds at the cell type's rates, and why the others are absent.
+
+    A BioTac's PAC is present when its rate (samples a frame x frame rate)
+    is within :data:`PAC_RATE_TOLERANCE` of the cell type's vibration rate:
+    old Shadow drivers' messages carry two PAC samples (``pac0``, ``pac1``)
+    a frame, 200 Hz at 100 frames a second, not a 2.2 kHz signal.  A cell's
+    vibration and deformation channels likewise at their modalities' rates.
+
+    Returns
+    -------
+    present : tuple of str
+    why : dict of str to str
+        Channel -> reason, for the absent ones.
+    """
+    why: dict[str, str] = {c: "not in the source" for c in rec.absent}
+    fps = rec.frame_rate_hz
+    k = rec.pac_per_frame if isinstance(rec, BiotacRecording) else rec.samples_per_frame
+    vib_hz, want = k * fps, cell_type.vibration.rate_hz
+    if abs(vib_hz / want - 1.0) > PAC_RATE_TOLERANCE:
+        for c in cell_type.vibration.channels:
+            why.setdefault(c, f"{c} at {vib_hz:.0f} Hz ({k} samples a frame at {fps:.1f} frames/s), "
+                              f"not the {want:g} Hz the descriptors take")
+    dfm_hz = cell_type.deformation.rate_hz
+    if isinstance(rec, CellRecording) and abs(fps / dfm_hz - 1.0) > PAC_RATE_TOLERANCE:
+        for c in cell_type.deformation.channels:
+            why.setdefault(c, f"frames at {fps:.1f} Hz, not the {dfm_hz:g} Hz of {c}")
+    return tuple(c for c in cell_type.channels if c not in why), why
+
+
+def recording_cells(rec: BiotacRecording | CellRecording,
+                    cell_type: CellType | None = None) -> dict[int, CellSignals]:
     """The core's cell signals of a recording (or a window of it: :meth:`BiotacRecording.crop_frames`).
 
     Vibration PAC (counts), deformation the electrodes (counts, tared by the
@@ -178,6 +246,10 @@ def recording_cells(rec: BiotacRecording, cell_type: CellType | None = None) -> 
         When the cell type declares an extra channel the recordings do not hold.
     """
     ct = cell_type or biotac_cell_type()
+    if isinstance(rec, CellRecording):
+        return {0: CellSignals(rec.vibration, rec.vibration_t_ns, rec.deformation, rec.frame_t_ns,
+                               rec.force_n(ct.force.n_per_count), extra=rec.extra,
+                               deformation_tare=rec.deformation_tare)}
     columns = {"pdc": rec.pdc, "tdc": rec.tdc, "tac": rec.tac}
     missing = [c for c in ct.extra_channels if c not in columns]
     if missing:
@@ -258,7 +330,13 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
     cells = recording_cells(w, cell_type)
     groups: dict[str, np.ndarray] = {}
     seconds: dict[str, float] = {}
+    present, _ = recording_channels(rec, cell_type)
+    feedable = {parse_group(g)[0] for g in feedable_groups(cell_type, present)}
     for g in GROUPS:
+        if g not in feedable:  # a group reading a channel the recording lacks is not computed
+            groups[g] = np.full(len(selection_labels(cell_type, (g,))), np.nan)
+            seconds[g] = 0.0
+            continue
         t0 = time.perf_counter()
         groups[g] = describe_window(robot, cells, layout="concat", groups=(g,), force_threshold_n=-np.inf).values
         seconds[g] = time.perf_counter() - t0
@@ -276,10 +354,12 @@ def _file_stamp(path: str) -> tuple[int, int]:
 
 
 def _cache_path(cache_dir: Path, n_frames: int, force_threshold_n: float, n_per_count: float,
-                cell_type: CellType) -> Path:
+                cell_type: CellType, present: Sequence[tuple[str, ...]] = ()) -> Path:
     key = json.dumps({"v": _BANK_VERSION, "n_frames": n_frames, "ft": force_threshold_n, "npc": n_per_count,
                       "bands": PAC_BANDS_HZ, "ebands": ELECTRODE_BANDS_HZ, "ppf": PAC_PER_FRAME,
-                      "cell_type": repr(cell_type)})
+                      "cell_type": repr(cell_type)}
+                     | ({"present": [list(p) for p in present]}
+                        if any(p != cell_type.channels for p in present) else {}))
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return cache_dir / f"bank_{n_frames}f_{digest}.npz"
 
@@ -391,7 +471,8 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
     if len(by_key) != len(recordings):
         raise ConfigError("recordings hold the same material and trial twice (two folders?): describe each "
                           "folder's windows with its own recordings")
-    cpath = (_cache_path(Path(cache_dir), n_frames, threshold, cell_type.force.n_per_count, cell_type)
+    present = sorted({recording_channels(r, cell_type)[0] for r in recordings})
+    cpath = (_cache_path(Path(cache_dir), n_frames, threshold, cell_type.force.n_per_count, cell_type, present)
              if cache_dir else None)
     cache = _load_cache(cpath) if cpath else {}
     stamps = {r.path: _file_stamp(r.source_file) for r in recordings}
@@ -412,7 +493,8 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
         bar = None
         if progress:
             from tqdm import tqdm
-            bar = tqdm(total=len(tasks), desc=f"{desc} ({n_frames / 100:.2f} s windows)", unit="trial",
+            rate_hz = float(np.median([r.frame_rate_hz for r in recordings])) or 100.0
+            bar = tqdm(total=len(tasks), desc=f"{desc} ({n_frames / rate_hz:.2f} s windows)", unit="trial",
                        leave=False)
         if jobs > 1 and len(tasks) > 4:
             pool = ProcessPoolExecutor(max_workers=jobs)
@@ -472,6 +554,19 @@ def drop_quantities(labels: Sequence[str], drop: Iterable[str]) -> np.ndarray:
     return np.array([quantity(lab) not in drop for lab in labels], dtype=bool)
 
 
+def _group_columns(bank: FeatureBank, group: str) -> tuple[np.ndarray, tuple[str, ...]]:
+    """A group's columns of a bank; ``levels:<ch>,<ch>`` the named channels' levels, labelled as the core does."""
+    name, chans = parse_group(group, key="channels") if group != "subwindows" else (group, None)
+    if chans is None:
+        return bank.groups[name], bank.labels[name]
+    index = {lab.rsplit("/", 1)[-1]: i for i, lab in enumerate(bank.labels[name])}
+    cols = [index.get(f"level_{c}") for c in chans]
+    if any(i is None for i in cols):
+        raise ConfigError(f"feature group {group!r}: the cell type declares no slow channel "
+                          f"{chans[cols.index(None)]!r}", key="channels")
+    return bank.groups[name][:, cols], tuple(f"{group}/level_{c}" for c in chans)
+
+
 def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
                     drop: Iterable[str] = ()) -> tuple[np.ndarray, tuple[str, ...]]:
     """Descriptor matrix of a mode.
@@ -492,11 +587,16 @@ def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
     labels : tuple of str
     """
     groups = mode_groups(mode)
-    missing = [g for g in groups if g not in bank.groups]
+    missing = [g for g in groups if g.partition(":")[0] not in bank.groups]
     if missing:
         raise ConfigError(f"mode {mode!r} needs the {missing} group(s): compute the bank with subwindows=True")
-    X = np.concatenate([bank.groups[g] for g in groups], axis=1)
-    labels = tuple(lab for g in groups for lab in bank.labels[g])
+    parts = [_group_columns(bank, g) for g in groups]
+    X = np.concatenate([p[0] for p in parts], axis=1)
+    labels = tuple(lab for p in parts for lab in p[1])
+    if np.isnan(X).all(axis=0).any():
+        g = groups[int(np.flatnonzero([np.isnan(p[0]).all(axis=0).any() for p in parts])[0])]
+        raise ConfigError(f"feature group {g!r} of mode {mode!r} was not computed: the recordings lack a channel "
+                          "it reads", key="channels")
     keep = drop_quantities(labels, drop)
     if not keep.any():
         raise ConfigError(f"dropping {sorted(drop)} leaves no feature of mode {mode!r}")

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import ConfigError
 
-__all__ = ["register", "run", "run_live", "default_trials", "split_trials"]
+__all__ = ["register", "run", "run_live", "default_trials", "split_trials", "check_recordings", "check_pac_rate"]
 
 
 def default_trials(train_dir: str, test_dir: str, train_text: str | None,
@@ -86,30 +86,42 @@ def split_trials(trials: list[int], train: list[int] | None, test: list[int] | N
     return train, test
 
 
-def check_pac_rate(recordings) -> None:
-    """The descriptors take PAC at the BioTac's rate (the robot description's); refuse another.
+def check_recordings(recordings, mode: str) -> None:
+    """Refuse a descriptor mode whose feature groups read a channel the recordings do not hold.
+
+    A channel is absent when the source lacks it, or when it is not at the
+    rate the descriptors take (:func:`~..evaluation.features.recording_channels`:
+    a BioTac's PAC must be at 2.2 kHz, so an old Shadow driver's two PAC
+    samples a frame are no PAC signal).
 
     Raises
     ------
     ConfigError
-        Naming the first recording whose PAC rate (samples per frame x frame rate) is more than 5 % off.
+        Naming the first recording lacking a channel, the feature group that
+        reads it, and the groups the recordings can feed.
     """
-    from ..core.robot import load_robot
+    from ..core.features import check_present
+    from ..evaluation.features import mode_groups, recording_channels, recordings_cell_type
 
-    fs_hz = float(load_robot("shadow_hand").cell_types["biotac"].vibration.rate_hz)
+    ct = recordings_cell_type(recordings)
+    groups = [g for g in mode_groups(mode) if g != "subwindows"]
+    if "subwindows" in mode_groups(mode):
+        groups += ["per_channel", "bands"]  # what each piece of a window is described with
     for r in recordings:
-        rate_hz = r.pac_per_frame * r.frame_rate_hz
-        if abs(rate_hz / fs_hz - 1.0) > 0.05:
-            raise ConfigError(f"{r.path}: PAC at {rate_hz:.0f} Hz ({r.pac_per_frame} samples a frame at "
-                              f"{r.frame_rate_hz:.1f} Hz); the descriptors take the BioTac's {fs_hz:.0f} Hz "
-                              "(check samples_per_frame and the stamps of the mapping)", key="samples_per_frame")
+        present, why = recording_channels(r, ct)
+        check_present(ct, groups, present, where=f"{r.path} (mode {mode})", why=why, key="channels")
+
+
+def check_pac_rate(recordings) -> None:
+    """The paper's descriptor reads PAC at the BioTac's rate: :func:`check_recordings` of mode ``paper``."""
+    check_recordings(recordings, "paper")
 
 
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
     from ..evaluation.windows import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
-    from ..evaluation.features import DEFAULT_MODE, DESCRIPTOR_MODES
+    from ..evaluation.features import DEFAULT_MODE
     from ..evaluation.modes import SCALINGS
 
     p = subparsers.add_parser(
@@ -146,11 +158,11 @@ def register(subparsers) -> None:
     p.add_argument("--block-hop", type=float, default=DEFAULT_BLOCK_HOP_S,
                    help=f"largest step between blocks in seconds (default {DEFAULT_BLOCK_HOP_S:g})")
     p.add_argument("--channels", "--mode", dest="channels", default=DEFAULT_MODE,
-                   choices=["averaged", *DESCRIPTOR_MODES],
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
                    "multiband (per_channel + Hjorth of 6 PAC bands), multiband_levels, baseline, "
                    "combined (all of them, 261 values), combined_subwindows (+ mean and sd over 4 successive "
-                   f"pieces, 493); default {DEFAULT_MODE}")
+                   "pieces, 493), or feature groups joined by '+' (levels, per_channel+levels, "
+                   f"levels:pdc,tdc,tac); default {DEFAULT_MODE}")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
     p.add_argument("--gate", action=argparse.BooleanOptionalAction, default=False,
                    help="contact gate (eq. 16; off by default: recorded slides are all in contact and the "
@@ -185,6 +197,9 @@ def run(args: argparse.Namespace) -> int:
     from ..datasets.sources import LoadReport, align_classes, check_selection
     from ..tools.cmd_import import parse_classes
 
+    from ..evaluation.features import mode_groups
+
+    mode_groups(args.channels)  # an unknown mode is refused before any data is read
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     if args.train_windows < 1 or args.test_windows < 1 or args.cv_repeats < 1:
@@ -208,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
         train = load_split(args.train, train_trials, materials, args.mapping, report=reports[0])
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
-    check_pac_rate(list(train) + list(test))
+    check_recordings(list(train) + list(test), args.channels)
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)
@@ -296,6 +311,11 @@ def run_live(args: argparse.Namespace) -> int:
     materials = parse_classes(args.materials) if args.materials else None
     both = None if train_trials is None or test_trials is None else sorted(set(train_trials) | set(test_trials))
     every = load_split(args.train, both, materials, args.mapping)
+    from ..datasets.recording import BiotacRecording
+
+    if not all(isinstance(r, BiotacRecording) for r in every):
+        raise ConfigError("--live replays BioTac recordings through the window node; these hold cell type "
+                          f"{getattr(every[0], 'cell_type', '?')!r}: leave out --live", key="live")
     train_trials, test_trials = split_trials(sorted({r.trial for r in every}), train_trials, test_trials,
                                              args.train_trials is not None, args.test_trials is not None)
     chosen = set(train_trials) | set(test_trials)

@@ -298,9 +298,9 @@ def test_evaluate_scores_an_hdf5_table_and_its_imported_bag_alike(csv_recs, tmp_
     assert "no trial 3-5; the data hold trials 1-2" in capsys.readouterr().err
 
 
-def test_evaluate_refuses_pac_at_another_rate():
+def test_evaluate_refuses_pac_at_another_rate_for_the_groups_that_read_it():
     from tactile_descriptors_ros.datasets.recording import BiotacRecording
-    from tactile_descriptors_ros.tools.cmd_evaluate import check_pac_rate
+    from tactile_descriptors_ros.tools.cmd_evaluate import check_pac_rate, check_recordings
 
     n = 100
     t = np.arange(n, dtype=np.int64) * 10_000_000
@@ -308,8 +308,10 @@ def test_evaluate_refuses_pac_at_another_rate():
                           pac_t_ns=np.arange(2 * n, dtype=np.int64) * 5_000_000, pdc=np.zeros(n, np.int64),
                           tac=np.zeros(n, np.int64), tdc=np.zeros(n, np.int64),
                           electrodes=np.zeros((19, n), np.int64), path="old_shadow.bag", pac_per_frame=2)
-    with pytest.raises(ConfigError, match=r"old_shadow.bag: PAC at 200 Hz \(2 samples a frame"):
+    with pytest.raises(ConfigError, match=r"old_shadow.bag \(mode paper\): feature group 'paper' needs channel "
+                                          r"'pac'.*pac at 200 Hz \(2 samples a frame.*can feed: levels$"):
         check_pac_rate([two])
+    check_recordings([two], "levels")  # electrodes, PDC, TDC, TAC: no PAC read
     full = BiotacRecording(**{**two.__dict__, "pac": np.zeros(22 * n, np.int64), "pac_per_frame": 22,
                               "pac_t_ns": np.arange(22 * n, dtype=np.int64) * 454_545})
     check_pac_rate([full])
@@ -341,3 +343,35 @@ def test_the_readers_import_no_ros_client_library():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+@pytest.mark.realdata
+def test_old_shadow_bags_evaluate_with_the_groups_their_channels_feed(csv_recs, tmp_path, capsys):
+    """``pac0, pac1`` a message is no 2.2 kHz PAC: groups reading PAC are refused, naming what works."""
+    from writers import write_old_shadow_bag
+
+    mapping = _mapping(tmp_path, "bag", BAG_MAPPING)
+    common = ["--mapping", str(mapping), "--train-trials", "1", "--test-trials", "2", "--window", "0.5",
+              "--classifier", "pa", "--train-windows", "4", "--test-windows", "2", "--jobs", "1", "--cache", "",
+              "--json"]
+    for electrodes in (True, False):
+        root = tmp_path / ("old" if electrodes else "old_no_electrodes")
+        for r in csv_recs:
+            write_old_shadow_bag(root / NAMES[r.material] / f"trial_{r.trial}.bag", r, electrodes=electrodes)
+        got = read_source(root, mapping)
+        assert [g.pac_per_frame for g in got] == [2] * 4
+        np.testing.assert_array_equal(got[0].pac.reshape(-1, 2), csv_recs[0].pac.reshape(-1, 22)[:, :2])
+        assert got[0].absent == (() if electrodes else tuple(f"e{i}" for i in range(1, 20)))
+        run = ["evaluate", "--train", str(root), "--test", str(root), *common]
+        assert main(run) == 2  # the default descriptor reads PAC
+        err = capsys.readouterr().err
+        assert "feature group 'per_channel' needs channel 'pac'" in err
+        assert "pac at 200 Hz (2 samples a frame at 100.0 frames/s), not the 2200 Hz" in err
+        able = "levels" if electrodes else "levels:pdc,tdc,tac"
+        assert err.rstrip().endswith(f"the groups they can feed: {able}")
+        if not electrodes:
+            assert main([*run, "--mode", "levels"]) == 2
+            assert "feature group 'levels' needs channel 'e1' (and 18 more)" in capsys.readouterr().err
+        assert main([*run, "--mode", able]) == 0
+        res = json.loads(capsys.readouterr().out)
+        assert res["n_features"] == (22 if electrodes else 3) and res["class_names"] == ["bouncy_foam", "cork"]
