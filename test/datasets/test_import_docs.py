@@ -8,7 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from writers import write_hdf5, write_npz, write_ros1_bag, write_ros2_shadow_bag
+from writers import (
+    simulated_skin_trials, write_hdf5, write_npz, write_old_shadow_bag, write_ros1_bag, write_ros2_shadow_bag,
+    write_skin_hdf5,
+)
 
 from tactile_descriptors_ros.datasets.biotac_slide import load_recordings
 from tactile_descriptors_ros.datasets.mapping import load_mapping
@@ -44,8 +47,8 @@ def recs(biotac_data_dir):
 @pytest.mark.realdata
 def test_every_command_of_the_page_runs(repo_dir, biotac_data_dir, recs, tmp_path, monkeypatch, capsys):
     files, commands = _page(repo_dir)
-    assert {"shadow.yaml", "hdf5.yaml", "npz.yaml", "labels.yaml"} <= set(files)
-    assert len(commands) >= 8
+    assert {"shadow.yaml", "hdf5.yaml", "npz.yaml", "labels.yaml", "skin.yaml"} <= set(files)
+    assert len(commands) >= 10
     work = tmp_path / "work"
     work.mkdir()
     (tmp_path / "shared").symlink_to(biotac_data_dir.parents[1])  # ../shared as seen from work/
@@ -57,8 +60,10 @@ def test_every_command_of_the_page_runs(repo_dir, biotac_data_dir, recs, tmp_pat
         write_ros1_bag(work / "shadow_ros1" / f"{stem}.bag", r, "shadow", sensor=1)
         write_ros2_shadow_bag(work / "shadow_ros2" / stem, r, sensor=1)
         write_ros1_bag(work / "upenn_ros1" / f"{stem}.bag", r, "upenn", sensor=0)
+        write_old_shadow_bag(work / "shadow_old" / f"{stem}.bag", r, sensor=1)
     write_hdf5(work / "recordings.h5", recs, NAMES)
     write_npz(work / "npz", recs, NAMES)
+    write_skin_hdf5(work / "skin.h5", simulated_skin_trials())
     monkeypatch.chdir(work)
     for line in commands:
         rc = main(shlex.split(line)[1:])
