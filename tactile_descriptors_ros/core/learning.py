@@ -425,8 +425,10 @@ def _replay_journal(model: OnlineClassifier, journal: Path, snapshot_sha256: str
     """Apply a journal's entries to ``model``; return (entries applied, bytes of whole lines used).
 
     A journal whose header names another snapshot is stale (the snapshot was
-    rewritten after it) and is skipped.  A last line without its newline is
-    an append cut short by a crash: it was never reported, and is ignored.
+    rewritten after it) and is skipped.  The entries end at the first zero
+    byte (the zeros :class:`ModelStore` reserves ahead of them).  A last line
+    without its newline is an append cut short by a crash: it was never
+    reported, and is ignored.
     """
     try:
         data = journal.read_bytes()
@@ -434,6 +436,7 @@ def _replay_journal(model: OnlineClassifier, journal: Path, snapshot_sha256: str
         return 0, 0
     except OSError as exc:
         raise ModelError(f"{journal}: cannot read journal: {exc}") from None
+    data = data.split(b"\0", 1)[0]  # the entries end at the reserved zeros (JSON holds no zero byte)
     lines = data.split(b"\n")[:-1]  # the part after the last newline is torn (or empty)
     if not lines:
         return 0, 0
@@ -537,6 +540,14 @@ class ModelStore:
       stale and never replayed twice.
     * **Exact**: entries hold floats as JSON's shortest round-trip repr; the
       replayed model equals the one in memory bit for bit.
+    * **Pre-sized**: the journal file is extended with written zeros ahead
+      of its entries (``reserve_bytes`` at a time, at least four entries), and
+      each entry is written over those zeros.  The file's size and blocks then
+      do not change when an entry is synced, so ``fdatasync`` flushes the
+      entry's data only, without a filesystem metadata commit; only the
+      extension, once per ``reserve_bytes``, syncs the size.  The entries end
+      at the first zero byte (JSON text holds none), so a torn entry followed
+      by the zeros is a last line without its newline, ignored as above.
 
     Parameters
     ----------
@@ -544,13 +555,24 @@ class ModelStore:
         The model file.
     min_compact_bytes : int, default 1 MiB
         Never compact a journal smaller than this.
+    reserve_bytes : int, default 256 KiB
+        Zeros written ahead of the entries at a time (at least four entries'
+        worth, in whole 4 KiB pages); 0 appends without reserving (every sync
+        then also commits the file's new size).
     """
 
-    def __init__(self, path: str | os.PathLike[str], min_compact_bytes: int = 1 << 20) -> None:
+    def __init__(self, path: str | os.PathLike[str], min_compact_bytes: int = 1 << 20,
+                 reserve_bytes: int = 1 << 18) -> None:
         self.path = Path(path)
         self.journal = journal_path(self.path)
         self.min_compact_bytes = int(min_compact_bytes)
-        self._fh = None
+        if reserve_bytes < 0:
+            raise ValueError(f"reserve_bytes must not be negative, got {reserve_bytes}")
+        self.reserve_bytes = int(reserve_bytes)
+        self._fd: int | None = None
+        self._reserved_bytes = 0  # the journal file's size: entries, then written zeros
+        #: times the journal file was extended (created included)
+        self.extensions = 0
         self._snapshot_bytes = 0
         self._snapshot_sha256 = ""
         self._journal_bytes = 0
@@ -596,17 +618,22 @@ class ModelStore:
             return
         line = (json.dumps(_entry(model, self._synced_classes)) + "\n").encode()
         try:
-            if self._fh is None:
-                header = json.dumps({"format": _JOURNAL_FORMAT, "snapshot_sha256": self._snapshot_sha256})
-                self._fh = open(self.journal, "wb")  # a new journal replaces any stale one
-                self._fh.write(header.encode() + b"\n")
-                self._journal_bytes = len(header) + 1
-                new_file = True
-            else:
-                new_file = False
-            self._fh.write(line)
-            self._fh.flush()
-            os.fdatasync(self._fh.fileno()) if hasattr(os, "fdatasync") else os.fsync(self._fh.fileno())
+            new_file = self._fd is None
+            if new_file:
+                header = (json.dumps({"format": _JOURNAL_FORMAT, "snapshot_sha256": self._snapshot_sha256})
+                          + "\n").encode()
+                # a new journal replaces any stale one
+                self._fd = os.open(self.journal, os.O_RDWR | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0),
+                                   0o644)
+                self._reserved_bytes = 0
+                self._journal_bytes = 0
+                self._extend(len(header) + len(line))
+                self._pwrite(header, 0)
+                self._journal_bytes = len(header)
+            elif self._journal_bytes + len(line) > self._reserved_bytes:
+                self._extend(len(line))
+            self._pwrite(line, self._journal_bytes)
+            _datasync(self._fd)  # over written zeros: the entry's data only, no metadata commit
             if new_file:
                 _fsync_dir(self.path.parent)  # the journal's name itself must survive
         except OSError as exc:
@@ -619,14 +646,40 @@ class ModelStore:
             self.save(model)
             self.compactions += 1
 
+    @property
+    def journal_bytes(self) -> int:
+        """Bytes of the journal's header and entries (the file is longer by its reserved zeros)."""
+        return self._journal_bytes
+
+    def _extend(self, need: int) -> None:
+        """Write zeros from the end of the entries to make room for ``need`` bytes and more; sync the new size."""
+        if not self.reserve_bytes:
+            return
+        start = self._journal_bytes
+        size = start + max(self.reserve_bytes, 4 * need)
+        size = -(-size // _PAGE) * _PAGE
+        zeros = bytes(min(size - start, 1 << 20))
+        pos = start
+        while pos < size:
+            pos += os.pwrite(self._fd, zeros[:size - pos], pos)
+        os.fsync(self._fd)  # the new size and blocks, once per reserve
+        self._reserved_bytes = size
+        self.extensions += 1
+
+    def _pwrite(self, data: bytes, offset: int) -> None:
+        view = memoryview(data)
+        while view:
+            n = os.pwrite(self._fd, view, offset)
+            view, offset = view[n:], offset + n
+
     def close(self) -> None:
         """Close the journal file (entries already recorded stay durable)."""
-        if self._fh is not None:
+        if self._fd is not None:
             try:
-                self._fh.close()
+                os.close(self._fd)
             except OSError:
                 pass
-            self._fh = None
+            self._fd = None
 
 
 def save_json_atomic(path: str | os.PathLike[str], obj: dict) -> None:
@@ -653,6 +706,18 @@ def save_json_atomic(path: str | os.PathLike[str], obj: dict) -> None:
         except OSError:
             pass
         raise ModelError(f"cannot save model to {path}: {exc}") from None
+
+
+#: Journal extensions are whole pages of this many bytes.
+_PAGE = 4096
+
+
+def _datasync(fd: int) -> None:
+    """``fdatasync`` where the platform has it, else ``fsync``."""
+    if hasattr(os, "fdatasync"):
+        os.fdatasync(fd)
+    else:  # pragma: no cover - macOS, Windows
+        os.fsync(fd)
 
 
 def _fsync_dir(folder: Path) -> None:

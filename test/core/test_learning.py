@@ -263,11 +263,55 @@ def test_journal_entry_size_does_not_grow_with_the_classes(tmp_path):
         store = ModelStore(path)
         store.save(clf)
         _learn_some(clf, store, 1, np.random.default_rng(3))
-        before = journal_path(path).stat().st_size
+        before = store.journal_bytes
         _learn_some(clf, store, 1, np.random.default_rng(4), offset=1)
-        sizes[n_classes] = journal_path(path).stat().st_size - before
+        sizes[n_classes] = store.journal_bytes - before
     assert (tmp_path / "m1000.json").stat().st_size > 50 * sizes[1000]  # a whole rewrite would be 50x more
     assert abs(sizes[1000] - sizes[10]) < 0.1 * sizes[10]
+
+
+def test_journal_entries_are_written_over_reserved_zeros(tmp_path):
+    """The journal file is extended ahead of its entries, so syncing an entry changes neither its size nor its
+    blocks (no filesystem metadata to commit); a torn entry over the zeros is ignored; a journal written
+    without a reserve (plain appends) loads the same."""
+    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+
+    path = tmp_path / "model.json"
+    clf = OnlineClassifier([f"A_{i}" for i in range(8)])
+    store = ModelStore(path, reserve_bytes=64 << 10)
+    store.save(clf)
+    _learn_some(clf, store, 1, np.random.default_rng(0))
+    size = journal_path(path).stat().st_size
+    assert size >= 64 << 10 and size % 4096 == 0 and store.extensions == 1
+    assert store.journal_bytes < size
+    _learn_some(clf, store, 10, np.random.default_rng(1))
+    assert journal_path(path).stat().st_size == size and store.extensions == 1  # written over the zeros
+    raw = journal_path(path).read_bytes()
+    assert raw[store.journal_bytes:] == bytes(size - store.journal_bytes)
+    assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
+    # past the reserve the file is extended once more, by at least the reserve
+    rng = np.random.default_rng(2)
+    for _ in range(1000):
+        if journal_path(path).stat().st_size != size:
+            break
+        _learn_some(clf, store, 1, rng)
+    assert store.extensions == 2 and journal_path(path).stat().st_size >= size + (64 << 10)
+    assert store.compactions == 0
+    assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
+    # a crash while writing an entry over the zeros: its beginning, no newline, zeros after it
+    with open(journal_path(path), "r+b") as fh:
+        fh.seek(store.journal_bytes)
+        fh.write(b'{"version": 99, "new_classes": [')
+    assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
+    store.close()
+    # the same labels appended without a reserve: the file is exactly the entries, and loads the same
+    plain = tmp_path / "plain.json"
+    clf2 = OnlineClassifier([f"A_{i}" for i in range(8)])
+    store2 = ModelStore(plain, reserve_bytes=0)
+    store2.save(clf2)
+    _learn_some(clf2, store2, 5, np.random.default_rng(0))
+    assert journal_path(plain).stat().st_size == store2.journal_bytes and store2.extensions == 0
+    assert json.dumps(OnlineClassifier.load(plain).state()) == json.dumps(clf2.state())
 
 
 def test_stale_or_corrupt_journal(tmp_path):
@@ -303,5 +347,4 @@ def test_journal_compacts_once_it_outgrows_the_file(tmp_path):
     _learn_some(clf, store, 40, np.random.default_rng(0))
     assert store.compactions >= 1
     assert json.dumps(OnlineClassifier.load(path).state()) == json.dumps(clf.state())
-    size = journal_path(path).stat().st_size if journal_path(path).exists() else 0
-    assert size <= path.stat().st_size + 2_000
+    assert store.journal_bytes <= path.stat().st_size + 2_000

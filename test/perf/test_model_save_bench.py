@@ -12,7 +12,7 @@ def test_model_save_bench_json(capsys):
     assert code == 0
     res = json.loads(capsys.readouterr().out)
     assert res["classes"] == 20 and res["labels"] == 50
-    for key in ("journal", "rewrite", "sync_floor"):
+    for key in ("journal", "journal_append", "rewrite", "sync_floor"):
         assert res[key]["n"] == 50 and 0 < res[key]["median_ms"] <= res[key]["max_ms"]
     assert res["ratio"] == res["rewrite"]["median_ms"] / res["journal"]["median_ms"]
     assert res["target_met"] == (res["journal"]["median_ms"] <= 5.0)
