@@ -187,3 +187,22 @@ def test_skin_tables_are_not_imported_into_biotac_bags(trials, tmp_path, capsys)
     source, mapping = _write("csv", tmp_path, trials[:1])
     assert main(["import", str(source), "--mapping", str(mapping), "-o", str(tmp_path / "bag")]) == 2
     assert "tactile evaluate" in capsys.readouterr().err and not (tmp_path / "bag").exists()
+
+
+def test_a_levels_channel_list_selects_those_levels_of_the_bank(trials, tmp_path):
+    from tactile_descriptors_ros.evaluation.features import compute_bank, mode_groups, select_features
+    from tactile_descriptors_ros.evaluation.windows import Window
+
+    source, mapping = _write("npz", tmp_path, trials)
+    recs = read_source(source, mapping)
+    bank = compute_bank(recs, [Window(r.material, r.trial, 150, 250) for r in recs], cell_type=_skin())
+    every, labels = select_features(bank, "levels", gate=False)
+    assert labels == tuple(f"levels/level_{c}" for c in ("f1", "f2", "f3", "proximity", "temperature"))
+    some, some_labels = select_features(bank, "levels:temperature,f2", gate=False)
+    np.testing.assert_array_equal(some, every[:, [4, 1]])
+    assert some_labels == ("levels:temperature,f2/level_temperature", "levels:temperature,f2/level_f2")
+    np.testing.assert_allclose(some[:, 0], [t["temperature"][150:400].mean() for t in
+                                            sorted(trials, key=lambda t: (t["class_name"], t["trial"]))])
+    assert mode_groups("per_channel+levels:f1") == ("per_channel", "levels:f1")
+    with pytest.raises(ConfigError, match=r"unknown descriptor mode 'per_channel\+level'"):
+        mode_groups("per_channel+level")
