@@ -1,5 +1,5 @@
-"""Drivers under attack: an unplugged and replugged serial BioTac, payloads of another pattern,
-a failure while handling a read, a skin cell that goes quiet for longer than its sequence wraps."""
+"""Drivers under attack: an unplugged and replugged serial BioTac and CAN adapter, payloads of another
+pattern, a failure while handling a read, a skin cell that goes quiet for longer than its sequence wraps."""
 
 from __future__ import annotations
 
@@ -292,4 +292,209 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
         assert drv.decoder.stats.lost_frames == lost and drv.decoder.stats.sequence_resets == 0
         assert int(_values(_statuses(drv)["left_hand"])["lost_frames"]) == lost
     finally:
+        drv.close()
+
+
+class _CanAdapter:
+    """A USB-CAN adapter that can be unplugged: the python-can bus of :class:`UnpluggableCanBus`.
+
+    ``deliver`` puts frames on the open bus as the adapter receives them (stamped with the host time); a
+    frame that arrives while the adapter is unplugged, or plugged in but not opened yet, is received by
+    nobody (``never_received``).  ``unplug`` makes every read and every open fail, as a vanished network
+    interface does, and drops the frames the driver had not read yet (``dropped``).  ``replug`` makes
+    the device openable again; the handle opened before stays dead.
+    """
+
+    adapters: dict[str, "_CanAdapter"] = {}
+
+    def __init__(self, channel: str) -> None:
+        import queue
+
+        self.channel = channel
+        self.lock = threading.Lock()
+        self.plugged = True
+        self.generation = 0
+        self.queue: queue.SimpleQueue | None = None
+        self.never_received = 0
+        self.dropped = 0
+        self.opens = 0
+        _CanAdapter.adapters[channel] = self
+
+    def deliver(self, messages) -> None:
+        now = time.time()
+        with self.lock:
+            if not self.plugged or self.queue is None:
+                self.never_received += len(messages)
+                return
+            for msg in messages:
+                msg.timestamp = now
+                self.queue.put(msg)
+
+    def unplug(self) -> None:
+        with self.lock:
+            self.plugged = False
+            if self.queue is not None:
+                self.dropped += self.queue.qsize()
+                self.queue = None
+
+    def replug(self) -> None:
+        with self.lock:
+            self.plugged = True
+            self.generation += 1
+
+
+try:
+    import can as _can
+except ImportError:  # pragma: no cover - python-can is a dependency
+    _can = None
+
+if _can is not None:
+    class UnpluggableCanBus(_can.BusABC):
+        """python-can interface ``tactile_test_unpluggable`` over :class:`_CanAdapter` (channel = adapter)."""
+
+        def __init__(self, channel, **kwargs) -> None:
+            import queue
+
+            adapter = _CanAdapter.adapters.get(str(channel))
+            if adapter is None:
+                raise _can.CanInitializationError(f"{channel}: no such device")
+            with adapter.lock:
+                if not adapter.plugged:
+                    raise _can.CanInitializationError(f"{channel}: No such device")
+                adapter.queue = self._queue = queue.SimpleQueue()
+                adapter.opens += 1
+                self._generation = adapter.generation
+            self._adapter = adapter
+            self.channel_info = f"unpluggable {channel}"
+            super().__init__(channel=channel, **kwargs)
+
+        def _alive(self) -> bool:
+            a = self._adapter
+            return a.plugged and a.generation == self._generation and a.queue is self._queue
+
+        def _recv_internal(self, timeout):
+            import queue
+
+            deadline = time.monotonic() + (timeout or 0.0)
+            while True:
+                with self._adapter.lock:
+                    if not self._alive():
+                        raise _can.CanOperationError(f"{self.channel_info}: Network is down")
+                    try:
+                        return self._queue.get_nowait(), False
+                    except queue.Empty:
+                        pass
+                if time.monotonic() >= deadline:
+                    return None, False
+                time.sleep(0.001)
+
+        def send(self, msg, timeout=None) -> None:
+            raise _can.CanOperationError("this adapter only receives")
+
+        def shutdown(self) -> None:
+            with self._adapter.lock:
+                if self._adapter.queue is self._queue:
+                    self._adapter.queue = None
+            super().shutdown()
+
+
+class _SkinCell:
+    """One NAO skin cell on the adapter, sampling at 1 kHz (accelerometer) and 250 Hz (force) in real time
+    from a thread, whether or not the adapter is plugged in (its numbers run on while unplugged)."""
+
+    def __init__(self, adapter: _CanAdapter, cell_id: int) -> None:
+        from tactile_descriptors_ros.codecs.skin_can import SkinCanEncoder
+
+        self.adapter, self.cell_id = adapter, cell_id
+        self.enc = SkinCanEncoder()
+        self.k = 0
+        self.stop = threading.Event()
+        self.t0 = time.monotonic()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        from tactile_descriptors_ros.codecs.skin import Modality
+
+        while not self.stop.wait(0.005):
+            due = int((time.monotonic() - self.t0) * 1000)
+            msgs = []
+            while self.k < due:
+                msgs.append(self.enc.encode(self.cell_id, Modality.ACCEL, (self.k % 50 - 25, 3, -4)))
+                if self.k % 4 == 0:
+                    msgs.append(self.enc.encode(self.cell_id, Modality.FORCE, (100, 110, 120)))
+                self.k += 1
+            self.adapter.deliver(msgs)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(timeout=5.0)
+
+
+def test_can_skin_driver_comes_back_after_the_adapter_is_unplugged_and_replugged(ros_context, monkeypatch):
+    """The CAN adapter vanishes (every read fails with an interface error, opening fails) and comes back:
+    the driver reads again from the first reopen attempt after the adapter returned, with no lifecycle
+    transition; the absence is counted (link disconnects and reconnects, the time away) and the frames
+    the cell sent meanwhile are the body part's lost frames, exactly; the bus status is OK again."""
+    import can.interfaces
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
+
+    import can.util
+
+    # a python-can interface of its own, registered as a plugin package registers one
+    monkeypatch.setitem(can.interfaces.BACKENDS, "tactile_test_unpluggable", (__name__, "UnpluggableCanBus"))
+    monkeypatch.setattr(can.util, "VALID_INTERFACES", can.util.VALID_INTERFACES | {"tactile_test_unpluggable"})
+    channel = f"usbcan_{time.monotonic_ns()}"
+    adapter = _CanAdapter(channel)
+    cell_id = 1
+    drv = SkinDriver(context=ros_context, parameter_overrides=[Parameter(k, value=v) for k, v in {
+        "robot": "nao", "body_parts": ["left_hand"], "transport": "can", "can.interface": "tactile_test_unpluggable",
+        "can.channel": channel, "tare_on_start_s": 0.0, "resync_s": 0.0, "reconnect_s": 0.25}.items()])
+    pub = drv.part_publishers["left_hand"]
+    sink = rclpy.create_node("sink", context=ros_context)
+    got = []
+    sink.create_subscription(pub.msg_type, pub.topic_name, got.append, 1000)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(drv)
+    ex.add_node(sink)
+    cell = None
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() > 0)
+        cell = _SkinCell(adapter, cell_id)
+        assert spin_until(ex, lambda: len(got) >= 3)
+        adapter.unplug()
+        assert spin_until(ex, lambda: _statuses(drv)["bus"].level == b"\x02")  # ERROR while it is gone
+        assert "reopening" in _statuses(drv)["bus"].message
+        link = drv.link
+        assert spin_until(ex, lambda: link.reopen_failures >= 2)  # away for a while: reopening fails meanwhile
+        before = len(got)
+        back = time.monotonic()
+        adapter.replug()
+        assert spin_until(ex, lambda: len(got) > before + 2, timeout_s=30.0)
+        recovered_s = time.monotonic() - back
+        assert link.connected and link.reconnects == 1 and link.disconnects == 1 and adapter.opens == 2
+        # the reopen that worked was the first attempt after the adapter returned (one every reconnect_s)
+        assert link.failed_attempts and all(t < back for t in link.failed_attempts), (link.failed_attempts, back)
+        assert link.last_gap_s >= 2 * drv.reconnect_s  # the time away, reported (two reopens failed)
+        assert drv._state_machine.current_state[1] == "active"  # no lifecycle transition was made
+        st = _statuses(drv)
+        assert st["bus"].level == b"\x00", st["bus"].message  # OK again, by itself
+        values = _values(st["bus"])
+        assert values["link_reconnects"] == "1" and values["link_disconnects"] == "1"
+        assert values["transport_errors"] != "0" and float(values["link_last_gap_s"]) == round(link.last_gap_s, 3)
+        # every frame the cell sent while the driver could not read it is counted lost, no more, no less
+        missed = adapter.never_received + adapter.dropped
+        assert missed > 0
+        assert spin_until(ex, lambda: drv.cells[cell_id].lost == missed)
+        assert drv.decoder.stats.lost_frames == missed and drv.decoder.stats.sequence_resets == 0
+        assert spin_until(ex, lambda: int(_values(_statuses(drv)["left_hand"])["lost_frames"]) == missed)
+        print(f"recovered {recovered_s:.3f} s after the adapter returned; away {link.last_gap_s:.3f} s, "
+              f"{missed} frames lost")
+    finally:
+        if cell is not None:
+            cell.close()
         drv.close()
