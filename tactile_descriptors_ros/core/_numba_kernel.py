@@ -1,18 +1,21 @@
-"""Compiled loops behind :mod:`.fast` for integer sensor data (numba; optional).
+"""The compiled backend of :mod:`.fast`: the descriptor's hot path for integer sensor data (numba).
 
-One loop per signal row does what the numpy kernel does in about ten passes
-over memory: the exact integer moments of the Hjorth parameters (row sum,
-sum of squares, lag-1 and lag-2 products, end samples), the counting ranks
-(histogram of the row's values, prefix sum, rank lookup), the run sums of
-the samples and of their ranks over the zero-order-hold runs of V, and the
-cross sums with every held V channel.  Every sum is an exact int64, so the
-results are the same integers the numpy kernel gets (in float64 within
-:func:`~.fast.exact_integer_ok` bounds); :mod:`.fast` turns them into the
-quantities with the same code for both paths.  The numpy kernel stays the
-fallback and the reference.
+Per cell, while its samples are in the cache, one loop per signal row: the
+exact integer moments of the Hjorth parameters (row sum, sum of squares,
+lag-1 and lag-2 products, end samples; eq. 1-3 need no difference array),
+the counting ranks (histogram of the row's values, prefix sum: twice the
+centred average rank ``2 r - (n + 1)`` is an integer), the run sums of the
+samples and of their ranks over the zero-order-hold runs of V (held V is
+piecewise constant, so every sum over the expanded series is a sum over
+runs, and the held V's ranks are ranks weighted by the run lengths), and
+the cross sums with every held V channel (eq. 4-5).  Every sum is an exact
+integer (checked against 2**53 before use), so the quantities differ from
+the reference (:func:`.descriptors.cell_quantities`) by rounding only.
+What this module cannot compute exactly it reports by a status code, and
+:func:`.fast.cell_quantities` hands it to the reference.
 
 This module imports numba; :mod:`.fast` imports it lazily, only when the
-accelerator is first used (``TACTILE_NO_NUMBA=1`` disables it).  Compiled
+backend is first used (``TACTILE_NO_NUMBA=1`` disables it).  Compiled
 code is cached on disk (``cache=True``) in :data:`CACHE_DIR`, filled at
 set-up (``make setup`` runs :func:`~.fast.main`) and found by every node
 afterwards:
@@ -120,7 +123,7 @@ PATH_INDEPENDENT_CACHE: bool = _install_locator()
 if not PATH_INDEPENDENT_CACHE:
     numba.config.CACHE_DIR = CACHE_DIR
 
-#: Status codes of :func:`quantities` (anything but OK: let the numpy kernel decide).
+#: Status codes of :func:`quantities` (anything but OK: the reference computes the batch).
 OK, NOT_EXACT, DEGENERATE, UNSORTED, TOO_WIDE = 0, 1, 2, 3, 4
 
 _F64_EXACT = float(2**53)
@@ -274,8 +277,13 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
 
 @_jit
 def _hjorth_row(n, fs, mom):  # pragma: no cover - compiled
-    """Hjorth parameters (eq. 1-3) from exact row moments, with the operations of
-    :func:`~.fast._hjorth_from_ints` in the same order; returns (A, M, C, flat)."""
+    """Hjorth parameters (eq. 1-3) from exact row moments; returns (A, M, C, flat).
+
+    With ``d`` the first and ``dd`` the second difference, ``n^2 var(x)``,
+    ``(n-1)^2 var(d)`` and ``(n-2)^2 var(dd)`` are exact integers from the
+    sum, the sum of squares, the lag-1 and lag-2 products and the end samples.
+    For integer data a non-zero variance is at least ``1/n^2``, far above the
+    reference's flatness tolerance: flat means exactly zero here."""
     s1 = np.int64(mom[0])
     q = np.int64(mom[1])
     r1 = np.int64(mom[2])
@@ -305,7 +313,7 @@ def _hjorth_row(n, fs, mom):  # pragma: no cover - compiled
 
 @_jit
 def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cover - compiled
-    """Every per-cell quantity of eq. 1-5 for integer cells, exactly; see :func:`~.fast.cell_quantities`.
+    """Every per-cell quantity of eq. 1-5 for integer cells, exactly; see :func:`.descriptors.cell_quantities`.
 
     Parameters
     ----------
@@ -323,20 +331,19 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cov
     Returns
     -------
     status : int
-        :data:`OK`, or why the numpy kernel must decide (:data:`NOT_EXACT`:
+        :data:`OK`, or why the reference must compute the batch (:data:`NOT_EXACT`:
         sums would pass 2**53; :data:`DEGENERATE`: fewer than 3 samples or
         pairs; :data:`UNSORTED` stamps; :data:`TOO_WIDE` value span).
     act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality : arrays
-        As :func:`~.fast.cell_quantities` (valid when status is OK).
+        As :func:`.descriptors.cell_quantities` (valid when status is OK).
 
     Notes
     -----
     Per row, one loop each for the moments, the value histogram and the run
     sums; ranks are ``2 r - (n + 1)`` from the histogram's prefix sums (ties
     get average ranks), held V is ranked with the run lengths as weights.
-    Every sum is an exact integer (checked before use), and the quantities
-    are computed from them with the numpy kernel's floating-point operations
-    in the same order, so both kernels return the same bits.
+    Every sum is an exact integer (checked before use): the quantities
+    differ from the reference's by the rounding of the last operations.
     """
     n_cells, n_s, n_fast = s.shape
     n_v, n_slow = v.shape[1], v.shape[2]
@@ -506,7 +513,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cov
                 q = np.int64(fq)
             den_s = float(n * q - s1 * s1)
             for j in range(n_v):
-                # Pearson (eq. 4), as fast._held_correlations' exact branch
+                # Pearson (eq. 4) from exact sums over the runs
                 v1 = np.int64(sums_v[j, 0])
                 v2 = np.int64(sums_v[j, 1])
                 den_v = float(n * v2 - v1 * v1)

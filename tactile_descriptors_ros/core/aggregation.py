@@ -26,7 +26,6 @@ A body part with no cell in contact yields zeros, ``contact = False`` and the
 from __future__ import annotations
 
 import functools
-import math
 import threading
 import weakref
 from collections.abc import Mapping
@@ -37,7 +36,7 @@ import numpy as np
 
 from ..errors import SignalError
 from .descriptors import Quality
-from .fast import cell_bounds, cell_quantities, cell_quantities_reference, exact_integer_ok
+from .fast import cell_bounds, cell_quantities, exact_integer_ok, scratch
 from .features import (
     KERNEL_GROUPS,
     band_hjorth,
@@ -215,22 +214,8 @@ def cell_features(
             f"vibration and deformation must be (n_cells, channels, samples) with the same n_cells; "
             f"got {s.shape} and {v.shape}"
         )
-    # Exact fast path (core/fast.py): run sums over the held V instead of the
-    # expanded series, counting ranks for integer counts, exact integer moments.
-    # Equal to the straightforward computation (fast.cell_quantities_reference).
-    # Float signals beyond 2**500 would overflow its sums of squares: those
-    # take the reference path, which scales every signal first.
-    compute = cell_quantities_reference if _extreme(s) or _extreme(v) else cell_quantities
-    return CellFeatures(*compute(s, vibration_t_ns, v, deformation_t_ns,
-                                 vibration_rate_hz, deformation_rate_hz))
-
-
-def _extreme(a: np.ndarray) -> bool:
-    """True for float data with a finite magnitude above 2**500."""
-    if a.dtype.kind != "f" or a.size == 0 or float(np.finfo(a.dtype).max) <= 2.0**500:
-        return False  # float32 and float16 cannot get there
-    with np.errstate(invalid="ignore"):
-        return bool(np.any(np.abs(a) > 2.0**500) and np.any(np.isfinite(a) & (np.abs(a) > 2.0**500)))
+    return CellFeatures(*cell_quantities(s, vibration_t_ns, v, deformation_t_ns,
+                                         vibration_rate_hz, deformation_rate_hz))
 
 
 def contact_gate(force_n: np.ndarray, threshold_n: float) -> np.ndarray:
@@ -709,22 +694,6 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
 STACK_CHUNK_SAMPLES = 1 << 20
 
 
-class _Buffers(threading.local):
-    def __init__(self) -> None:
-        self.arrays: dict[tuple[str, str], np.ndarray] = {}
-
-    def get(self, slot: str, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
-        size = math.prod(shape)
-        key = (slot, np.dtype(dtype).str)
-        buf = self.arrays.get(key)
-        if buf is None or buf.size < size:
-            buf = self.arrays[key] = np.empty(max(size, 1), dtype=dtype)
-        return buf[:size].reshape(shape)
-
-
-_BUFFERS = _Buffers()
-
-
 def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFeatures, np.ndarray] | None:
     """Per-cell quantities and saturation of integer cells of one shape, in chunks of cells.
 
@@ -744,9 +713,9 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFe
     for c0 in range(0, len(sigs), step):
         chunk = sigs[c0:c0 + step]
         # np.stack, without its per-array expand_dims: the rows of all cells concatenated into the buffer
-        vib = _BUFFERS.get("vib", (len(chunk),) + s0.shape, s0.dtype)
+        vib = scratch("agg.vib", (len(chunk),) + s0.shape, s0.dtype)
         np.concatenate([s.vibration for s in chunk], out=vib.reshape(len(chunk) * s0.shape[0], n_fast))
-        dfm = _BUFFERS.get("dfm", (len(chunk),) + v0.shape, v0.dtype)
+        dfm = scratch("agg.dfm", (len(chunk),) + v0.shape, v0.dtype)
         np.concatenate([s.deformation for s in chunk], out=dfm.reshape(len(chunk) * v0.shape[0], n_slow))
         peaks, sat = _peaks_and_saturation(vib, dfm, cell_type)
         if not exact_integer_ok(n_max, *peaks):

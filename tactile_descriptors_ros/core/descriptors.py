@@ -15,6 +15,13 @@ section II:
 * Nonlinear correlation ``N`` (eq. 5, 10): Spearman's rho, computed as
   Pearson's r of average ranks so that ties (quantised 12-bit data tie a lot)
   are handled exactly; eq. 5 is exact only without ties.
+* Per cell (:func:`cell_quantities`): all of the above for every vibration
+  channel S and deformation channel V of a batch of cells, the slow V held
+  onto S's time base (zero-order hold, :mod:`.alignment`) for eq. 4-5.
+
+This module is the readable reference of the descriptor's maths.  The hot
+path (:func:`.fast.cell_quantities`, a compiled kernel) computes the same
+numbers from exact integer sums; property tests keep the two equal.
 
 Numerics (see ``docs/numerics.md``): inputs are converted to float64, scaled
 by their largest magnitude (so amplitudes from 1e-30 to 1e300 neither
@@ -32,6 +39,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import SignalError
+from .alignment import hold_indices
 
 __all__ = [
     "Quality",
@@ -40,6 +48,9 @@ __all__ = [
     "pearson",
     "spearman",
     "average_ranks",
+    "held_correlations",
+    "cell_quantities",
+    "check_cell_batch",
     "FLAT_RELATIVE_TOLERANCE",
     "COUNTING_RANK_MAX_BINS",
 ]
@@ -445,3 +456,119 @@ def _ranks_of(original: np.ndarray, as_float: np.ndarray, axis: int) -> np.ndarr
     if _is_integral(original):
         return average_ranks(np.moveaxis(original, axis, -1), axis=-1)
     return average_ranks(as_float, axis=-1)
+
+
+# ------------------------------------------------------------------ per cell
+def check_cell_batch(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np.ndarray) -> None:
+    """Check the shapes of a batch of cells: (n_cells, channels, samples) and their stamps.
+
+    Raises
+    ------
+    SignalError
+        When S and V differ in ``n_cells``, or a stamp array matches neither
+        ``(samples,)`` (shared by all cells) nor ``(n_cells, samples)``.
+    """
+    if s.ndim != 3 or v.ndim != 3 or s.shape[0] != v.shape[0]:
+        raise SignalError(
+            f"vibration and deformation must be (n_cells, channels, samples) with the same n_cells; "
+            f"got {s.shape} and {v.shape}")
+    n_cells = s.shape[0]
+    if np.shape(t_s_ns) not in ((s.shape[2],), (n_cells, s.shape[2])) or \
+            np.shape(t_v_ns) not in ((v.shape[2],), (n_cells, v.shape[2])):
+        raise SignalError(f"time stamps do not match samples: {np.shape(t_s_ns)} vs {s.shape}, "
+                          f"{np.shape(t_v_ns)} vs {v.shape}")
+
+
+def held_correlations(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pearson and Spearman correlation of every S channel with every V channel held on S (eq. 4-5, 9-10).
+
+    V is held onto S's time base (zero-order hold); S samples before the
+    first V sample have no partner and are left out.
+
+    Parameters
+    ----------
+    s : array_like, shape (n_cells, n_s, n_fast)
+        Vibration samples S of cells sharing one fast time base.
+    t_s_ns : array_like of int64, shape (n_fast,)
+    v : array_like, shape (n_cells, n_v, n_slow)
+        Deformation samples V (one slow time base).
+    t_v_ns : array_like of int64, shape (n_slow,)
+
+    Returns
+    -------
+    lin, nonlin : numpy.ndarray, shape (n_cells, n_s, n_v)
+        Pearson r and Spearman rho.
+    quality : numpy.ndarray of uint32, shape (n_cells,)
+        OR of the :class:`Quality` flags of every pair.
+    """
+    s = np.asarray(s)
+    v = np.asarray(v)
+    if np.ndim(t_s_ns) != 1 or np.ndim(t_v_ns) != 1:
+        raise SignalError("held_correlations takes one fast and one slow time base (1-D stamps)")
+    check_cell_batch(s, t_s_ns, v, t_v_ns)
+    idx = hold_indices(np.asarray(t_v_ns, dtype=np.int64), np.asarray(t_s_ns, dtype=np.int64))
+    paired = idx >= 0
+    if v.shape[2] == 0:
+        paired[:] = False
+    s_p = s[:, :, paired]
+    v_p = v[:, :, idx[paired]]
+    r, qr = pearson(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
+    rho, qn = spearman(s_p[:, :, None, :], v_p[:, None, :, :], return_quality=True)
+    quality = np.bitwise_or.reduce((qr | qn).reshape(s.shape[0], -1), axis=1).astype(np.uint32)
+    return r, rho, quality
+
+
+def cell_quantities(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np.ndarray,
+                    rate_s_hz: float, rate_v_hz: float) -> tuple[np.ndarray, ...]:
+    """Every per-cell quantity of eq. 1-5 for a batch of cells, computed as the paper states it.
+
+    :func:`hjorth` of every channel, and :func:`held_correlations` per
+    group of cells sharing their time bases.
+
+    Parameters
+    ----------
+    s : array_like, shape (n_cells, n_s, n_fast)
+    t_s_ns : array_like of int64, shape (n_fast,) or (n_cells, n_fast)
+    v : array_like, shape (n_cells, n_v, n_slow)
+    t_v_ns : array_like of int64, shape (n_slow,) or (n_cells, n_slow)
+    rate_s_hz, rate_v_hz : float
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``act_s, mob_s, com_s`` (n_cells, n_s), ``act_v, mob_v, com_v``
+        (n_cells, n_v), ``lin, nonlin`` (n_cells, n_s, n_v) and ``quality``
+        (n_cells,) uint32, the OR of every flag of the cell: the fields of
+        :class:`~.aggregation.CellFeatures` in order.
+    """
+    s = np.asarray(s)
+    v = np.asarray(v)
+    ts = np.asarray(t_s_ns, dtype=np.int64)
+    tv = np.asarray(t_v_ns, dtype=np.int64)
+    check_cell_batch(s, ts, v, tv)
+    n_cells = s.shape[0]
+    hs = hjorth(s, rate_s_hz)
+    hv = hjorth(v, rate_v_hz)
+    quality = np.bitwise_or.reduce(hs.quality, axis=1) | np.bitwise_or.reduce(hv.quality, axis=1)
+    lin = np.zeros((n_cells, s.shape[1], v.shape[1]))
+    nonlin = np.zeros_like(lin)
+    for cells, t_fast, t_slow in _time_groups(ts, tv, n_cells):
+        r, rho, q = held_correlations(s[cells], t_fast, v[cells], t_slow)
+        lin[cells], nonlin[cells] = r, rho
+        quality[cells] |= q
+    return (hs.activity, hs.mobility, hs.complexity, hv.activity, hv.mobility, hv.complexity,
+            lin, nonlin, quality.astype(np.uint32))
+
+
+def _time_groups(ts: np.ndarray, tv: np.ndarray, n_cells: int):
+    """Cells sharing both time bases: (cell indices, fast stamps, slow stamps)."""
+    if n_cells == 0:
+        return
+    ts2 = np.broadcast_to(ts, (n_cells, ts.shape[-1]))
+    tv2 = np.broadcast_to(tv, (n_cells, tv.shape[-1]))
+    groups: dict[tuple[bytes, bytes], list[int]] = {}
+    for c in range(n_cells):
+        groups.setdefault((ts2[c].tobytes(), tv2[c].tobytes()), []).append(c)
+    for cells in groups.values():
+        yield np.asarray(cells), ts2[cells[0]], tv2[cells[0]]

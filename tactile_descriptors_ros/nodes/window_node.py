@@ -397,8 +397,8 @@ class WindowNode(Node):
         """Kernel warm-up thread: load (or compile) the descriptor kernel, then let the held windows go."""
         try:
             info = warm_up()
-        except Exception as exc:  # noqa: BLE001 - the numpy kernel serves; say why
-            info = {"accelerator": "numpy", "import_s": 0.0, "first_call_s": 0.0, "error": repr(exc)}
+        except Exception as exc:  # noqa: BLE001 - the reference serves; say why
+            info = {"accelerator": "reference", "import_s": 0.0, "first_call_s": 0.0, "error": repr(exc)}
         self.kernel_info = info
         self.get_logger().info(f"descriptor kernel: {info['accelerator']} "
                                f"(ready in {info['import_s'] + info['first_call_s']:.2f} s"

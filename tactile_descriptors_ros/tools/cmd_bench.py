@@ -6,9 +6,8 @@ baseline's on the same window (it aborts otherwise), times on one core
 2 s), a NAO window (116 skin cells, 2 s), 1,000 and 10,000 skin cells (the
 baseline extrapolated from a measured subset), the scaling with window length
 (0.5 to 10 s), and the windowing cost per NAO message (Windower.add vs
-add_many).  The package and kernel are timed with the accelerator in use
-(numba when installed; loaded or compiled before timing) and with the numpy
-kernel only; then the shipped feature groups (the best measured mode) on a
+add_many).  The compiled kernel is loaded (or compiled) before timing and
+checked against the reference (core/descriptors.py); then the shipped feature groups (the best measured mode) on a
 Shadow Hand and a NAO window, checked against the evaluation's values per
 cell and group before timing; the report ends with the targets, met or not
 (``targets`` in ``--json``).
@@ -56,8 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--baseline-cells", type=int, default=116,
                    help="cells on which the baseline of a large skin is measured (default 116)")
     p.add_argument("--no-windowing", action="store_true", help="skip the windowing measurement")
-    p.add_argument("--numpy-only", action="store_true",
-                   help="time the numpy kernel only (as without numba, or TACTILE_NO_NUMBA=1)")
+    p.add_argument("--reference-only", action="store_true",
+                   help="time the reference backend only, no compiled code (as without numba, or TACTILE_NO_NUMBA=1)")
     p.add_argument("--latency", action="store_true",
                    help="also measure sensor stamp -> Prediction latency through window_node + classifier_node")
     p.add_argument("--latency-s", type=float, default=8.0, help="seconds of NAO data for --latency (default 8)")
@@ -116,8 +115,8 @@ def run(args: argparse.Namespace) -> int:
         bar.set_postfix_str(msg)
         bar.update(1)
 
-    if args.numpy_only:
-        fast.set_accelerator("numpy")
+    if args.reference_only:
+        fast.set_backend(fast.REFERENCE)
     try:
         report = run_bench(repeat=args.repeat, sizes=args.sizes, lengths_s=args.lengths,
                            baseline_cells=args.baseline_cells, windowing=not args.no_windowing,

@@ -26,14 +26,13 @@ def test_bench_command_json_smoke(capsys):
     assert any("extrapolated" in note for note in report["notes"])
     assert report["scaling"][0]["length_s"] == pytest.approx(0.5)
     assert report["windowing"] is None and report["environment"]["threads"] == 1
-    # which kernel served, its load/compile time (before timing), and the numpy-only figures beside it
+    # which backend served, its load/compile time (before timing); the kernel checked against the reference
     accel = report["accelerator"]["accelerator"]
-    assert accel in ("numba", "numpy") and report["accelerator"]["first_call_s"] >= 0
+    assert accel in ("numba", "reference") and report["accelerator"]["first_call_s"] >= 0
     for case in report["cases"]:
         assert case["accelerator"] == accel and case["package_windows_per_s_cpu"] > 0
-        if accel == "numba":
-            assert case["package_numpy"]["cpu_ms"] > 0 and case["kernel_numpy"]["cpu_ms"] > 0
-            assert case["max_abs_diff_numpy"] < 1e-6
+    for case in report["cases"][:2]:  # Shadow Hand and NAO: kernel against the reference, then the reference timed
+        assert case["max_abs_diff_reference"] < 1e-6 and case["reference"]["cpu_ms"] > 0
     targets = report["targets"]
     assert set(targets) == {"shadow_hand_time", "nao_time", "nao_speedup", "skin_10000_time", "latency",
                             "shadow_hand_best_mode_time", "nao_best_mode_time"}
@@ -54,9 +53,24 @@ def test_bench_command_json_smoke(capsys):
     assert (hand["block_s"], hand["block_hop_s"]) == (1.0, 0.5) and hand["blocks"]["cpu_ms"] > 0
     assert hand["ratio_blocks_to_single_cpu"] == pytest.approx(hand["blocks"]["cpu_ms"] / hand["package"]["cpu_ms"])
     assert best["nao"]["blocks"] is None and best["nao"]["ratio_blocks_to_single_cpu"] is None
-    assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 1.0)
+    assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 0.3)
+    assert targets["nao_time"]["met"] == (report["cases"][1]["package"]["cpu_ms"] <= 2.0)
     assert targets["nao_speedup"]["speedup_cpu"] == pytest.approx(report["cases"][1]["speedup_cpu"])
     assert targets["skin_10000_time"]["met"] is None and targets["latency"]["met"] is None  # not measured
+
+
+def test_bench_aborts_when_the_kernel_disagrees_with_the_reference(monkeypatch, capsys):
+    real = bench.descriptors.cell_quantities
+
+    def off(*args):
+        out = list(real(*args))
+        out[6] = out[6] + 1e-3  # Pearson
+        return tuple(out)
+
+    monkeypatch.setattr(bench.descriptors, "cell_quantities", off)
+    code = main(["bench", "--sizes", "", "--lengths", "0.5", "--repeat", "1", "--no-windowing"])
+    assert code == 1
+    assert "kernel and reference disagree on lin" in capsys.readouterr().err
 
 
 def test_bench_aborts_when_the_baseline_disagrees(monkeypatch, capsys):

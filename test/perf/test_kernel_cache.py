@@ -26,7 +26,7 @@ if path != "-":  # the kernel module from another install path
     spec = importlib.util.spec_from_file_location("_numba_kernel", path)
     kernel = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(kernel)
-    fast._ACCEL.update(kernel=kernel, resolved=True)
+    fast._STATE.update(module=kernel, name="numba", resolved=True)
 info = fast.warm_up()
 kernel = fast._kernel()
 stats = {name: (sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))
