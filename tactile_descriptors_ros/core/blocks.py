@@ -30,22 +30,39 @@ Per body part, the average runs over the blocks in which the part was in
 contact (eq. 13 on the block); a part in contact in no block is zeros and
 flagged ``NO_CONTACT``, as :func:`~.aggregation.describe_window` does.  The
 quality flags of the blocks are OR-ed.
+
+All blocks of a window are described by one call: the blocks' cells become
+the cells of a robot whose body parts are the original ones once per block
+(:func:`block_robot`, cached), so the kernel, the FFTs and the other groups
+run once over every block's cells stacked instead of once per block.  Every
+body part's values are computed from its own cells only, so the result is
+the same, bit for bit, as describing each block on its own.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import threading
+import weakref
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from ..errors import ConfigError
-from .aggregation import BodyPartDescriptor, CellSignals, RobotDescriptor, describe_window, pool_body_parts
+from .aggregation import (
+    BodyPartDescriptor,
+    CellSignals,
+    RobotDescriptor,
+    _plan,
+    _selection,
+    describe_window,
+    pool_body_parts,
+)
 from .descriptors import Quality
-from .robot import RobotDescription
+from .robot import BodyPart, Cell, RobotDescription
 from .scaling import activity_mask, log_activity
 
-__all__ = ["check_blocks", "block_starts", "block_mean", "split_cells", "describe_blocks"]
+__all__ = ["check_blocks", "block_starts", "block_mean", "split_cells", "block_robot", "describe_blocks"]
 
 
 def check_blocks(block_s: float, block_hop_s: float, *, key: str = "descriptor", source: str | None = None,
@@ -198,6 +215,37 @@ def _mean_part(blocks: list[BodyPartDescriptor]) -> BodyPartDescriptor:
         mean_force_n=float(np.mean([bp.mean_force_n for bp in blocks])), quality=quality)
 
 
+_BLOCK_ROBOTS: dict[tuple[int, int], tuple[weakref.ref, RobotDescription, int]] = {}
+_BLOCK_ROBOTS_LOCK = threading.Lock()
+
+
+def block_robot(robot: RobotDescription, n_blocks: int) -> tuple[RobotDescription, int]:
+    """``robot`` with its body parts repeated ``n_blocks`` times, block after block (cached per robot object).
+
+    Cell ``id`` of block ``b`` is cell ``id + b * stride`` of the returned
+    robot; body parts keep their names and cell types.
+
+    Returns
+    -------
+    (RobotDescription, int)
+        The block robot and the id ``stride``.
+    """
+    key = (id(robot), int(n_blocks))
+    hit = _BLOCK_ROBOTS.get(key)
+    if hit is not None and hit[0]() is robot:
+        return hit[1], hit[2]
+    stride = max((c.id for p in robot.body_parts for c in p.cells), default=-1) + 1
+    stride = max(stride, 1)
+    parts = tuple(BodyPart(p.name, p.cell_type, tuple(Cell(c.id + b * stride, c.name, c.extra) for c in p.cells))
+                  for b in range(n_blocks) for p in robot.body_parts)
+    out = dataclasses.replace(robot, body_parts=parts)
+    with _BLOCK_ROBOTS_LOCK:
+        for k in [k for k, (ref, _, _) in _BLOCK_ROBOTS.items() if ref() is None]:
+            del _BLOCK_ROBOTS[k]
+        _BLOCK_ROBOTS[key] = (weakref.ref(robot), out, stride)
+    return out, stride
+
+
 def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *, block_s: float,
                     block_hop_s: float, layout: str | None = None, channels: str | None = None,
                     groups: tuple[str, ...] | None = None, force_threshold_n: float | None = None
@@ -225,16 +273,29 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         For a bad block setting, and whatever :func:`~.aggregation.describe_window` raises.
     """
     pieces = split_cells(cells, block_s, block_hop_s)
-    kw = {"layout": layout, "channels": channels, "groups": groups, "force_threshold_n": force_threshold_n}
-    descs = [describe_window(robot, piece, **kw) for piece in pieces]
-    if len(descs) == 1:
-        descs[0].extra["blocks"] = 1
-        return descs[0]
-    first = descs[0]
-    parts = tuple(_mean_part([d.body_parts[i] for d in descs]) for i in range(len(first.body_parts)))
-    if first.layout == "pooled":
+    kw = {"channels": channels, "groups": groups, "force_threshold_n": force_threshold_n}
+    if len(pieces) == 1:
+        desc = describe_window(robot, pieces[0], layout=layout, **kw)
+        desc.extra["blocks"] = 1
+        return desc
+    layout = layout or robot.descriptor.layout
+    if layout not in ("concat", "pooled"):
+        describe_window(robot, pieces[0], layout=layout, **kw)  # raises the layout error
+    plan = _plan(robot)
+    unknown = cells.keys() - plan.index.keys()
+    if unknown:
+        describe_window(robot, {cid: cells[cid] for cid in unknown}, layout=layout, **kw)  # raises naming them
+    many, stride = block_robot(robot, len(pieces))
+    joined = {cid + b * stride: sig for b, piece in enumerate(pieces) for cid, sig in piece.items()}
+    desc = describe_window(many, joined, layout="concat", **kw)
+    n_parts = len(robot.body_parts)
+    parts = tuple(_mean_part([desc.body_parts[b * n_parts + i] for b in range(len(pieces))]) for i in range(n_parts))
+    if layout == "pooled":
         values, labels = pool_body_parts(robot, parts)
     else:
-        values, labels = np.concatenate([bp.values for bp in parts]), first.labels
-    return RobotDescriptor(first.robot, first.layout, first.channels, parts, values, labels,
-                           extra={"blocks": len(descs)})
+        values = np.concatenate([bp.values for bp in parts])
+        selection = _selection(robot, channels, groups)
+        labels = plan.concat_labels.get(selection)
+        if labels is None:
+            labels = plan.concat_labels[selection] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
+    return RobotDescriptor(robot.name, layout, desc.channels, parts, values, labels, extra={"blocks": len(pieces)})

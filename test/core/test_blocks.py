@@ -94,3 +94,42 @@ def test_shipped_shadow_hand_averages_1s_blocks_and_the_paper_mode_is_one_parame
     data = yaml.safe_load((config_dir() / "shadow_hand.yaml").read_text())
     data["descriptor"]["block_s"] = 0
     assert parse_robot(data, source="hand.yaml").descriptor.block_s == 0.0
+
+
+def _one_block_at_a_time(robot, cells, **kw):
+    """Each block described on its own, then the blocks' values averaged per body part (what describe_blocks means)."""
+    blocks = split_cells(cells, kw.pop("block_s"), kw.pop("block_hop_s"))
+    descs = [describe_window(robot, b, **kw) for b in blocks]
+    out = []
+    for i in range(len(robot.body_parts)):
+        parts = [d.body_parts[i] for d in descs]
+        touching = [bp for bp in parts if bp.contact]
+        out.append(block_mean(np.stack([bp.values for bp in touching]), parts[0].labels) if touching
+                   else np.zeros(len(parts[0].labels)))
+        assert descs[0].body_parts[i].labels == parts[-1].labels
+    return out, len(blocks), [bp.quality for d in descs for bp in d.body_parts]
+
+
+@pytest.mark.parametrize("robot_name, groups, layout", [
+    ("shadow_hand", None, "concat"),
+    ("shadow_hand", ("paper",), "pooled"),
+    ("nao", ("paper", "bands", "levels", "statistics"), "concat"),
+])
+def test_all_blocks_in_one_call_equal_one_block_at_a_time(robot_name, groups, layout):
+    """describe_blocks describes every block's cells in one call; each body part must come out bit for bit."""
+    from tactile_descriptors_ros.perf.bench import biotac_window, skin_window
+
+    robot = load_robot(robot_name)
+    cells = biotac_window(robot, 2.0) if robot_name == "shadow_hand" else skin_window(robot, 2.0)
+    some = sorted(cells)[1::3]  # some cells out of contact in every block
+    for cid in some:
+        cells[cid] = dataclasses.replace(cells[cid], force_n=np.zeros_like(np.asarray(cells[cid].force_n)))
+    kw = {"block_s": 1.0, "block_hop_s": 0.5, "groups": groups, "layout": layout}
+    got = describe_blocks(robot, cells, **kw)
+    want, n_blocks, _ = _one_block_at_a_time(robot, cells, **{**kw, "layout": "concat"})
+    assert got.extra["blocks"] == n_blocks >= 3
+    for bp, values in zip(got.body_parts, want):
+        np.testing.assert_array_equal(bp.values, values, err_msg=bp.name)
+    if layout == "concat":
+        assert got.labels == describe_window(robot, cells, groups=groups, layout="concat").labels
+        np.testing.assert_array_equal(got.values, np.concatenate(want))
