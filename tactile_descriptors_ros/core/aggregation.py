@@ -816,11 +816,12 @@ def _selection(robot: RobotDescription, channels: str | None, groups) -> tuple[s
 def _touching(part_ids: tuple[tuple[int, ...], ...], cells: Mapping[int, CellSignals],
               threshold_n: float) -> list[list[int]]:
     """Per body part, the ids of its valid cells in contact (eq. 13; the gate of :func:`_describe_type`)."""
-    out = []
-    for ids in part_ids:
-        usable = [cid for cid in ids if cid in cells and cells[cid].valid]
-        means = _force_means([cells[cid].force_n for cid in usable])
-        out.append([cid for cid, m in zip(usable, means.tolist()) if m >= threshold_n])
+    usable = [[cid for cid in ids if cid in cells and cells[cid].valid] for ids in part_ids]
+    means = _force_means([cells[cid].force_n for ids in usable for cid in ids]).tolist()  # as _describe_type
+    out, k = [], 0
+    for ids in usable:
+        out.append([cid for cid, m in zip(ids, means[k:k + len(ids)]) if m >= threshold_n])
+        k += len(ids)
     return out
 
 

@@ -149,23 +149,35 @@ def _frame_period_ns(cells: Mapping[int, CellSignals]) -> int | None:
     return period if period > 0 else None
 
 
-def _cut(sig: CellSignals, lo_ns: int, hi_ns: int) -> CellSignals:
-    """The samples of one cell in the block ``[lo_ns, hi_ns)`` of the slow timeline."""
+def _cuts(sig: CellSignals, lo_ns: np.ndarray, hi_ns: np.ndarray) -> list[CellSignals]:
+    """The samples of one cell in each block ``[lo_ns[k], hi_ns[k])`` of the slow timeline (views, no copies)."""
     t_v = np.asarray(sig.deformation_t_ns, dtype=np.int64)
-    a, b = np.searchsorted(t_v, [lo_ns, hi_ns], side="left")
     t_f = np.asarray(sig.vibration_t_ns, dtype=np.int64)
-    f_lo = np.searchsorted(t_f, t_v[a], side="left") if a < t_v.size else t_f.size
-    f_hi = np.searchsorted(t_f, t_v[b], side="left") if b < t_v.size else t_f.size
+    n_blocks = lo_ns.size
+    ab = np.searchsorted(t_v, np.concatenate([lo_ns, hi_ns]), side="left")
+    f = np.full(ab.size, t_f.size, dtype=np.intp)
+    inside = ab < t_v.size
+    f[inside] = np.searchsorted(t_f, t_v[ab[inside]], side="left")
     force = np.asarray(sig.force_n)
     if force.shape[0] == t_v.size:
-        fa, fb = a, b
+        fab = ab.tolist()
     else:  # force at its own rate: the same share of the window
         n = max(t_v.size, 1)
-        fa, fb = (int(round(x * force.shape[0] / n)) for x in (a, b))
-    extra = None if sig.extra is None else np.asarray(sig.extra)[:, a:b]
-    return dataclasses.replace(sig, vibration=np.asarray(sig.vibration)[:, f_lo:f_hi], vibration_t_ns=t_f[f_lo:f_hi],
-                               deformation=np.asarray(sig.deformation)[:, a:b], deformation_t_ns=t_v[a:b],
-                               force_n=force[fa:fb], extra=extra)
+        fab = [int(round(x * force.shape[0] / n)) for x in ab.tolist()]
+    vib, dfm = np.asarray(sig.vibration), np.asarray(sig.deformation)
+    extra = None if sig.extra is None else np.asarray(sig.extra)
+    ab_l, f_l = ab.tolist(), f.tolist()
+    out = []
+    for k in range(n_blocks):
+        a, b, f_lo, f_hi = ab_l[k], ab_l[n_blocks + k], f_l[k], f_l[n_blocks + k]
+        piece = object.__new__(CellSignals)  # every field of sig (flags, tare), the arrays cut below
+        piece.__dict__.update(sig.__dict__)
+        piece.vibration, piece.vibration_t_ns = vib[:, f_lo:f_hi], t_f[f_lo:f_hi]
+        piece.deformation, piece.deformation_t_ns = dfm[:, a:b], t_v[a:b]
+        piece.force_n = force[fab[k]:fab[n_blocks + k]]
+        piece.extra = None if extra is None else extra[:, a:b]
+        out.append(piece)
+    return out
 
 
 def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: float
@@ -190,10 +202,12 @@ def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: f
     if starts.size == 1:
         return [dict(cells)]
     half = period // 2  # frame k of the block owns the stamps within half a period of t0 + k * period
-    out = []
-    for s in starts.tolist():
-        lo, hi = t0 + s * period - half, t0 + (s + block_frames) * period - half
-        out.append({cid: _cut(sig, lo, hi) for cid, sig in cells.items()})
+    lo = t0 + starts * period - half
+    hi = t0 + (starts + block_frames) * period - half
+    out: list[dict[int, CellSignals]] = [{} for _ in range(starts.size)]
+    for cid, sig in cells.items():
+        for block, piece in zip(out, _cuts(sig, lo, hi)):
+            block[cid] = piece
     return out
 
 

@@ -15,6 +15,7 @@ The benchmark (``tactile evaluate``) shows the effect of each step.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -26,6 +27,13 @@ __all__ = ["activity_mask", "log_activity", "RunningStandardizer", "FeatureScale
 
 def activity_mask(labels: Sequence[str]) -> np.ndarray:
     """True for labels whose quantity is Activity (``A_...`` after any ``part/`` prefix)."""
+    if isinstance(labels, tuple):  # a descriptor's labels: the same tuple window after window
+        return _activity_mask_of(labels).copy()
+    return np.array([lab.rsplit("/", 1)[-1].startswith("A_") for lab in labels], dtype=bool)
+
+
+@functools.lru_cache(maxsize=64)
+def _activity_mask_of(labels: tuple[str, ...]) -> np.ndarray:
     return np.array([lab.rsplit("/", 1)[-1].startswith("A_") for lab in labels], dtype=bool)
 
 
