@@ -254,6 +254,12 @@ def test_param_describe_get(graph):
     text = graph.ros2("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
                       window, "window.length_s")
     assert "Type: double" in text, text
+    # the range travels in the ParameterDescriptor, so the CLI shows it; a tunable value says no "Read only"
+    assert re.search(r"^ +Min value: 0\.001$", text, re.M), text
+    assert "Read only" not in text, text
+    mode = graph.ros2("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
+                      window, "window.mode")
+    assert "Read only: true" in mode and "Additional constraints: one of: fixed, exploration" in mode, mode
     value = graph.ros2("param", "get", "--no-daemon", "--spin-time", "3", "--timeout", "20",
                        "/classifier_node", "eta")
     assert re.match(r"Double value is: \d", value), value
