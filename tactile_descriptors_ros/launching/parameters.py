@@ -58,7 +58,7 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
     },
     "skin_driver": {
         **_DRIVER, "batch_s": "double", "can.interface": "string", "can.channel": "string",
-        "can.bitrate": "integer", "sim.wire": "string",
+        "can.bitrate": "integer", "sim.wire": "string", "sim.loop": "bool",
     },
     "window_node": {
         "robot": "string", "body_parts": "string_array", "window.mode": "string", "descriptor.layout": "string",

@@ -39,6 +39,7 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from ..codecs.skin import ACCEL_MPS2_PER_COUNT, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
+from ..errors import ConfigError
 from ..streams.skin import CellState, SkinStream
 from .common import RateMeter, Status, declare, run_node
 from .conversions import SkinFrame, skin_frame_to_msg
@@ -81,6 +82,8 @@ class SkinDriver(DriverBase):
         self.sim_speed = declare(self, "sim.speed", 1.0, "simulated time per wall time", minimum=1e-3)
         self.sim_wire = declare(self, "sim.wire", "can", "framing of the simulated bus: can (skin CAN layout) or "
                                 "serial (skin serial framing)", choices=("can", "serial"))
+        self.sim_loop = declare(self, "sim.loop", False, "play the scene over and over, simulated once (CAN): a "
+                                "large skin at full rate for as long as wanted")
         autostart = declare(self, "autostart", True, "configure and activate at start")
         self.qos_frames = declare_qos(self, "frames", QosDefaults("reliable", "volatile", 200))
 
@@ -103,9 +106,13 @@ class SkinDriver(DriverBase):
 
     # ------------------------------------------------------------- lifecycle
     def _simulated_source(self):
-        from ..sim.sources import SkinCanSource, SkinSerialSource, load_scene_for
+        from ..sim.sources import LoopedSkinCanSource, SkinCanSource, SkinSerialSource, load_scene_for
 
         scene = load_scene_for(self.sim_scene, self.full_robot.name)
+        if self.sim_loop:
+            if self.sim_wire != "can":
+                raise ConfigError("sim.loop plays CAN frames: set sim.wire to can", key="sim.loop")
+            return LoopedSkinCanSource(scene, speed=self.sim_speed, chunk_s=2.0)
         source_cls = SkinCanSource if self.sim_wire == "can" else SkinSerialSource
         return source_cls(scene, speed=self.sim_speed, chunk_s=2.0)
 
@@ -247,6 +254,7 @@ class SkinDriver(DriverBase):
         live = [st for st in cells if st is not None]
         values = {"cells": len(part.cells), "silent_cells": len(silent),
                   "samples_per_s": sum(self._rates[st.cell_id].rate_hz for st in live),
+                  "samples": sum(self._rates[st.cell_id].total for st in live),
                   "messages": sum(st.messages for st in live), "lost_frames": sum(st.lost for st in live),
                   "tared_cells": sum(st.tared for st in live)}
         if silent and self.scene_ended():

@@ -455,6 +455,7 @@ class WindowNode(Node):
         values: dict = {"descriptors_published": self.descriptors_published,
                         "kernel": self.kernel_info["accelerator"] if self.kernel_info else "warming up",
                         "windows_held_at_start": self.windows_held_at_start,
+                        "messages_received": self.frames_taken,
                         "frames_per_callback": self.frames_taken / self.batches if self.batches else 0.0,
                         "largest_frames_batch": self.largest_batch,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}

@@ -51,6 +51,7 @@ __all__ = [
     "SkinRows",
     "BiotacBridgeSource",
     "SkinCanSource",
+    "LoopedSkinCanSource",
     "SkinSerialSource",
     "biotac_spi_bus",
     "load_scene_for",
@@ -500,6 +501,97 @@ class SkinCanSource(_PacedSource):
         if not parts:
             return empty_frames(0)
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+class LoopedSkinCanSource(SkinCanSource):
+    """A short scene's CAN frames played over and over, each lap re-stamped and re-numbered.
+
+    The scene is simulated and encoded once, at :meth:`open`; every later
+    lap hands out the same frames with their time stamps shifted by the
+    scene's duration and every (cell, modality)'s sequence numbers advanced
+    by its frames per lap, so the bus looks like one endless recording
+    (continuous sample grids, no sequence gap).  A skin of thousands of cells
+    then runs at full rate for as long as wanted at the cost of decoding it,
+    not of simulating it (about 0.7 ms of CPU per cell and simulated second).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene without bus faults (dropped, corrupt frames, unplugged cells:
+        a lap would repeat them) whose duration holds a whole number of
+        periods of every stream, so the grids join across laps.
+    speed, clock
+        As :class:`SkinCanSource`.
+    laps : int, optional
+        Laps to play (default: endless).
+
+    Raises
+    ------
+    SceneError
+        For a scene with bus faults or a duration that breaks a stream's grid.
+    """
+
+    def __init__(self, scene: Scene, speed: float | None = None, chunk_s: float = 10.0,
+                 clock: Any = time.monotonic, laps: int | None = None) -> None:
+        super().__init__(scene, speed, chunk_s, clock)
+        faults = sorted({"dropped_frames", "corrupt_frames", "unplug", "bad_parity"} & set(scene.effects))
+        if faults:
+            raise SceneError(f"a looped scene cannot declare bus faults ({', '.join(faults)}): every lap would "
+                             "repeat them", key="effects", source=scene.source)
+        if laps is not None and laps < 1:
+            raise SceneError(f"laps must be at least 1, got {laps}", key="laps")
+        self.laps = laps
+        self.lap = 0
+        self._lap_frames: np.ndarray | None = None
+        self._lap_t_ns: np.ndarray | None = None
+        self._lap_seq_step: np.ndarray | None = None
+        self._lap_ns = 0
+
+    def open(self) -> None:
+        """Simulate and encode the scene once (the first lap), then start the clock."""
+        if self._lap_frames is None:
+            self._simulate_lap()
+        super().open()
+
+    def _simulate_lap(self) -> None:
+        chunks = []
+        while super()._fill():
+            chunks.append(self._items.pop())
+        frames = np.concatenate([c.frames for c in chunks]) if chunks else np.zeros(0)
+        if not len(frames):
+            raise SceneError("the scene has no skin cells to loop", key="scene.robot", source=self.scene.source)
+        self._lap_ns = int(round(self.scene.duration_s * 1e9))
+        rates = {r for ct in self.scene.robot.cell_types.values()
+                 for r in (ct.vibration.rate_hz, ct.deformation.rate_hz)}
+        for rate in rates:
+            periods = self._lap_ns * rate / 1e9
+            if abs(periods - round(periods)) > 1e-6:
+                raise SceneError(f"the scene lasts {self.scene.duration_s} s, not a whole number of {rate:g} Hz "
+                                 "periods: the sample grid would jump between laps", key="explorations",
+                                 source=self.scene.source)
+        _, inverse, counts = np.unique(frames["arbitration_id"], return_inverse=True, return_counts=True)
+        self._lap_frames = frames
+        self._lap_t_ns = np.concatenate([c.t_ns for c in chunks])
+        self._lap_seq_step = counts[inverse].astype(np.int64)
+        self.exhausted = False
+
+    def _fill(self) -> bool:
+        if self._lap_frames is None:
+            self._simulate_lap()
+        if self.laps is not None and self.lap >= self.laps:
+            self.exhausted = True
+            return False
+        k = self.lap
+        frames = self._lap_frames.copy()
+        if k:
+            frames["timestamp"] += k * self._lap_ns * 1e-9
+            frames["data"][:, 0] = (frames["data"][:, 0] + k * self._lap_seq_step) & 0xFF
+        from ..codecs.can_frames import messages_from_frames
+
+        self._items.append(_Chunk(self._lap_t_ns + k * self._lap_ns,
+                                  lambda i, _f=frames: messages_from_frames(_f[i:i + 1])[0], frames=frames))
+        self.lap += 1
+        return True
 
 
 def biotac_spi_bus(result: SimResult, serial_prefix: str = "BTSIM") -> Any:

@@ -12,7 +12,9 @@ Shadow Hand and a NAO window, checked against the evaluation's values per
 cell and group before timing; the report ends with the targets, met or not
 (``targets`` in ``--json``).
 ``--latency`` also measures sensor stamp -> Prediction through the ROS node
-graph.  Reading the numbers: docs/performance.md.
+graph; ``--scale-graph --cells N`` instead runs N skin cells through skin
+drivers and one window node per body part, each its own process
+(docs/scaling.md).  Reading the numbers: docs/performance.md.
 """
 
 from __future__ import annotations
@@ -82,6 +84,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "over time, CPU, lost and late frames (docs/hardcases.md)")
     p.add_argument("--soak-robot", default="nao", help="robot whose graph --soak runs (default nao)")
     p.add_argument("--soak-sample-s", type=float, default=5.0, help="sampling period of --soak [s] (default 5)")
+    p.add_argument("--scale-graph", action="store_true",
+                   help="instead of timing: run a synthetic skin of --cells cells through skin drivers and one "
+                        "window node per body part, each its own process, and report CPU per process, lost "
+                        "frames, windows and whether it kept up in real time (docs/scaling.md)")
+    p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
+    p.add_argument("--parts", type=int, default=None,
+                   help="body parts of --scale-graph, one driver and one window node each (default: one per 500 "
+                        "cells)")
+    p.add_argument("--seconds", type=float, default=30.0,
+                   help="measurement time of --scale-graph after the warm-up [s] (default 30)")
+    p.add_argument("--settle-s", type=float, default=5.0,
+                   help="time between the first descriptor of every body part and the measurement [s] (default 5)")
+    p.add_argument("--groups", default="paper",
+                   help="descriptor feature groups of --scale-graph, comma-separated (default paper)")
+    p.add_argument("--one-driver", action="store_true",
+                   help="--scale-graph with one skin driver for all body parts instead of one per body part")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -91,6 +109,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.soak is not None:
         return _soak(args)
+    if args.scale_graph:
+        return _scale_graph(args)
 
     from ..core import fast
     from ..perf.bench import BenchMismatch, format_report, run_bench
@@ -168,4 +188,35 @@ def _soak(args: argparse.Namespace) -> int:
         return 1
     bar.close()
     print(json.dumps(report.to_dict(), default=float) if args.json else format_soak(report))
+    return 0
+
+
+def _scale_graph(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..errors import ConfigError
+    from ..perf.scale_graph import format_scale_graph, run_scale_graph
+
+    if args.cells < 1 or (args.parts is not None and args.parts < 1) or not args.seconds > 0 \
+            or not args.settle_s >= 0:
+        print("tactile bench: error: --cells, --parts and --seconds must be positive, --settle-s at least 0",
+              file=sys.stderr)
+        return 2
+    groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
+    bar = tqdm(total=round(args.seconds), desc="scale graph", unit="s", file=sys.stderr, leave=False)
+
+    def progress(measured_s: float, text: str) -> None:
+        bar.n = min(round(measured_s), bar.total)
+        bar.set_postfix_str(text)
+        bar.refresh()
+
+    try:
+        report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
+                                 groups=groups, one_driver=args.one_driver, progress=progress)
+    except (RuntimeError, ImportError, ConfigError) as exc:
+        bar.close()
+        print(f"tactile bench: error: scale graph failed: {exc}", file=sys.stderr)
+        return 1
+    bar.close()
+    print(json.dumps(report.to_dict(), default=float) if args.json else format_scale_graph(report))
     return 0
