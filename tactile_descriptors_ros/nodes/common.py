@@ -13,6 +13,7 @@ from __future__ import annotations
 import collections
 import gc
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -55,6 +56,11 @@ class Status:
 class RateMeter:
     """Events per second over a sliding window of wall time (a steady clock).
 
+    Thread-safe: a driver's reader thread adds while the executor's
+    diagnostics timer reads (a deque iterated while another thread appends
+    raises, and the diagnostics task would report a failure instead of the
+    rates).
+
     Parameters
     ----------
     window_s : float
@@ -67,13 +73,15 @@ class RateMeter:
         self.window_s = float(window_s)
         self._now = now
         self._events: collections.deque[tuple[float, int]] = collections.deque()
+        self._lock = threading.Lock()
         self.total = 0
 
     def add(self, count: int = 1) -> None:
         t = self._now()
-        self._events.append((t, int(count)))
-        self.total += int(count)
-        self._expire(t)
+        with self._lock:
+            self._events.append((t, int(count)))
+            self.total += int(count)
+            self._expire(t)
 
     def _expire(self, t: float) -> None:
         while self._events and self._events[0][0] < t - self.window_s:
@@ -82,8 +90,9 @@ class RateMeter:
     @property
     def rate_hz(self) -> float:
         t = self._now()
-        self._expire(t)
-        return sum(c for _, c in self._events) / self.window_s
+        with self._lock:
+            self._expire(t)
+            return sum(c for _, c in self._events) / self.window_s
 
 
 def steady_clock():

@@ -359,6 +359,7 @@ class _Monitor:
         self.windows: dict[str, list[tuple[float, int, int]]] = {}
         self.diagnostics: dict[str, dict[str, str]] = {}
         self.diagnostics_at: dict[str, float] = {}
+        self.task_failures: dict[str, str] = {}
         self.first_window = threading.Event()
         self.expected_parts: set[str] = set()
         node.create_subscription(Descriptor, "/tactile/descriptor", self._on_descriptor, 100)
@@ -378,6 +379,9 @@ class _Monitor:
         now = time.monotonic()
         with self.updated:
             for st in msg.status:
+                if st.message.startswith("diagnostic task failed"):  # no counters: keep the last ones
+                    self.task_failures[st.name] = st.message
+                    continue
                 self.diagnostics[st.name] = {kv.key: kv.value for kv in st.values}
                 self.diagnostics_at[st.name] = now
             self.updated.notify_all()
