@@ -143,7 +143,7 @@ def _scene(robot_path: Path, name: str, seed: int) -> dict[str, Any]:
 
 
 def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str], *,
-                      groups: Sequence[str] = ("paper",), batch_s: float = 0.05,
+                      groups: Sequence[str] = ("paper",), batch_s: float | None = None,
                       one_driver: bool = False, window_parameters: dict[str, Any] | None = None) -> Path:
     """Write the synthetic robot description (with its ``nodes:`` graph) and the drivers' scenes.
 
@@ -156,12 +156,12 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
         one-part robot descriptions are written.
     groups : sequence of str
         Descriptor feature groups (default: the paper's 18 values per body part).
-    batch_s : float
-        The drivers' ``batch_s``.
+    batch_s : float, optional
+        The drivers' ``batch_s`` (default: the NAO graph's).
     one_driver : bool
         One skin driver for all body parts (one bus) instead of one per body part.
     window_parameters : dict, optional
-        Parameters of the window node merged over the defaults (nested names).
+        Parameters of the window node merged over the NAO graph's (nested names).
 
     Returns
     -------
@@ -187,6 +187,9 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
     buses = [[bp] for bp in body_parts] if not one_driver else [body_parts]
     # No tare at start: every lap is mostly touch, so the first samples are no baseline; the simulated
     # force baseline (20 counts, 0.05 N) is below the contact threshold untared.
+    shipped = nao.get("nodes", {})
+    if batch_s is None:
+        batch_s = float(shipped.get("skin_driver", {}).get("parameters", {}).get("batch_s", 0.05))
     driver_params = {"transport": "simulated", "batch_s": float(batch_s), "stamp_source": "device",
                      "tare_on_start_s": 0.0,
                      "sim": {"loop": True, "speed": 1.0}}
@@ -203,7 +206,8 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
         params["sim"]["scene"] = str(scene_path.resolve())
         node = "skin_driver" if one_driver else f"skin_driver_{bus_name}"
         nodes[node] = {"executable": "skin_driver", "body_parts": [bp["name"] for bp in bus], "parameters": params}
-    window = {"window": {"lateness_s": 0.01}, "frames": {"drain_max": 1000}, "qos": {"frames": {"depth": 256}}}
+    # the window node as the NAO graph ships it (lateness, draining, queue depth), windows fixed by the robot
+    window = copy.deepcopy(shipped.get("window_node", {}).get("parameters", {}) or {})
     for key, value in (window_parameters or {}).items():
         if isinstance(value, dict) and isinstance(window.get(key), dict):
             window[key] = {**window[key], **value}
@@ -232,13 +236,23 @@ class ProcessLoad:
     executable: str
     pid: int
     cells: int
+    body_parts: tuple[str, ...] = ()
     cpu_percent: float | None = None
     rss_mb: float | None = None
+    #: simulated seconds the process handled per wall second (its body parts' driver or window real-time factor)
+    data_realtime_factor: float | None = None
 
     @property
     def cpu_ms_per_cell_s(self) -> float | None:
         """CPU per cell and wall second [ms] (cpu_percent * 10 / cells)."""
         return None if self.cpu_percent is None or not self.cells else self.cpu_percent * 10.0 / self.cells
+
+    @property
+    def cpu_ms_per_cell_data_s(self) -> float | None:
+        """CPU per cell and second of sensor data handled [ms]: the demand, also of a process that fell behind."""
+        per_wall = self.cpu_ms_per_cell_s
+        rtf = self.data_realtime_factor
+        return None if per_wall is None or not rtf or rtf <= 0 else round(per_wall / rtf, 4)
 
 
 @dataclass
@@ -303,8 +317,11 @@ class ScaleGraphReport:
             ps = [p for p in self.processes if p.executable == exe]
             cpu = [p.cpu_percent for p in ps if p.cpu_percent is not None]
             total = sum(cpu) if len(cpu) == len(ps) else None
+            demand = [p.cpu_ms_per_cell_data_s * p.cells for p in ps if p.cpu_ms_per_cell_data_s is not None]
             out[exe] = {"processes": len(ps), "cpu_percent": total,
-                        "cpu_ms_per_cell_s": None if total is None else total * 10.0 / self.n_cells}
+                        "cpu_ms_per_cell_s": None if total is None else round(total * 10.0 / self.n_cells, 4),
+                        "cpu_ms_per_cell_data_s": round(sum(demand) / self.n_cells, 4)
+                        if len(demand) == len(ps) else None}
         return out
 
     def targets(self) -> dict[str, dict[str, Any]]:
@@ -331,6 +348,8 @@ class ScaleGraphReport:
             "cpu_by_executable": self.cpu_by_executable(),
             "processes": {p.name: {"executable": p.executable, "pid": p.pid, "cells": p.cells,
                                    "cpu_percent": p.cpu_percent, "cpu_ms_per_cell_s": p.cpu_ms_per_cell_s,
+                                   "data_realtime_factor": p.data_realtime_factor,
+                                   "cpu_ms_per_cell_data_s": p.cpu_ms_per_cell_data_s,
                                    "rss_mb": p.rss_mb} for p in self.processes},
             "parts": {p.name: {"cells": p.cells, "messages_sent": p.messages_sent,
                                "messages_received": p.messages_received, "lost": p.lost, "late": p.late,
@@ -417,7 +436,7 @@ def _part_timing(rows: list[tuple[float, int, int]], t0: float, t1: float) -> tu
 
 
 def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 30.0, settle_s: float = 5.0,
-                    groups: Sequence[str] = ("paper",), batch_s: float = 0.05, one_driver: bool = False,
+                    groups: Sequence[str] = ("paper",), batch_s: float | None = None, one_driver: bool = False,
                     warm_up_timeout_s: float = 180.0, window_parameters: dict[str, Any] | None = None,
                     progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> ScaleGraphReport:
     """Run the scale graph (module docstring) and measure it for ``seconds`` after the warm-up.
@@ -488,7 +507,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         procs.start()
         handles = {}
         for r in procs.nodes:
-            loads.append(ProcessLoad(r.spec.name, r.spec.executable, r.process.pid, cells_of.get(r.spec.name, 0)))
+            loads.append(ProcessLoad(r.spec.name, r.spec.executable, r.process.pid, cells_of.get(r.spec.name, 0),
+                                     tuple(r.spec.parameters.get("body_parts", []))))
             handles[r.process.pid] = psutil.Process(r.process.pid)
         t_start = time.monotonic()
         while not monitor.first_window.wait(0.5):
@@ -540,6 +560,12 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         spin.join(timeout=5.0)
         tmp.cleanup()
     results = _parts(monitor, before, after, runs, t0, t1)
+    by_part = {r.name: r for r in results}
+    for p in loads:
+        rtf = [by_part[b].driver_realtime_factor if p.executable == "skin_driver" else by_part[b].realtime_factor
+               for b in p.body_parts if b in by_part]
+        if rtf and all(x is not None for x in rtf):
+            p.data_realtime_factor = round(float(np.mean(rtf)), 4)
     return ScaleGraphReport(n_cells, results, loads, float(seconds), round(warm_up_s, 2), tuple(groups), one_driver,
                             load_start, load_end, os.cpu_count() or 1, codes)
 
@@ -599,17 +625,19 @@ def format_scale_graph(report: ScaleGraphReport) -> str:
              f"groups {','.join(report.groups)}",
              f"measured {d['seconds']:.0f} s after a {d['warm_up_s']:.0f} s warm-up; {d['cpus']} CPUs, load "
              f"{d['load_avg_start'][0]:.1f} -> {d['load_avg_end'][0]:.1f}",
-             f"{'process':<26} {'cells':>6} {'CPU %':>7} {'ms/cell/s':>10} {'RSS MB':>7}"]
+             "CPU per cell: ms of CPU per cell and wall second, and per cell and second of data handled (the "
+             "demand, also of a process that fell behind)",
+             f"{'process':<26} {'cells':>6} {'CPU %':>7} {'ms/cell/s':>10} {'ms/cell/data s':>15} {'RSS MB':>7}"]
 
     def f(x: Any, fmt: str) -> str:
         return "-" if x is None else format(x, fmt)
 
     for p in report.processes:
         lines.append(f"{p.name:<26} {p.cells:>6} {f(p.cpu_percent, '7.1f')} {f(p.cpu_ms_per_cell_s, '10.3f')} "
-                     f"{f(p.rss_mb, '7.0f')}")
+                     f"{f(p.cpu_ms_per_cell_data_s, '15.3f')} {f(p.rss_mb, '7.0f')}")
     for exe, v in d["cpu_by_executable"].items():
         lines.append(f"{'all ' + exe:<26} {d['n_cells']:>6} {f(v['cpu_percent'], '7.1f')} "
-                     f"{f(v['cpu_ms_per_cell_s'], '10.3f')}")
+                     f"{f(v['cpu_ms_per_cell_s'], '10.3f')} {f(v['cpu_ms_per_cell_data_s'], '15.3f')}")
     lines.append(f"{'body part':<12} {'sent':>8} {'received':>9} {'lost':>5} {'driver RTF':>10} {'windows':>8} "
                  f"{'expected':>9} {'RTF':>6} {'lag +s':>7} kept up")
     for name, p in d["parts"].items():

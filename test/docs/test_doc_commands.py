@@ -46,6 +46,9 @@ SKIP: dict[tuple[str, str], str] = {
         "minutes of benchmarking; test/perf/test_bench_command.py runs `tactile bench` on a small size",
     ("docs/latency.md", ".venv/bin/tactile bench --sizes 1000 --lengths 2 --latency --json > latency.json"):
         "a latency measurement of minutes; test/perf/test_latency.py measures a short one",
+    ("docs/scaling.md", "tactile bench --scale-graph --cells 10000 --parts 20 --seconds 30 --json > scale_10000.json"):
+        "41 processes for minutes; the page's small run above and test/perf/test_scale_graph.py run the same "
+        "command on a small skin",
     ("docs/performance.md", "tactile bench --model-save"):
         "a benchmark of 100 durable saves of a 1,000-class model; test/perf/test_model_save_bench.py runs a small one",
     ("docs/simulator.md", "tactile fit-textures ../shared/data/biotac_slide_20_50 -o texture_models   "
