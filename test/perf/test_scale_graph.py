@@ -14,6 +14,7 @@ from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.perf.scale_graph import (
     WINDOW_HOP_S,
     PartResult,
+    ProcessLoad,
     _part_timing,
     scale_graph_specs,
     scale_robot_files,
@@ -89,6 +90,13 @@ def test_a_body_part_keeps_up_only_without_lost_frames_missing_windows_or_a_grow
     assert not _part(lag_growth_s=WINDOW_HOP_S).kept_up
     assert not _part(driver_realtime_factor=0.9).kept_up
     assert _part(windows=19).kept_up  # a window on either side of the measurement's edges
+
+
+def test_a_process_that_fell_behind_is_charged_for_the_data_it_handled_not_the_wall_time():
+    p = ProcessLoad("skin_driver_part_0", "skin_driver", 1, cells=100, cpu_percent=50.0, data_realtime_factor=0.5)
+    assert p.cpu_ms_per_cell_s == pytest.approx(5.0)  # half a core for 100 cells
+    assert p.cpu_ms_per_cell_data_s == pytest.approx(10.0)  # ... handling half of their data
+    assert ProcessLoad("w", "window_node", 2, cells=100, cpu_percent=50.0).cpu_ms_per_cell_data_s is None
 
 
 @pytest.mark.ros
