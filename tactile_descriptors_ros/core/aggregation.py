@@ -855,7 +855,7 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
     """Per-cell values of the non-kernel groups, cells of one window shape stacked and computed together."""
     fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
     n_v = len(cell_type.deformation.channels)
-    out: dict[str, list] = {g: [None] * len(sigs) for g in groups}
+    out: dict[str, list | np.ndarray] = {g: [None] * len(sigs) for g in groups}
     batches: dict[tuple, list[int]] = {}
     for k, sig in enumerate(sigs):
         batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
@@ -874,9 +874,12 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
                 else:
                     vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
                                         _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
+            if len(batches) == 1:  # one window shape (the common case): the rows are the cells, in order
+                out[g] = vals
+                continue
             for r, k in enumerate(rows):
                 out[g][k] = vals[r]
-    return {g: np.stack(v) for g, v in out.items()}
+    return {g: v if isinstance(v, np.ndarray) else np.stack(v) for g, v in out.items()}
 
 
 def _cells_mean(rows: np.ndarray) -> tuple[np.ndarray, bool]:

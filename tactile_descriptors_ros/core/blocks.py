@@ -211,14 +211,32 @@ def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: f
     return out
 
 
-def _mean_part(blocks: list[BodyPartDescriptor]) -> BodyPartDescriptor:
+def _mean_parts(grid: list[list[BodyPartDescriptor]]) -> tuple[BodyPartDescriptor, ...]:
+    """:func:`_mean_part` of each body part (``grid[part][block]``); the parts in contact in every block and
+    with the same labels are averaged together (the same sums: block after block, value by value)."""
+    values: dict[int, np.ndarray] = {}
+    together: dict[tuple[str, ...], list[int]] = {}
+    for i, blocks in enumerate(grid):
+        if len(blocks) > 1 and all(bp.contact for bp in blocks):
+            together.setdefault(blocks[0].labels, []).append(i)
+    for labels, idx in together.items():
+        stacked = np.stack([[bp.values for bp in grid[i]] for i in idx], axis=1)  # (blocks, parts, values)
+        mask = activity_mask(labels)
+        mean = log_activity(stacked, mask).mean(axis=0)
+        mean[:, mask] = np.expm1(mean[:, mask])
+        values.update(zip(idx, mean))
+    return tuple(_mean_part(blocks, values.get(i)) for i, blocks in enumerate(grid))
+
+
+def _mean_part(blocks: list[BodyPartDescriptor], values: np.ndarray | None = None) -> BodyPartDescriptor:
     first = blocks[0]
     touching = [bp for bp in blocks if bp.contact]
     quality = 0
     for bp in blocks:
         quality |= int(bp.quality)
     if touching:
-        values = block_mean(np.stack([bp.values for bp in touching]), first.labels)
+        if values is None:
+            values = block_mean(np.stack([bp.values for bp in touching]), first.labels)
         quality &= ~int(Quality.NO_CONTACT)
     else:
         values = np.zeros(len(first.labels))
@@ -303,7 +321,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     joined = {cid + b * stride: sig for b, piece in enumerate(pieces) for cid, sig in piece.items()}
     desc = describe_window(many, joined, layout="concat", **kw)
     n_parts = len(robot.body_parts)
-    parts = tuple(_mean_part([desc.body_parts[b * n_parts + i] for b in range(len(pieces))]) for i in range(n_parts))
+    parts = _mean_parts([[desc.body_parts[b * n_parts + i] for b in range(len(pieces))] for i in range(n_parts)])
     if layout == "pooled":
         values, labels = pool_body_parts(robot, parts)
     else:

@@ -55,7 +55,7 @@ __all__ = [
 
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
-#: ``central_moments``, the status ``OK`` and ``CACHE_DIR``
+#: ``central_moments``, ``power_spectrum``, the status ``OK`` and ``CACHE_DIR``
 #: (:mod:`._numba_kernel` documents them).  The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}._numba_kernel"}
 
@@ -280,6 +280,7 @@ def warm_up() -> dict:
         cell_quantities(s, np.stack([t_s, t_s]), v, np.stack([t_v, t_v]), 1000.0, 250.0)
         cell_bounds(s)
         kernel.central_moments(s.reshape(4, 40), np.empty((4, 5)))  # the statistics feature group
+    kernel.power_spectrum(np.zeros((2, 8)), np.ones(4), np.empty((2, 4)))  # the bands and statistics groups
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info
