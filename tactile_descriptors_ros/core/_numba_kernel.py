@@ -312,7 +312,7 @@ def _hjorth_row(n, fs, mom):  # pragma: no cover - compiled
 
 
 @_jit
-def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cover - compiled
+def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma: no cover - compiled
     """Every per-cell quantity of eq. 1-5 for integer cells, exactly; see :func:`.descriptors.cell_quantities`.
 
     Parameters
@@ -327,6 +327,9 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cov
         The quality flag of a flat channel or pair.
     max_span : int
         Largest value span of a row ranked by counting.
+    bounds : (n_cells, 4) int64 array
+        Filled with each cell's smallest and largest S value, then V value
+        (valid when status is OK): the saturation check needs no pass of its own.
 
     Returns
     -------
@@ -411,6 +414,16 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span):  # pragma: no cov
         for j in range(n_v):
             _moments_row(v[c, j], mom_v[c, j])
             peak_v = max(peak_v, abs(mom_v[c, j, 8]), abs(mom_v[c, j, 9]))
+        bounds[c, 0] = np.int64(mom_s[c, 0, 8])
+        bounds[c, 1] = np.int64(mom_s[c, 0, 9])
+        bounds[c, 2] = np.int64(mom_v[c, 0, 8])
+        bounds[c, 3] = np.int64(mom_v[c, 0, 9])
+        for i in range(1, n_s):
+            bounds[c, 0] = min(bounds[c, 0], np.int64(mom_s[c, i, 8]))
+            bounds[c, 1] = max(bounds[c, 1], np.int64(mom_s[c, i, 9]))
+        for j in range(1, n_v):
+            bounds[c, 2] = min(bounds[c, 2], np.int64(mom_v[c, j, 8]))
+            bounds[c, 3] = max(bounds[c, 3], np.int64(mom_v[c, j, 9]))
         if not (_exact_ok(n_fast, max(peak_s, peak_v)) and _exact_ok(n_slow, peak_v)):
             return NOT_EXACT, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
         qc = np.uint32(0)

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import SignalError
 from .descriptors import Quality
-from .fast import cell_bounds, cell_quantities, exact_integer_ok, scratch
+from .fast import cell_bounds, cell_quantities, cell_quantities_bounded, exact_integer_ok, scratch
 from .features import (
     KERNEL_GROUPS,
     band_hjorth,
@@ -717,15 +717,23 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFe
         np.concatenate([s.vibration for s in chunk], out=vib.reshape(len(chunk) * s0.shape[0], n_fast))
         dfm = scratch("agg.dfm", (len(chunk),) + v0.shape, v0.dtype)
         np.concatenate([s.deformation for s in chunk], out=dfm.reshape(len(chunk) * v0.shape[0], n_slow))
+        ts = _shared_or_stacked([s.vibration_t_ns for s in chunk])
+        tv = _shared_or_stacked([s.deformation_t_ns for s in chunk])
+        fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
+        # the compiled kernel computes exact quantities (batch-independent) and each cell's bounds in one pass
+        done = cell_quantities_bounded(vib, ts, dfm, tv, fs_s, fs_v)
+        if done is not None:
+            quantities, bounds = done
+            saturated[c0:c0 + len(chunk)] = (_saturated(vib, bounds[:, 0], bounds[:, 1], cell_type.vibration)
+                                             | _saturated(dfm, bounds[:, 2], bounds[:, 3], cell_type.deformation))
+            parts.append(CellFeatures(*quantities))
+            continue
         peaks, sat = _peaks_and_saturation(vib, dfm, cell_type)
         if not exact_integer_ok(n_max, *peaks):
             return None
         saturated[c0:c0 + len(chunk)] = sat
         # cell_features without its float checks (integer data)
-        parts.append(CellFeatures(*cell_quantities(
-            vib, _shared_or_stacked([s.vibration_t_ns for s in chunk]),
-            dfm, _shared_or_stacked([s.deformation_t_ns for s in chunk]),
-            cell_type.vibration.rate_hz, cell_type.deformation.rate_hz)))
+        parts.append(CellFeatures(*cell_quantities(vib, ts, dfm, tv, fs_s, fs_v)))
     if len(parts) == 1:
         return parts[0], saturated
     return CellFeatures(*(np.concatenate([getattr(f, name) for f in parts])
@@ -772,17 +780,24 @@ def _peaks_and_saturation(vib: np.ndarray, dfm: np.ndarray, cell_type: CellType
             peaks.append(0.0)
             continue
         a_min, a_max = cell_bounds(a)
-        low, high = int(a_min.min()), int(a_max.max())
-        peaks.append(float(max(abs(low), abs(high))))
-        lo, hi = mod.adc_range
-        if low > lo and high < hi:
-            continue  # no cell reaches the limits
-        near = np.flatnonzero((a_min <= lo) | (a_max >= hi))
-        if near.size:
-            sub = a[near]
-            at_limit = np.count_nonzero((sub <= lo) | (sub >= hi), axis=(1, 2))
-            saturated[near] |= at_limit > 0.01 * a.shape[1] * a.shape[2]
+        peaks.append(float(max(abs(int(a_min.min())), abs(int(a_max.max())))))
+        saturated |= _saturated(a, a_min, a_max, mod)
     return (peaks[0], peaks[1]), saturated
+
+
+def _saturated(a: np.ndarray, a_min: np.ndarray, a_max: np.ndarray, mod) -> np.ndarray:
+    """Per cell of ``a`` (cell, channel, sample) with bounds ``a_min``, ``a_max``: over 1 % of its samples at the
+    modality's ADC limits (:func:`_saturation`)."""
+    out = np.zeros(a.shape[0], dtype=bool)
+    lo, hi = mod.adc_range
+    if a.size == 0 or (int(a_min.min()) > lo and int(a_max.max()) < hi):
+        return out  # no cell reaches the limits
+    near = np.flatnonzero((a_min <= lo) | (a_max >= hi))
+    if near.size:
+        sub = a[near]
+        at_limit = np.count_nonzero((sub <= lo) | (sub >= hi), axis=(1, 2))
+        out[near] = at_limit > 0.01 * a.shape[1] * a.shape[2]
+    return out
 
 
 def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ...]

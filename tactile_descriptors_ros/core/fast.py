@@ -45,6 +45,7 @@ __all__ = [
     "backend",
     "set_backend",
     "cell_quantities",
+    "cell_quantities_bounded",
     "cell_bounds",
     "exact_integer_ok",
     "scratch",
@@ -229,16 +230,53 @@ def cell_quantities(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np
     tv = np.asarray(t_v_ns, dtype=np.int64)
     descriptors.check_cell_batch(s, ts, v, tv)
     fs_s, fs_v = _check_rate(rate_s_hz), _check_rate(rate_v_hz)
-    kernel = _kernel()
-    if kernel is not None and min(s.shape) and min(v.shape) and s.shape[2] >= 3 and v.shape[2] >= 3:
-        s_c, v_c = _compiled_int(s), _compiled_int(v)
-        if s_c is not None and v_c is not None:
-            status, *out = kernel.quantities(s_c, np.ascontiguousarray(ts[None, :] if ts.ndim == 1 else ts), v_c,
-                                             np.ascontiguousarray(tv[None, :] if tv.ndim == 1 else tv), fs_s, fs_v,
-                                             _U_FLAT, max(4 * s.shape[2], 1 << 16))
-            if status == kernel.OK:
-                return tuple(out)
+    res = _compiled(s, ts, v, tv, fs_s, fs_v)
+    if res is not None:
+        return res[0]
     return descriptors.cell_quantities(s, ts, v, tv, fs_s, fs_v)
+
+
+def _compiled(s: np.ndarray, ts: np.ndarray, v: np.ndarray, tv: np.ndarray, fs_s: float, fs_v: float
+              ) -> tuple[tuple[np.ndarray, ...], np.ndarray] | None:
+    """The compiled backend's quantities and per-cell bounds, or None when it cannot compute the batch exactly."""
+    kernel = _kernel()
+    if kernel is None or not (min(s.shape) and min(v.shape) and s.shape[2] >= 3 and v.shape[2] >= 3):
+        return None
+    s_c, v_c = _compiled_int(s), _compiled_int(v)
+    if s_c is None or v_c is None:
+        return None
+    bounds = np.empty((s.shape[0], 4), dtype=np.int64)
+    status, *out = kernel.quantities(s_c, np.ascontiguousarray(ts[None, :] if ts.ndim == 1 else ts), v_c,
+                                     np.ascontiguousarray(tv[None, :] if tv.ndim == 1 else tv), fs_s, fs_v, _U_FLAT,
+                                     max(4 * s.shape[2], 1 << 16), bounds)
+    return (tuple(out), bounds) if status == kernel.OK else None
+
+
+def cell_quantities_bounded(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np.ndarray,
+                            rate_s_hz: float, rate_v_hz: float) -> tuple[tuple[np.ndarray, ...], np.ndarray] | None:
+    """:func:`cell_quantities` and each cell's value bounds, when the compiled backend computes the batch exactly.
+
+    Parameters
+    ----------
+    s, t_s_ns, v, t_v_ns, rate_s_hz, rate_v_hz
+        As :func:`cell_quantities`.
+
+    Returns
+    -------
+    (tuple of numpy.ndarray, numpy.ndarray) or None
+        The quantities (as :func:`cell_quantities` returns them) and an
+        ``(n_cells, 4)`` int64 array of each cell's smallest and largest S
+        value and smallest and largest V value; None when there is no
+        compiled backend or it cannot compute this batch exactly (integer
+        data within :func:`exact_integer_ok`, 3 or more samples and pairs,
+        sorted stamps): call :func:`cell_quantities` then.
+    """
+    s = np.asarray(s)
+    v = np.asarray(v)
+    ts = np.asarray(t_s_ns, dtype=np.int64)
+    tv = np.asarray(t_v_ns, dtype=np.int64)
+    descriptors.check_cell_batch(s, ts, v, tv)
+    return _compiled(s, ts, v, tv, _check_rate(rate_s_hz), _check_rate(rate_v_hz))
 
 
 def cell_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

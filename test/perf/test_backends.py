@@ -34,16 +34,17 @@ def test_compiled_hands_over_what_it_cannot_do_exactly():
     previous = fast.set_backend("numba")
     try:
         kernel = fast._kernel()
+        bounds = np.empty((2, 4), dtype=np.int64)
         big = rng.integers(-(2**40), 2**40, (2, 2, 40), dtype=np.int64)
         v = rng.integers(0, 50, (2, 3, 10)).astype(np.int64)
-        status = kernel.quantities(big, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16)[0]
+        status = kernel.quantities(big, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
         assert status == kernel.NOT_EXACT
-        status = kernel.quantities(v[:, :, :2], ts[None, :2], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16)[0]
+        status = kernel.quantities(v[:, :, :2], ts[None, :2], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
         assert status == kernel.DEGENERATE
         wide = rng.integers(0, 2**20, (2, 2, 40), dtype=np.int64)
-        status = kernel.quantities(wide, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16)[0]
+        status = kernel.quantities(wide, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
         assert status == kernel.TOO_WIDE
-        status = kernel.quantities(v, tv[None, ::-1].copy(), v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16)[0]
+        status = kernel.quantities(v, tv[None, ::-1].copy(), v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
         assert status == kernel.UNSORTED
         # and cell_quantities still answers: the reference's own arrays
         _identical(fast.cell_quantities(big, ts, v, tv, 1.0, 1.0), descriptors.cell_quantities(big, ts, v, tv, 1.0, 1.0))

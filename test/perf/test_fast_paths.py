@@ -161,6 +161,22 @@ def test_compiled_integer_windows_equal_reference(batch, fs_s, fs_v):
 
 
 @needs_compiled
+@settings(max_examples=60, deadline=None)
+@given(integer_batches())
+def test_bounded_quantities_are_the_quantities_and_each_cells_bounds(batch):
+    s, ts, v, tv = batch
+    done = fast.cell_quantities_bounded(s, ts, v, tv, 1000.0, 250.0)
+    if done is None:  # the kernel hands this batch to the reference (too few pairs)
+        assert descriptors.cell_quantities(s, ts, v, tv, 1000.0, 250.0)[8].any()
+        return
+    quantities, bounds = done
+    for got, want in zip(quantities, fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0)):
+        np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(bounds, np.stack([s.min(axis=(1, 2)), s.max(axis=(1, 2)),
+                                                    v.min(axis=(1, 2)), v.max(axis=(1, 2))], axis=1))
+
+
+@needs_compiled
 @pytest.mark.parametrize("length_s", [0.05, 2.0])
 def test_bench_windows_equal_reference(length_s):
     from tactile_descriptors_ros.core.robot import load_robot
