@@ -46,6 +46,7 @@ _DRIVER = {
     "resync_s": "double", "tare_on_start_s": "double", "tare.window_s": "double", "contact_threshold_n": "double",
     "frames_topic": "string", "serial.port": "string", "serial.baudrate": "integer", "sim.scene": "string",
     "sim.speed": "double", "autostart": "bool", "diagnostics_period_s": "double", "reconnect_s": "double",
+    "read_period_s": "double",
     **_qos("frames"),
 }
 

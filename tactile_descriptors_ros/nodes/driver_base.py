@@ -78,6 +78,9 @@ class DriverBase(LifecycleNode):
         self.last_error: str | None = None
         self._last_error_monotonic = float("-inf")
         self.scene_ended_logged = False
+        self.read_period_s = 0.0
+        #: reads of the device so far (each one decode and one publish round)
+        self.reads = 0
 
     # ---------------------------------------------------------- parameters
     def _declare_robot(self, kind: str, example: str, parts_what: str
@@ -121,6 +124,10 @@ class DriverBase(LifecycleNode):
 
         self.reconnect_s = declare(self, "reconnect_s", 0.25, "retry period of reopening a lost device [s]",
                                    minimum=0.01)
+        self.read_period_s = declare(self, "read_period_s", 0.0,
+                                     "shortest time between two reads of the device [s]: frames queue meanwhile and "
+                                     "are decoded and published together (0 = read as soon as any is there)",
+                                     minimum=0.0)
 
         self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
@@ -259,8 +266,10 @@ class DriverBase(LifecycleNode):
                 except Exception as exc:  # noqa: BLE001 - report and keep the node alive
                     self._count_error("reader_errors", f"after reopening: {exc!r}")
                 continue
+            started = time.monotonic()
             try:
                 items = self._read()
+                self.reads += 1
             except TransportError as exc:
                 self.faults["transport_errors"] += 1
                 self.last_error = str(exc)
@@ -283,6 +292,10 @@ class DriverBase(LifecycleNode):
                 self._count_error("consume_errors", f"handling a read: {exc!r}")
             if not items:
                 self._note_scene_end()
+            if self.read_period_s > 0:
+                # Every read costs a decode and a publish round for all cells whatever it holds: a large skin
+                # read as soon as anything is due pays that round a thousand times a second.
+                self._stop.wait(max(0.0, self.read_period_s - (time.monotonic() - started)))
 
     def _count_error(self, counter: str, text: str) -> None:
         self.faults[counter] += 1
@@ -293,7 +306,8 @@ class DriverBase(LifecycleNode):
     # ------------------------------------------------------------ diagnostics
     def _transport_values(self, settings: dict[str, Any]) -> dict[str, Any]:
         """Key/values of the transport status: name, ``settings``, stamp source, device description, link, faults."""
-        values = {"transport": self.transport_name, **settings, "stamp_source": self.stamp_source}
+        values = {"transport": self.transport_name, **settings, "stamp_source": self.stamp_source,
+                  "reads": self.reads}
         if self.transport is not None:
             values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
         if self.link is not None:

@@ -144,7 +144,8 @@ def _scene(robot_path: Path, name: str, seed: int) -> dict[str, Any]:
 
 def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str], *,
                       groups: Sequence[str] = ("paper",), batch_s: float | None = None,
-                      one_driver: bool = False, window_parameters: dict[str, Any] | None = None) -> Path:
+                      read_period_s: float | None = None, one_driver: bool = False,
+                      window_parameters: dict[str, Any] | None = None) -> Path:
     """Write the synthetic robot description (with its ``nodes:`` graph) and the drivers' scenes.
 
     Parameters
@@ -158,6 +159,8 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
         Descriptor feature groups (default: the paper's 18 values per body part).
     batch_s : float, optional
         The drivers' ``batch_s`` (default: the NAO graph's).
+    read_period_s : float, optional
+        The drivers' ``read_period_s`` (default: the driver's, 0: read as soon as frames are due).
     one_driver : bool
         One skin driver for all body parts (one bus) instead of one per body part.
     window_parameters : dict, optional
@@ -194,6 +197,8 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
                      "tare_on_start_s": 0.0,
                      "sim": {"loop": True, "speed": 1.0}}
     nodes: dict[str, Any] = {}
+    if read_period_s is not None:
+        driver_params["read_period_s"] = float(read_period_s)
     for k, bus in enumerate(buses):
         bus_name = bus[0]["name"] if not one_driver else "all"
         sub = copy.deepcopy(base)
@@ -436,7 +441,8 @@ def _part_timing(rows: list[tuple[float, int, int]], t0: float, t1: float) -> tu
 
 
 def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 30.0, settle_s: float = 5.0,
-                    groups: Sequence[str] = ("paper",), batch_s: float | None = None, one_driver: bool = False,
+                    groups: Sequence[str] = ("paper",), batch_s: float | None = None,
+                    read_period_s: float | None = None, one_driver: bool = False,
                     warm_up_timeout_s: float = 180.0, window_parameters: dict[str, Any] | None = None,
                     progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> ScaleGraphReport:
     """Run the scale graph (module docstring) and measure it for ``seconds`` after the warm-up.
@@ -452,7 +458,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     settle_s : float
         Time between the first descriptor of every body part and the
         measurement (the backlog of the start-up drains).
-    groups, batch_s, one_driver, window_parameters
+    groups, batch_s, read_period_s, one_driver, window_parameters
         See :func:`scale_robot_files`.
     warm_up_timeout_s : float
         Longest wait for the first descriptor of every body part.
@@ -484,7 +490,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     from ..launching.processes import GraphProcesses, localhost_environment
 
     tmp = tempfile.TemporaryDirectory(prefix="tactile_scale_")
-    robot_path = scale_robot_files(n_cells, parts, tmp.name, groups=groups, batch_s=batch_s, one_driver=one_driver,
+    robot_path = scale_robot_files(n_cells, parts, tmp.name, groups=groups, batch_s=batch_s,
+                                   read_period_s=read_period_s, one_driver=one_driver,
                                    window_parameters=window_parameters)
     specs = scale_graph_specs(robot_path)
     runs = dict(zip((_part_name(k, parts) for k in range(parts)), split_cells(n_cells, parts)))

@@ -100,6 +100,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="descriptor feature groups of --scale-graph, comma-separated (default paper)")
     p.add_argument("--batch-s", type=float, default=None,
                    help="the skin drivers' batch_s for --scale-graph (default: the NAO graph's)")
+    p.add_argument("--read-period-s", type=float, default=None,
+                   help="the skin drivers' read_period_s for --scale-graph (default 0: read as soon as frames are "
+                        "due)")
     p.add_argument("--one-driver", action="store_true",
                    help="--scale-graph with one skin driver for all body parts instead of one per body part")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -200,9 +203,10 @@ def _scale_graph(args: argparse.Namespace) -> int:
     from ..perf.scale_graph import format_scale_graph, run_scale_graph
 
     if args.cells < 1 or (args.parts is not None and args.parts < 1) or not args.seconds > 0 \
-            or not args.settle_s >= 0 or (args.batch_s is not None and not args.batch_s > 0):
-        print("tactile bench: error: --cells, --parts, --seconds and --batch-s must be positive, --settle-s at "
-              "least 0", file=sys.stderr)
+            or not args.settle_s >= 0 or (args.batch_s is not None and not args.batch_s > 0) \
+            or (args.read_period_s is not None and not args.read_period_s >= 0):
+        print("tactile bench: error: --cells, --parts, --seconds and --batch-s must be positive, --settle-s and "
+              "--read-period-s at least 0", file=sys.stderr)
         return 2
     groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
     bar = tqdm(total=round(args.seconds), desc="scale graph", unit="s", file=sys.stderr, leave=False)
@@ -214,7 +218,8 @@ def _scale_graph(args: argparse.Namespace) -> int:
 
     try:
         report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
-                                 groups=groups, batch_s=args.batch_s, one_driver=args.one_driver,
+                                 groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
+                                 one_driver=args.one_driver,
                                  progress=progress)
     except (RuntimeError, ImportError, ConfigError) as exc:
         bar.close()
