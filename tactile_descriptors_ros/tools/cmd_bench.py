@@ -96,6 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="measurement time of --scale-graph after the warm-up [s] (default 30)")
     p.add_argument("--settle-s", type=float, default=5.0,
                    help="time between the first descriptor of every body part and the measurement [s] (default 5)")
+    p.add_argument("--warm-up-s", type=float, default=180.0,
+                   help="longest wait for the first descriptor of every body part before --scale-graph measures "
+                        "anyway [s] (default 180)")
     p.add_argument("--groups", default="paper",
                    help="descriptor feature groups of --scale-graph, comma-separated (default paper)")
     p.add_argument("--batch-s", type=float, default=None,
@@ -204,9 +207,9 @@ def _scale_graph(args: argparse.Namespace) -> int:
 
     if args.cells < 1 or (args.parts is not None and args.parts < 1) or not args.seconds > 0 \
             or not args.settle_s >= 0 or (args.batch_s is not None and not args.batch_s > 0) \
-            or (args.read_period_s is not None and not args.read_period_s >= 0):
-        print("tactile bench: error: --cells, --parts, --seconds and --batch-s must be positive, --settle-s and "
-              "--read-period-s at least 0", file=sys.stderr)
+            or (args.read_period_s is not None and not args.read_period_s >= 0) or not args.warm_up_s > 0:
+        print("tactile bench: error: --cells, --parts, --seconds, --batch-s and --warm-up-s must be positive, "
+              "--settle-s and --read-period-s at least 0", file=sys.stderr)
         return 2
     groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
     bar = tqdm(total=round(args.seconds), desc="scale graph", unit="s", file=sys.stderr, leave=False)
@@ -219,7 +222,7 @@ def _scale_graph(args: argparse.Namespace) -> int:
     try:
         report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
                                  groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
-                                 one_driver=args.one_driver,
+                                 one_driver=args.one_driver, warm_up_timeout_s=args.warm_up_s,
                                  progress=progress)
     except (RuntimeError, ImportError, ConfigError) as exc:
         bar.close()

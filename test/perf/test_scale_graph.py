@@ -119,3 +119,15 @@ def test_bench_scale_graph_runs_a_small_skin_in_real_time_without_lost_frames():
         assert p["cells_in_contact"] == cells // parts  # every cell touches: the descriptor's full cost
     target = d["targets"][f"skin_{cells}_graph"]
     assert target["lost_frames"] == 0 and target["met"] is True, d["parts"]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_graph_without_descriptors_when_the_warm_up_ends_is_measured_anyway():
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--scale-graph",
+                          "--cells", "4", "--parts", "1", "--seconds", "2", "--settle-s", "0", "--warm-up-s", "0.1",
+                          "--json"], capture_output=True, text=True, timeout=280)
+    assert out.returncode == 0, out.stderr[-3000:]
+    d = json.loads(out.stdout)
+    assert d["silent_at_start"] == ["part_0"]  # no window can close 0.1 s after start
+    assert all(p["cpu_percent"] is not None for p in d["processes"].values())
