@@ -33,13 +33,24 @@ from ..errors import ConfigError, SignalError
 from .aggregation import CellSignals
 from .robot import RobotDescription
 
-__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S"]
+__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S", "BUFFER_HEADROOM",
+           "BUFFER_SLACK_S"]
 
 #: Exploration mode judges contact only up to the time every cell has sent
 #: force data for (the watermark), so the order in which cells' messages
 #: arrive cannot change onset or release; a cell silent for longer than this
 #: behind the most recent one (unplugged, dead) no longer holds it back.
 WATERMARK_STALL_S = 0.5
+
+#: A cell's buffers are sized when its first chunk arrives, from its cell
+#: type's rates, for the longest span the windower keeps plus
+#: :data:`BUFFER_SLACK_S` (the chunks of one drained batch), times this
+#: headroom: the kept samples are moved down once per third of a buffer, and
+#: the buffer never has to grow (growing by doubling left the window node
+#: with buffers 2-4 times the data, filled over minutes).
+BUFFER_HEADROOM = 1.5
+#: Seconds of samples a buffer holds beyond the retained span [s].
+BUFFER_SLACK_S = 2.0
 
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
@@ -94,26 +105,36 @@ class Window:
 
 
 class SampleStream:
-    """A growable, trimmable buffer of time-stamped multichannel samples.
+    """A trimmable buffer of time-stamped multichannel samples, sized up front.
 
     Samples live in preallocated arrays between ``_lo`` and ``_hi``;
-    trimming moves ``_lo`` (no copy) and appending compacts or grows the
-    arrays only when the end is reached, so the cost per message is a few
-    slice assignments.  The last stamp is kept as a Python int (it is read
-    for every message).
+    trimming moves ``_lo`` (no copy) and appending moves the kept samples
+    down to the start when the end is reached, so the cost per message is a
+    few slice assignments.  The arrays grow (to twice what is needed) only
+    when the kept samples would fill more than three quarters of them, i.e.
+    when more is kept than the capacity was sized for.  The last stamp is
+    kept as a Python int (it is read for every message).
 
     Parameters
     ----------
     n_channels : int
     dtype : numpy dtype
+    capacity : int, default 256
+        Samples the arrays hold from the start.
+    touch : bool, default False
+        Write the arrays once at creation, so their memory is resident from
+        the start instead of page by page as samples first reach it.
     """
 
-    def __init__(self, n_channels: int, dtype: np.dtype) -> None:
+    def __init__(self, n_channels: int, dtype: np.dtype, capacity: int = 256, touch: bool = False) -> None:
         self.n_channels = int(n_channels)
-        cap = 256
+        cap = max(int(capacity), 1)
         self._t = np.empty(cap, dtype=np.int64)
         self._v = np.empty((self.n_channels, cap), dtype=dtype)
         self._ok = np.empty(cap, dtype=bool)
+        if touch:
+            for a in (self._t, self._v, self._ok):
+                a.fill(0)
         self._lo = 0
         self._hi = 0
         self._last: int | None = None
@@ -143,10 +164,20 @@ class SampleStream:
         self._hi = end
         self._last = int(self._t[end - 1])
 
+    @property
+    def capacity(self) -> int:
+        """Samples the arrays hold."""
+        return int(self._t.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the arrays."""
+        return int(self._t.nbytes + self._v.nbytes + self._ok.nbytes)
+
     def _compact(self, extra: int) -> None:
         size = self._hi - self._lo
         cap = self._t.shape[0]
-        if size + extra > cap // 2:
+        if size + extra > cap - cap // 4:
             cap = max(2 * cap, 2 * (size + extra))
             t = np.empty(cap, dtype=np.int64)
             v = np.empty((self.n_channels, cap), dtype=self._v.dtype)
@@ -182,13 +213,15 @@ class SampleStream:
 
 
 class _CellState:
-    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype, n_extra: int = 0) -> None:
-        self.vib = SampleStream(n_s, dtype_s)
-        self.dfm = SampleStream(n_v, dtype_v)
+    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype, n_extra: int = 0,
+                 capacity: tuple[int, int, int] = (256, 256, 256)) -> None:
+        cap_s, cap_v, cap_f = capacity
+        self.vib = SampleStream(n_s, dtype_s, cap_s, touch=True)
+        self.dfm = SampleStream(n_v, dtype_v, cap_v, touch=True)
         # extra channels ride on the deformation stamps (one value per deformation sample)
-        self.extra = SampleStream(n_extra, np.float64) if n_extra else None
+        self.extra = SampleStream(n_extra, np.float64, cap_v, touch=True) if n_extra else None
         self.tare: np.ndarray | None = None  # latest deformation tare reported
-        self.force = SampleStream(1, np.float64)
+        self.force = SampleStream(1, np.float64, cap_f, touch=True)
         self.last_force_n = 0.0  # mean over the last ``smooth_s`` of force samples
         self.hot_until_ns: int | None = None  # last stamp of a chunk with a force at or above release
         self.below_since_ns: int | None = None
@@ -398,7 +431,8 @@ class Windower:
                     return False
         st = self._cells.get(cell_id)
         if st is None:
-            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype, n_extra)
+            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype, n_extra,
+                                                   self.buffer_capacity(cell_id))
         t_v = np.asarray(chunk.vibration_t_ns, dtype=np.int64)
         if t_v.size == 0:
             self.faults["empty"] += 1
@@ -785,6 +819,25 @@ class Windower:
             for stream in (st.vib, st.dfm, st.force, st.extra):
                 if stream is not None:
                     stream.trim_before(horizon)
+
+    def buffer_capacity(self, cell_id: int) -> tuple[int, int, int]:
+        """Samples of a cell's vibration, deformation and force buffers, sized from its cell type's rates.
+
+        ``BUFFER_HEADROOM`` times (the longest span kept, :data:`BUFFER_SLACK_S`
+        included) times the rate: the buffers never grow unless :meth:`retune`
+        makes the kept span longer.
+        """
+        part, _ = self._index[cell_id]
+        ct = self.robot.cell_types[part.cell_type]
+        span_s = self._retain_ns / 1e9 + BUFFER_SLACK_S
+        return tuple(int(math.ceil(BUFFER_HEADROOM * span_s * rate))
+                     for rate in (ct.vibration.rate_hz, ct.deformation.rate_hz, ct.force.rate_hz))
+
+    @property
+    def buffer_bytes(self) -> int:
+        """Bytes of every cell's sample buffers (what the windower holds, kept samples and headroom)."""
+        return sum(s.nbytes for st in self._cells.values() for s in (st.vib, st.dfm, st.force, st.extra)
+                   if s is not None)
 
     @property
     def exploration_id(self) -> int:

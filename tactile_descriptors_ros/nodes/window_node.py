@@ -457,6 +457,8 @@ class WindowNode(Node):
                         "windows_held_at_start": self.windows_held_at_start,
                         "messages_received": self.frames_taken,
                         "frames_per_callback": self.frames_taken / self.batches if self.batches else 0.0,
+                        "frames_messages_taken": self.frames_taken,
+                        "windower_buffer_mb": round(self.windower.buffer_bytes / 2**20, 3),
                         "largest_frames_batch": self.largest_batch,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
         now = time.monotonic()

@@ -217,6 +217,46 @@ def test_contact_held_past_max_duration_keeps_bounded_buffers():
     assert [x.exploration_id for x in wins] == [1, 2]
 
 
+def test_buffers_are_sized_from_the_robot_description_and_never_grow():
+    """A cell's buffers are sized at its first chunk from its cell type's rates and the longest span the
+    windower keeps: over a minute of touches, releases and a contact held past max_duration_s (in chunks
+    of 0.1 s and in a burst of 2 s) they are never reallocated, and they hold at most the headroom over
+    the data they keep (doubling left buffers of 2-4 times it, growing for minutes)."""
+    from tactile_descriptors_ros.core.windowing import BUFFER_HEADROOM, BUFFER_SLACK_S
+
+    rng = np.random.default_rng(6)
+    robot = load_robot("shadow_hand")
+    w = Windower(robot, mode="exploration", max_duration_s=2.0)
+    w.add(1, _chunk(0, 0.0, rng))
+    st = w._cells[1]
+    streams = (st.vib, st.dfm, st.force, st.extra)
+    arrays = [s._v for s in streams]
+    span_s = w._retain_ns / 1e9 + BUFFER_SLACK_S
+    ct = robot.cell_types[robot.cell_index()[1][0].cell_type]
+    assert st.vib.capacity == int(np.ceil(BUFFER_HEADROOM * span_s * ct.vibration.rate_hz))
+    assert st.dfm.capacity == int(np.ceil(BUFFER_HEADROOM * span_s * ct.deformation.rate_hz))
+    assert st.force.capacity == int(np.ceil(BUFFER_HEADROOM * span_s * ct.force.rate_hz))
+    assert w.buffer_bytes == sum(s.nbytes for s in streams)
+    t, wins, kept = 100 * MS, [], []
+    schedule = [(1.0, 0.0), (3.0, 2.0), (0.5, 0.0), (30.0, 2.0), (1.0, 0.0), (2.0, 1.0), (20.0, 0.0)]
+    for duration_s, force in schedule:
+        for _ in range(int(round(duration_s * 10))):
+            w.add(1, _chunk(t, force, rng))
+            wins += w.poll()
+            t += 100 * MS
+            kept.append(len(st.vib))
+    burst = []
+    for _ in range(20):  # a node catching up: 2 s of chunks in one batch
+        burst.append((1, _chunk(t, 2.0, rng)))
+        t += 100 * MS
+    w.add_many(burst)
+    wins += w.poll()
+    assert all(s._v is a for s, a in zip(streams, arrays))  # never reallocated
+    # sized for what is kept (plus the slack and a chunk), not 2-4 times it
+    assert st.vib.capacity <= BUFFER_HEADROOM * (max(kept) + (BUFFER_SLACK_S + 0.1) * ct.vibration.rate_hz)
+    assert [x.exploration_id for x in wins] == [1, 2, 3]
+
+
 def _feed_from(w: Windower, t: int, schedule, rng, cell_id: int = 1):
     out = []
     for duration_s, force in schedule:
