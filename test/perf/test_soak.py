@@ -51,3 +51,41 @@ def test_bench_soak_command_reports_every_node(tmp_path):
         assert len(n["rss_mb"]) >= 5 and n["rss_end_mb"] > 0 and n["cpu_percent"] is not None
     assert set(d["lost_frames"]) == {"lost_frames", "bad_frames", "sequence_restart"}
     assert "windower_gap" in d["late_frames"] and d["exit_codes"]
+    f = d["frames"]  # 8 s may end before the driver's first frames: the split is consistent either way
+    assert f["frames_sent_meanwhile"] + f["never_sent"] >= f["frames_due_at_real_rate"]
+    assert f["frames_sent_meanwhile"] <= f["frames_sent"] and d["scene_frames_per_s"] > 0
+    assert d["windower_buffer_mb"] > 0 and all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
+
+
+def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
+    """Frames the simulator did not send in time are not losses; the bus's gaps and the messages the
+    window node never received are, each counted apart; lost frames are judged only when the
+    simulated bus kept up with the real rate."""
+    nodes = [NodeSamples("skin_driver", "skin_driver", 1), NodeSamples("window_node", "window_node", 2)]
+    diag = {"skin_driver: bus": {"bus_frames": "9000", "bus_lost_frames": "7"},
+            "skin_driver: left_hand": {"messages": "60", "lost_frames": "7"},
+            "skin_driver: chest": {"messages": "40"},
+            "window_node: windows": {"fault_lost_frames": "2", "frames_messages_taken": "97",
+                                     "windower_buffer_mb": "82.5"}}
+    r = SoakReport("nao", 10.0, 10.0, 1.0, nodes, diag, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=9000)
+    f = r.frames_split()
+    assert f["frames_due_at_real_rate"] == 10000 and f["frames_sent_meanwhile"] == 9000 and f["never_sent"] == 1000
+    assert f["frames_sent"] == 9000
+    assert f["sent_percent_of_real_rate"] == pytest.approx(90.0) and f["machine_kept_up"] is False
+    assert f["lost_on_bus"] == 7 and f["messages_sent"] == 100 and f["messages_received"] == 97
+    assert f["messages_sent_and_lost"] == 2 and f["frames_sent_and_lost"] == 180  # 90 frames a message
+    d = r.to_dict()
+    assert d["goal"]["no_lost_frames"] is False and d["goal"]["machine_kept_up"] is False
+    assert d["windower_buffer_mb"] == 82.5
+    kept_up = SoakReport("nao", 10.0, 10.0, 1.0, nodes, {"skin_driver: bus": {"bus_frames": "9950"}},
+                         (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {}, scene_frames_per_s=1000.0, driver_run_s=10.0,
+                         frames_sent_in_run=9950)
+    assert kept_up.frames_split()["machine_kept_up"] is True and kept_up.to_dict()["goal"]["no_lost_frames"]
+
+
+def test_rss_per_minute_takes_the_first_sample_of_every_minute():
+    s = NodeSamples("window_node", "window_node", 1, t_s=[0, 30, 61, 90, 120], rss_mb=[10, 20, 30, 40, 50],
+                    cpu_s=[0] * 5)
+    r = SoakReport("nao", 10.0, 150.0, 1.0, [s], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {})
+    assert r.rss_per_minute() == {"window_node": [10, 30, 50]}
