@@ -37,7 +37,7 @@ from __future__ import annotations
 import os
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -198,6 +198,9 @@ class ClassifierNode(Node):
             self.get_logger().error(self.layout_error, throttle_duration_sec=5.0)
             return
         self.layout_error = None
+        # the kept descriptors (label_horizon of them) share the model's labels: one copy, not one per
+        # descriptor (a NAO descriptor's 917 label strings are about 80 kB; the node grew by that per touch)
+        sample = replace(sample, labels=self.model.labels)
         if not np.all(np.isfinite(sample.values)):
             self.counts["nonfinite_descriptor"] += 1
             self.get_logger().warning("descriptor with non-finite values ignored", throttle_duration_sec=5.0)
