@@ -54,7 +54,9 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     f = d["frames"]  # 8 s may end before the driver's first frames: the split is consistent either way
     assert f["frames_sent_meanwhile"] + f["never_sent"] >= f["frames_due_at_real_rate"]
     assert f["frames_sent_meanwhile"] <= f["frames_sent"] and d["scene_frames_per_s"] > 0
-    assert d["windower_buffer_mb"] > 0 and all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
+    # the window node reports its sample buffers with its diagnostics (none yet if it was still starting)
+    assert (d["windower_buffer_mb"] is None) == ("window_node: windows" not in d["diagnostics"])
+    assert all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
 
 
 def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
