@@ -99,6 +99,11 @@ def cv_splits(y: np.ndarray, groups: np.ndarray, folds: int = 5, repeats: int = 
     if np.unique(groups).size == groups.size:
         cv = RepeatedStratifiedKFold(n_splits=folds, n_repeats=repeats, random_state=seed)
         return list(cv.split(x_dummy, y))
+    n_groups = np.unique(groups).size
+    if n_groups < folds:
+        raise ConfigError(f"{folds}-fold CV over trials (choosing the SVM's C) needs at least {folds} training "
+                          f"trials, there are {n_groups}: train on more trials, or use a classifier without CV "
+                          "(pa)", key="classifier")
     out = []
     for r in range(repeats):
         cv = StratifiedGroupKFold(n_splits=folds, shuffle=True, random_state=seed + r)

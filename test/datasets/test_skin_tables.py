@@ -206,3 +206,10 @@ def test_a_levels_channel_list_selects_those_levels_of_the_bank(trials, tmp_path
     assert mode_groups("per_channel+levels:f1") == ("per_channel", "levels:f1")
     with pytest.raises(ConfigError, match=r"unknown descriptor mode 'per_channel\+level'"):
         mode_groups("per_channel+level")
+
+
+def test_svm_on_too_few_training_trials_is_a_one_line_error(trials, tmp_path, capsys):
+    source, mapping = _write("hdf5", tmp_path, trials)
+    rc, err = _evaluate(capsys, source, mapping, "--classifier", "svm")
+    assert rc == 2 and "Traceback" not in err
+    assert "5-fold CV over trials (choosing the SVM's C) needs at least 5 training trials, there are 2" in err
