@@ -23,7 +23,7 @@ from .classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
 from ..core.robot import load_robot
 from ..core.blocks import block_mean
 from .features import (
-    DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, recordings_cell_type, select_features,
+    DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, recordings_robot, select_features,
 )
 from .windows import (  # DEFAULT_BLOCK_*: re-exported
     DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
@@ -138,8 +138,8 @@ def _draw(recordings: Sequence[BiotacRecording], spec: str, rate_hz: float, comm
     lengths = window_lengths(spec, rate_hz, common)
     if len(lengths) != 1:
         raise ConfigError(f"contact windows take one length, not the range {spec!r}", key="windows")
-    npc = recordings_cell_type(recordings).force.n_per_count
-    ft = load_robot("shadow_hand").contact.force_threshold_n
+    robot, cell_type = recordings_robot(recordings)
+    npc, ft = cell_type.force.n_per_count, robot.contact.force_threshold_n
     wins, miss = draw_contact_windows(recordings, lengths[0], per_trial, seed, npc, ft)
     without += [f"{r.class_name} trial {r.trial}" for r in miss]
     if not wins:
@@ -291,8 +291,9 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     # Each split's windows are looked up in that split's recordings only: (material, trial) names a
     # recording uniquely inside one folder, not across two.
     sub = "subwindows" in mode_groups(cfg.mode)
+    robot, cell_type = recordings_robot(list(train) + list(test))
     bank_kw = {"cache_dir": cfg.cache_dir, "jobs": cfg.jobs, "progress": cfg.progress, "subwindows": sub,
-               "cell_type": recordings_cell_type(list(train) + list(test))}
+               "cell_type": cell_type, "force_threshold_n": robot.contact.force_threshold_n}
     if cfg.block_s:
         bank_kw["block_frames"] = int(round(cfg.block_s * rate))
         bank_kw["hop_frames"] = int(round((cfg.block_hop_s or cfg.block_s) * rate))

@@ -91,6 +91,7 @@ __all__ = [
     "drop_quantities",
     "mode_groups",
     "recordings_cell_type",
+    "recordings_robot",
     "recording_channels",
     "PAC_RATE_TOLERANCE",
 ]
@@ -184,8 +185,12 @@ def finger_robot(cell_type: CellType | None = None) -> RobotDescription:
     return robot
 
 
-def recordings_cell_type(recordings: Sequence[BiotacRecording | CellRecording]) -> CellType:
-    """The one cell type of a set of recordings (the BioTac's for :class:`BiotacRecording`).
+def recordings_robot(recordings: Sequence[BiotacRecording | CellRecording]) -> tuple[RobotDescription, CellType]:
+    """The robot description declaring the one cell type of a set of recordings, and that cell type.
+
+    :class:`BiotacRecording` objects are the Shadow Hand's BioTacs; a
+    :class:`CellRecording` names its robot and cell type.  The robot's
+    contact threshold F_t is the evaluation's.
 
     Raises
     ------
@@ -197,8 +202,14 @@ def recordings_cell_type(recordings: Sequence[BiotacRecording | CellRecording]) 
     if len(kinds) != 1:
         raise ConfigError(f"the recordings hold cells of several types ({', '.join(sorted(k[1] for k in kinds))}): "
                           "train and test on one cell type", key="cell_type")
-    robot, name = kinds.pop()
-    return load_robot(robot).cell_types[name]
+    name, cell_type = kinds.pop()
+    robot = load_robot(name)
+    return robot, robot.cell_types[cell_type]
+
+
+def recordings_cell_type(recordings: Sequence[BiotacRecording | CellRecording]) -> CellType:
+    """The one cell type of a set of recordings (the BioTac's for :class:`BiotacRecording`); see :func:`recordings_robot`."""
+    return recordings_robot(recordings)[1]
 
 
 def recording_channels(rec: BiotacRecording | CellRecording, cell_type: CellType

@@ -213,3 +213,16 @@ def test_svm_on_too_few_training_trials_is_a_one_line_error(trials, tmp_path, ca
     rc, err = _evaluate(capsys, source, mapping, "--classifier", "svm")
     assert rc == 2 and "Traceback" not in err
     assert "5-fold CV over trials (choosing the SVM's C) needs at least 5 training trials, there are 2" in err
+
+
+def test_the_contact_threshold_is_the_recordings_robots(trials, tmp_path, capsys):
+    """A robot file beside the mapping with F_t = 5 N: the 2 N touches hold no contact window."""
+    from tactile_descriptors_ros.core.robot import robot_config_path
+
+    robot = yaml.safe_load(robot_config_path("nao").read_text())
+    robot["contact"] = {"force_threshold_n": 5.0, "release_threshold_n": 0.1}
+    (tmp_path / "strict_nao.yaml").write_text(yaml.safe_dump(robot))
+    source = write_skin_hdf5(tmp_path / "skin.h5", trials)
+    mapping = _mapping(tmp_path, "strict", {**HDF5_MAPPING, "robot": "strict_nao.yaml"})
+    rc, err = _evaluate(capsys, source, mapping)
+    assert rc == 2 and "lies wholly in contact (force >= 5 N)" in err
