@@ -106,7 +106,8 @@ def ros_context():
 def ros_message_examples() -> list:
     """One fully filled rclpy message of each tactile type (needs rclpy); fresh objects per test."""
     from builtin_interfaces.msg import Time
-    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, Label, Prediction, SkinCellFrame
+    from tactile_descriptors_msgs.msg import (BioTacFrameBatch, Descriptor, Label, Prediction, SkinCellFrame,
+                                              SkinPartFrames)
 
     b = BioTacFrameBatch()
     b.header.stamp = Time(sec=12, nanosec=345)
@@ -148,4 +149,16 @@ def ros_message_examples() -> list:
 
     lab = Label()
     lab.exploration_id, lab.class_name = 5, "cork"
-    return [b, s, d, p, lab]
+
+    sp = SkinPartFrames()
+    sp.header.stamp = Time(sec=12, nanosec=500)
+    sp.header.frame_id = sp.body_part = "chest"
+    sp.cell_ids, sp.sequence, sp.bad_frames = [17, 18], [99, 7], [0, 2]
+    sp.accel_count, sp.force_count = [3, 1], [1, 0]
+    sp.temperature_c = [31.5, 30.25]
+    sp.force_tare_counts = [1.0, 2.0, 3.0, 0.0, 0.0, 0.0]
+    sp.accel_x, sp.accel_y, sp.accel_z = [-512, 0, 511, SkinPartFrames.INVALID_ACCEL], [1, 2, 3, 4], [5, 6, 7, 8]
+    sp.accel_offset_ns = [0, 1_000_000, 2_000_000, 500_000]
+    sp.force, sp.force_offset_ns, sp.proximity = [1, 2, SkinPartFrames.INVALID_COUNT], [0], [400]
+    sp.accel_mps2_per_count, sp.force_n_per_count = 0.038, 0.00244
+    return [b, s, d, p, lab, sp]

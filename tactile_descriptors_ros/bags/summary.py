@@ -10,7 +10,8 @@ something is wrong, so :class:`EchoTracker` reduces each message to
   eq. 13 reads it), and consistency checks of array lengths;
 * stream health across messages, per sensor: message rate, lost frames
   (gaps in ``first_frame_sequence`` / ``sequence``) and time-stamp gaps or
-  jumps back;
+  jumps back; for a ``SkinPartFrames`` (all skin cells of a body part) per
+  cell, summed over the body part;
 * for a ``Descriptor``: per body part contact, cells in contact, mean force,
   the ``QUALITY_*`` bit mask decoded into names, and the values by label;
 * for a ``Prediction``: the top scores and the margin between the best two.
@@ -40,6 +41,7 @@ __all__ = [
 
 _BATCH = "tactile_descriptors_msgs/msg/BioTacFrameBatch"
 _SKIN = "tactile_descriptors_msgs/msg/SkinCellFrame"
+_SKIN_PART = "tactile_descriptors_msgs/msg/SkinPartFrames"
 _DESCRIPTOR = "tactile_descriptors_msgs/msg/Descriptor"
 _PREDICTION = "tactile_descriptors_msgs/msg/Prediction"
 _LABEL = "tactile_descriptors_msgs/msg/Label"
@@ -229,6 +231,7 @@ class EchoTracker:
         handler = {
             _BATCH: self._biotac,
             _SKIN: self._skin,
+            _SKIN_PART: self._skin_part,
             _DESCRIPTOR: self._descriptor,
             _PREDICTION: self._prediction,
             _LABEL: self._label,
@@ -355,6 +358,73 @@ class EchoTracker:
             "invalid_samples": int(invalid),
             "lost_messages": lost,
             "stamp_gap_ns": stamp_gap,
+            "problems": problems,
+            "stream": self._health(s),
+        }
+
+    def _skin_part(self, topic: str, msgtype: str, m: Any, log_ns: int) -> dict[str, Any]:
+        from ..errors import SignalError
+        from ..nodes.conversions import skin_part_from_msg
+        from ..streams.skin_parts import skin_part_chunks
+
+        stamp = _stamp_ns(m.header.stamp)
+        problems: list[str] = []
+        cell_ids = [int(c) for c in m.cell_ids]
+        channels = {f"accel_{a}": channel_stats(getattr(m, f"accel_{a}"), INVALID_ACCEL) for a in "xyz"}
+        force = np.asarray(m.force)
+        if force.size % 3 == 0:
+            grid = force.reshape(-1, 3)
+            for k in range(3):
+                channels[f"f{k + 1}"] = channel_stats(grid[:, k], INVALID_COUNT)
+        channels["proximity"] = channel_stats(m.proximity, INVALID_COUNT)
+        force_n: dict[str, Any] = channel_stats([])
+        part = None
+        try:
+            part = skin_part_from_msg(m)
+        except SignalError as exc:
+            problems.append(str(exc))
+        s = self._stream(topic, log_ns)
+        lost = 0
+        gaps: list[int] = []
+        accel_rate = None
+        if part is not None:
+            chunks = skin_part_chunks(part)
+            forces = np.concatenate([c.force_n for _, c in chunks]) if chunks else np.zeros(0)
+            force_n = channel_stats(forces)
+            for (cid, chunk), seq in zip(chunks, (int(q) for q in m.sequence)):
+                cs = self.streams.setdefault(f"{topic}#cell{cid}", _Stream())
+                cs.count += 1
+                lost += self._check_sequence(cs, seq, 1)
+                t = chunk.vibration_t_ns
+                period = int(np.median(np.diff(t))) if t.size > 1 else None
+                if period and accel_rate is None:
+                    accel_rate = 1e9 / period
+                if t.size:
+                    gap = self._check_stamp(cs, int(t[0]), int(t[-1]) + period if period else None,
+                                            (period or 1_000_000) // 2 + 1)
+                    if gap is not None:
+                        gaps.append(gap)
+            s.lost += lost
+            s.sequence_gaps += int(lost > 0)
+            s.stamp_gaps += sum(1 for g in gaps if g > 0)
+            s.stamp_backwards += sum(1 for g in gaps if g < 0)
+        invalid = sum(c["invalid"] for c in channels.values())
+        return {
+            "stamp_ns": stamp,
+            "body_part": m.body_part,
+            "runs": len(cell_ids),
+            "cells": len(set(cell_ids)),
+            "cell_ids": cell_ids,
+            "accel_samples": len(m.accel_x),
+            "force_samples": len(m.force_offset_ns),
+            "accel_rate_hz": accel_rate,
+            "force_n": force_n,
+            "temperature_c": channel_stats(np.asarray(m.temperature_c, dtype=np.float64)),
+            "bad_frames": int(np.sum(np.asarray(m.bad_frames, dtype=np.int64))),
+            "channels": channels,
+            "invalid_samples": int(invalid),
+            "lost_messages": lost,
+            "stamp_gaps_ns": gaps,
             "problems": problems,
             "stream": self._health(s),
         }
@@ -537,6 +607,27 @@ def format_summary(summary: Mapping[str, Any]) -> str:
             flags.append(f"LOST {s['lost_messages']} messages before this one")
         if s["stamp_gap_ns"] is not None:
             flags.append(f"stamp gap {s['stamp_gap_ns'] / 1e6:+.3f} ms")
+        if flags:
+            lines.append("  !! " + "; ".join(flags))
+    elif t == _SKIN_PART:
+        s = summary
+        temp = s["temperature_c"]
+        lines.append(f"  {s['body_part']}: {s['cells']} cells in {s['runs']} runs  stamp {s['stamp_ns'] / 1e9:.6f}  "
+                     f"accel {s['accel_samples']} @ {_f(s['accel_rate_hz'])} Hz, force {s['force_samples']}  "
+                     f"T {_f(temp['min'])}..{_f(temp['max'])} C")
+        f = s["force_n"]
+        lines.append(f"  force_n    min {_f(f['min']):>8}  max {_f(f['max']):>8}  mean {_f(f['mean']):>9}")
+        for name, st in s["channels"].items():
+            lines.append(_stats_line(name, st))
+        flags = []
+        if s["invalid_samples"]:
+            flags.append(f"INVALID samples {s['invalid_samples']}")
+        if s["bad_frames"]:
+            flags.append(f"bad frames {s['bad_frames']}")
+        if s["lost_messages"]:
+            flags.append(f"LOST {s['lost_messages']} cell batches before this message")
+        if s["stamp_gaps_ns"]:
+            flags.append(f"stamp gaps {', '.join(f'{g / 1e6:+.3f}' for g in s['stamp_gaps_ns'][:5])} ms")
         if flags:
             lines.append("  !! " + "; ".join(flags))
     elif t == _DESCRIPTOR:

@@ -3,7 +3,7 @@
 * :mod:`.biotac_driver`   -- BioTac SPI (Cheetah), USB-serial bridge, simulated
   or loopback transport -> ``BioTacFrameBatch``; ``~/tare``; diagnostics.
 * :mod:`.skin_driver`     -- skin cells over CAN (python-can) or serial
-  (pyserial) -> ``SkinCellFrame``; ``~/tare``; diagnostics.
+  (pyserial) -> ``SkinPartFrames`` (one per body part and batch); ``~/tare``; diagnostics.
 * :mod:`.window_node`     -- frames -> contact gate -> windows -> ``Descriptor``.
 * :mod:`.classifier_node` -- ``Descriptor`` + ``Label`` -> online PA-I -> ``Prediction``.
 

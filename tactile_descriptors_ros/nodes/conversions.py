@@ -37,6 +37,9 @@ __all__ = [
     "skin_frame_to_msg",
     "skin_msg_to_frame",
     "skin_msg_to_chunk",
+    "skin_part_to_msg",
+    "skin_part_from_msg",
+    "skin_part_msg_to_chunks",
     "BIOTAC_EXTRA_CHANNELS",
     "SKIN_EXTRA_CHANNELS",
     "descriptor_to_msg",
@@ -45,9 +48,9 @@ __all__ = [
     "prediction_to_msg",
 ]
 
-#: Marker of an unreadable unsigned sample (BioTacFrameBatch, SkinCellFrame).
+#: Marker of an unreadable unsigned sample (BioTacFrameBatch, SkinPartFrames, SkinCellFrame).
 INVALID_COUNT = 65535
-#: Marker of an unreadable accelerometer sample (SkinCellFrame).
+#: Marker of an unreadable accelerometer sample (SkinPartFrames, SkinCellFrame).
 INVALID_ACCEL = -32768
 
 
@@ -413,6 +416,99 @@ def skin_msg_to_chunk(msg, extra_channels: Sequence[str] = ()) -> CellChunk:
         extra=extra,
         deformation_tare=tare,
     )
+
+
+# ------------------------------------------------------- skin cells of a body part
+
+
+def skin_part_to_msg(part):
+    """Build a ``SkinPartFrames`` message from a :class:`~..streams.skin_parts.SkinPartFrames`."""
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+
+    msg = SkinPartFrames()
+    msg.header.stamp = ns_to_stamp(part.stamp_ns)
+    msg.header.frame_id = part.frame_id
+    msg.body_part = part.body_part
+    msg.cell_ids = _arr("I", part.cell_ids, np.uint32)
+    msg.sequence = _arr("I", np.asarray(part.sequence, dtype=np.int64) & 0xFFFFFFFF, np.uint32)
+    msg.accel_count = _arr("I", part.accel_count, np.uint32)
+    msg.force_count = _arr("I", part.force_count, np.uint32)
+    msg.temperature_c = _arr("d", part.temperature_c, np.float64)
+    msg.force_tare_counts = _arr("d", np.asarray(part.force_tare_counts, dtype=np.float64).reshape(-1), np.float64)
+    msg.bad_frames = _arr("I", np.minimum(part.bad_frames, 0xFFFFFFFF), np.uint32)
+    acc = np.asarray(part.accel, dtype=np.int16)
+    msg.accel_x = _arr("h", acc[0], np.int16)
+    msg.accel_y = _arr("h", acc[1], np.int16)
+    msg.accel_z = _arr("h", acc[2], np.int16)
+    msg.accel_offset_ns = _arr("q", part.accel_offset_ns, np.int64)
+    msg.accel_mps2_per_count = float(part.accel_mps2_per_count)
+    msg.force = _arr("H", np.asarray(part.force, dtype=np.uint16).T.reshape(-1), np.uint16)
+    msg.force_offset_ns = _arr("q", part.force_offset_ns, np.int64)
+    msg.force_n_per_count = float(part.force_n_per_count)
+    msg.proximity = _arr("H", part.proximity, np.uint16)
+    msg.proximity_per_count = float(part.proximity_per_count)
+    return msg
+
+
+def skin_part_from_msg(msg):
+    """``SkinPartFrames`` (rclpy or rosbags) -> :class:`~..streams.skin_parts.SkinPartFrames`, without copies.
+
+    The arrays are read-only numpy views of the message's fields.
+
+    Raises
+    ------
+    SignalError
+        For lengths that disagree with the per-run counts (accelerometer
+        axes, offsets, a force array that is not three sensors, proximity,
+        three tare values per run).
+    """
+    from ..streams.skin_parts import SkinPartFrames
+
+    ax, ay, az = _view(msg.accel_x, np.int16), _view(msg.accel_y, np.int16), _view(msg.accel_z, np.int16)
+    if not ax.size == ay.size == az.size:
+        raise SignalError(f"accelerometer axes differ in length: {ax.size}, {ay.size}, {az.size}")
+    force = _view(msg.force, np.uint16)
+    if force.size % 3:
+        raise SignalError(f"{force.size} force samples is not a multiple of 3 sensors")
+    acc = np.empty((3, ax.size), dtype=np.int16)
+    acc[0], acc[1], acc[2] = ax, ay, az
+    return SkinPartFrames(
+        stamp_ns=stamp_to_ns(msg.header.stamp),
+        body_part=str(msg.body_part),
+        cell_ids=_view(msg.cell_ids, np.uint32),
+        sequence=_view(msg.sequence, np.uint32),
+        accel_count=_view(msg.accel_count, np.uint32),
+        force_count=_view(msg.force_count, np.uint32),
+        temperature_c=_view(msg.temperature_c, np.float64),
+        force_tare_counts=_view(msg.force_tare_counts, np.float64),
+        bad_frames=_view(msg.bad_frames, np.uint32),
+        accel=acc,
+        accel_offset_ns=_view(msg.accel_offset_ns, np.int64),
+        force=force.reshape(-1, 3).T,
+        force_offset_ns=_view(msg.force_offset_ns, np.int64),
+        proximity=_view(msg.proximity, np.uint16),
+        accel_mps2_per_count=float(msg.accel_mps2_per_count),
+        force_n_per_count=float(msg.force_n_per_count),
+        proximity_per_count=float(msg.proximity_per_count),
+        frame_id=str(msg.header.frame_id),
+    )
+
+
+def skin_part_msg_to_chunks(msg, extra_channels: Sequence[str] = ()) -> list[tuple[int, CellChunk]]:
+    """``SkinPartFrames`` -> ``(cell_id, CellChunk)`` per cell run (the window node's per-message path).
+
+    :func:`skin_part_from_msg` then
+    :func:`~..streams.skin_parts.skin_part_chunks`: each chunk is what
+    :func:`skin_msg_to_chunk` made of the cell's ``SkinCellFrame``.
+
+    Raises
+    ------
+    SignalError
+        As :func:`skin_part_from_msg`.
+    """
+    from ..streams.skin_parts import skin_part_chunks
+
+    return skin_part_chunks(skin_part_from_msg(msg), extra_channels)
 
 
 # ----------------------------------------------------------------- descriptor

@@ -1,4 +1,4 @@
-"""``skin_driver``: multimodal skin cells -> ``SkinCellFrame`` (transport -> codec -> message).
+"""``skin_driver``: multimodal skin cells -> ``SkinPartFrames`` (transport -> codec -> message).
 
 Transports (parameter ``transport``):
 
@@ -13,9 +13,13 @@ cell id that is not in the description are counted per id and reported in
 ``/diagnostics`` (never dropped silently, never guessed onto a body part);
 cells of body parts this node does not serve are counted separately.
 
-Every cell's samples are published every ``batch_s`` of sample time as one
-``SkinCellFrame``: accelerometer (x, y, z), the three force sensors,
-proximity, the last temperature.  Sample times (``stamp_source``): ``clock``
+Every cell's samples are cut every ``batch_s`` of sample time (accelerometer
+x, y, z, the three force sensors, proximity, the last temperature), and the
+batches of all cells of a body part go out together as one
+``SkinPartFrames`` on the body part's frames topic
+(:class:`~tactile_descriptors_ros.streams.skin_parts.PartGatherer`: once
+every cell that is sending has its batch, or when one cell is a batch ahead
+of a late or silent one, or after ``2 * batch_s`` of waiting).  Sample times (``stamp_source``): ``clock``
 runs a sample clock per cell and modality (the node clock at its first
 sample plus sequence number times the nominal period, so a lost frame leaves
 a gap in time), re-anchored when it drifts from the node clock by more than
@@ -41,8 +45,9 @@ from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..streams.skin import CellState, SkinStream
+from ..streams.skin_parts import PartGatherer, SkinRun, pack_skin_part
 from .common import RateMeter, Status, declare, run_node
-from .conversions import SkinFrame, skin_frame_to_msg
+from .conversions import skin_part_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
 from .window_node import FRAMES_TOPIC
@@ -65,7 +70,8 @@ class SkinDriver(DriverBase):
         super().__init__(node_name, transport_factory, **kwargs)
         self.full_robot, self.robot = self._declare_robot("skin", "nao", "skin-cell")
         self.transport_name = declare(self, "transport", "can", "device transport", choices=TRANSPORTS)
-        self.batch_s = declare(self, "batch_s", 0.05, "sample time per message and cell [s]", minimum=0.001)
+        self.batch_s = declare(self, "batch_s", 0.05, "sample time per message (all cells of a body part) [s]",
+                               minimum=0.001)
         self._declare_stamps_and_tare(self.full_robot.contact.force_threshold_n,
                                       "force baseline from the first samples [s]", "samples averaged by ~/tare [s]")
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
@@ -101,6 +107,8 @@ class SkinDriver(DriverBase):
         self._rates: dict[int, RateMeter] = {}
         self._arrival_ns: int | None = None
         self.part_publishers: dict[str, object] = {}
+        self.gatherer: PartGatherer | None = None
+        self.part_messages: dict[str, int] = {p.name: 0 for p in self.robot.body_parts}
         self._start(autostart, [("bus", self._bus_status)]
                     + [(part.name, lambda p=part: self._part_status(p)) for part in self.robot.body_parts])
 
@@ -126,11 +134,13 @@ class SkinDriver(DriverBase):
         self.decoder = SkinCanDecoder(known_cell_ids=self.known, rates_hz=rates) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known, rates_hz=rates)
         self._rates = {cid: RateMeter() for cid in self.served}
-        from tactile_descriptors_msgs.msg import SkinCellFrame
+        self.gatherer = PartGatherer({p.name: [c.id for c in p.cells] for p in self.robot.body_parts},
+                                     max_wait_s=2 * self.batch_s)
+        from tactile_descriptors_msgs.msg import SkinPartFrames
 
         for part in self.robot.body_parts:
             topic = self.topic_fmt.format(body_part=part.name)
-            self.part_publishers[part.name] = self.create_lifecycle_publisher(SkinCellFrame, topic, self.qos_frames)
+            self.part_publishers[part.name] = self.create_lifecycle_publisher(SkinPartFrames, topic, self.qos_frames)
         self.get_logger().info(f"{self.transport_name} transport open: {len(self.cells)} cells on "
                                f"{len(self.robot.body_parts)} body parts")
         return TransitionCallbackReturn.SUCCESS
@@ -153,28 +163,33 @@ class SkinDriver(DriverBase):
         return self.decoder.feed_batch(data, self._arrival_ns)
 
     def _consume(self, batch: SkinSampleBatch) -> None:
-        if not len(batch):
-            return
         with self._lock:
-            out = self.stream.add(batch, self._arrival_ns)
-            ids, counts = np.unique(batch.cell_id, return_counts=True)
-            for cid, k in zip(ids.tolist(), counts.tolist()):
-                meter = self._rates.get(cid)
-                if meter is not None:
-                    meter.add(k)
-        for cell, frame in out:
-            self._publish(cell, frame)
+            if len(batch):
+                out = self.stream.add(batch, self._arrival_ns)
+                ids, counts = np.unique(batch.cell_id, return_counts=True)
+                for cid, k in zip(ids.tolist(), counts.tolist()):
+                    meter = self._rates.get(cid)
+                    if meter is not None:
+                        meter.add(k)
+                for cell, frame in out:
+                    self.gatherer.add(cell.body_part, SkinRun(cell.cell_id, frame, cell.tare.copy()))
+                    cell.messages += 1
+                due = self.gatherer.due()
+            else:
+                due = []
+            due += self.gatherer.flush_stale()
+        for part, runs in due:
+            self._publish(part, runs)
 
     def _reopened(self, gap_s: float) -> None:
         with self._lock:
             self.stream.resume()
 
-    def _publish(self, cell: CellState, frame: SkinFrame) -> None:
-        msg = skin_frame_to_msg(frame, cell_id=cell.cell_id, body_part=cell.body_part, frame_id=cell.frame_id,
-                                accel_mps2_per_count=self.accel_scale, force_n_per_count=self.force_n_per_count,
-                                force_tare_counts=cell.tare)
-        self.part_publishers[cell.body_part].publish(msg)
-        cell.messages += 1
+    def _publish(self, part: str, runs: list[SkinRun]) -> None:
+        msg = skin_part_to_msg(pack_skin_part(part, runs, accel_mps2_per_count=self.accel_scale,
+                                              force_n_per_count=self.force_n_per_count))
+        self.part_publishers[part].publish(msg)
+        self.part_messages[part] += 1
 
     def _log_stream(self, level: str, text: str) -> None:
         if level == "info":
@@ -238,6 +253,8 @@ class SkinDriver(DriverBase):
             values["unknown_cell_ids"] = ", ".join(f"{c} ({n} frames)" for c, n in sorted(unknown.items()))
         if self.other_part_frames:
             values["cells_of_unserved_body_parts"] = len(self.other_part_frames)
+        if self.gatherer is not None:
+            values["part_messages_without_late_cells"] = self.gatherer.partial
         error = self._transport_error(values)
         if error is not None:
             return error
@@ -255,7 +272,8 @@ class SkinDriver(DriverBase):
         values = {"cells": len(part.cells), "silent_cells": len(silent),
                   "samples_per_s": sum(self._rates[st.cell_id].rate_hz for st in live),
                   "samples": sum(self._rates[st.cell_id].total for st in live),
-                  "messages": sum(st.messages for st in live), "lost_frames": sum(st.lost for st in live),
+                  "messages": self.part_messages.get(part.name, 0),
+                  "cell_batches": sum(st.messages for st in live), "lost_frames": sum(st.lost for st in live),
                   "tared_cells": sum(st.tared for st in live)}
         if silent and self.scene_ended():
             return Status("stale", "scene ended: the simulated scene was played to its end, no more frames", values)

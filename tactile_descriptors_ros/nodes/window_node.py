@@ -1,7 +1,7 @@
 """``window_node``: tactile frames -> contact gate -> windows -> ``Descriptor``.
 
 Subscribes to the frames of the body parts it serves (``BioTacFrameBatch`` or
-``SkinCellFrame``, chosen by each body part's cell type), converts them to
+``SkinPartFrames``, chosen by each body part's cell type), converts them to
 :class:`~tactile_descriptors_ros.core.windowing.CellChunk` (force: BioTac
 ``(PDC - tare) * force_n_per_count``; skin cell: mean of the three tared force
 sensors times their scale), cuts fixed or exploration windows with
@@ -28,7 +28,12 @@ lost (``windows_held_at_start`` in diagnostics).
 Everything runs on the *sensor time stamps*: live data, ``use_sim_time`` and
 replayed bags give the same windows.  Faults (unknown sensors, malformed
 messages, lost frames, the windower's out-of-order / duplicate / clock-jump
-counters) are counted and reported on ``/diagnostics``.
+counters) are counted and reported on ``/diagnostics``, with the latency
+path's timing: ``frames_age_ms_*`` (host time when a message is taken minus
+its newest sample's stamp: publishing, transport and queueing, meaningful
+when sensor stamps are host time, as the drivers' ``clock`` stamps are) and
+``describe_ms_*`` (window cut to descriptor published), median, p95 and max
+over the last messages and windows.
 
 Topics, parameters and QoS: ``docs/nodes.md``.
 """
@@ -38,9 +43,10 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Sequence
 
+import numpy as np
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
@@ -57,7 +63,7 @@ from .conversions import (
     SKIN_EXTRA_CHANNELS,
     biotac_msg_to_chunk,
     descriptor_to_msg,
-    skin_msg_to_chunk,
+    skin_part_msg_to_chunks,
 )
 from .qos import QosDefaults, declare_qos
 
@@ -74,7 +80,7 @@ def message_kind(cell_type: CellType) -> str:
 
     A cell type with one vibration channel (PAC) is a BioTac
     (``BioTacFrameBatch``); three vibration channels and three deformation
-    channels are a skin cell (``SkinCellFrame``).
+    channels are a skin cell (``SkinPartFrames``, all cells of a body part per message).
 
     Raises
     ------
@@ -88,11 +94,11 @@ def message_kind(cell_type: CellType) -> str:
         missing = [c for c in cell_type.extra_channels if c not in carried]
         if missing:
             raise ConfigError(f"cell type {cell_type.name!r} declares extra channel {missing[0]!r}, which "
-                              f"{'BioTacFrameBatch' if kind == 'biotac' else 'SkinCellFrame'} does not carry "
+                              f"{'BioTacFrameBatch' if kind == 'biotac' else 'SkinPartFrames'} does not carry "
                               f"(it carries {', '.join(carried)})", key=f"cell_types.{cell_type.name}.extra_channels")
         return kind
     raise ConfigError(f"no message type carries cell type {cell_type.name!r} ({n_s} vibration and {n_v} "
-                      "deformation channels; BioTacFrameBatch has 1 + N, SkinCellFrame 3 + 3)",
+                      "deformation channels; BioTacFrameBatch has 1 + N, SkinPartFrames 3 + 3)",
                       key=f"cell_types.{cell_type.name}")
 
 
@@ -120,7 +126,7 @@ class WindowNode(Node):
 
     def __init__(self, node_name: str = "window_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, SkinCellFrame
+        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, SkinPartFrames
 
         robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
         if not robot_arg:
@@ -210,15 +216,18 @@ class WindowNode(Node):
                 cb = self._on_biotac
                 mtype = BioTacFrameBatch
             else:
-                cb = self._on_skin
-                mtype = SkinCellFrame
+                cb = self._on_skin_part
+                mtype = SkinPartFrames
             sub = self.create_subscription(mtype, topic, self._on_frames, qos_frames)
             self.subs.append(sub)
             self._handlers[sub] = cb
-        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinCellFrame: self._on_skin}
+        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
         self.frames_taken = 0
         self.batches = 0
         self.largest_batch = 0
+        # timing of the latency path (diagnostics): how old the frames are when taken, how long a window takes
+        self._frames_age_ms: deque[float] = deque(maxlen=5000)
+        self._describe_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0,
                                                      "diagnostics period [s]", minimum=0.01))
@@ -292,10 +301,12 @@ class WindowNode(Node):
     def _on_frames(self, msg) -> None:
         """Frames callback: this message and every one already waiting, one windower batch, one poll."""
         items = []
+        now_ns = time.time_ns()
         for sub_msg, handle in self._drain(msg):
-            item = handle(sub_msg)
-            if item is not None:
-                items.append(item)
+            items += handle(sub_msg)
+            newest = _newest_sample_ns(sub_msg)
+            if newest is not None:
+                self._frames_age_ms.append((now_ns - newest) / 1e6)
         if items:
             try:
                 self.windower.add_many(items)
@@ -329,7 +340,7 @@ class WindowNode(Node):
         self.largest_batch = max(self.largest_batch, len(out))
         return out
 
-    def _on_biotac(self, msg) -> tuple[int, CellChunk] | None:
+    def _on_biotac(self, msg) -> list[tuple[int, CellChunk]]:
         part = msg.body_part
         cid = self._cells_by_name.get((part, msg.sensor_name))
         if cid is None:
@@ -337,14 +348,14 @@ class WindowNode(Node):
             self.get_logger().warning(f"frames from unknown sensor {msg.sensor_name!r} on body part {part!r}; "
                                    "dropped (not in the robot description)",
                                    throttle_duration_sec=5.0)
-            return
+            return []
         try:
             chunk = biotac_msg_to_chunk(msg, self._extra[part])
         except SignalError as exc:
             self.faults["malformed"] += 1
             self.get_logger().warning(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
                                    throttle_duration_sec=5.0)
-            return
+            return []
         if msg.pdc_tare_counts != 0.0:
             self._untared.discard(msg.sensor_name)
         elif msg.sensor_name not in self._untared:
@@ -354,31 +365,39 @@ class WindowNode(Node):
         self._sequence(msg.sensor_name, int(msg.first_frame_sequence), int(msg.frame_count))
         self.faults["bad_words"] += int(msg.bad_words)
         self._seen(part, int(msg.frame_count))
-        return cid, chunk
+        return [(cid, chunk)]
 
-    def _on_skin(self, msg) -> tuple[int, CellChunk] | None:
-        cid = int(msg.cell_id)
-        part = self._cell_part.get(cid)
-        if part is None:
-            self.faults["unknown_cell"] += 1
-            self.get_logger().warning(f"frames from cell {cid} which is not in the served body parts; dropped",
-                                   throttle_duration_sec=5.0)
-            return
-        if msg.body_part != part:
-            self.faults["body_part_mismatch"] += 1
-            self.get_logger().warning(f"cell {cid} claims body part {msg.body_part!r} but the robot description "
-                                   f"puts it on {part!r}; dropped", throttle_duration_sec=5.0)
-            return
+    def _on_skin_part(self, msg) -> list[tuple[int, CellChunk]]:
+        """One ``SkinPartFrames``: a chunk per cell run; runs of unknown or misplaced cells are dropped and counted."""
+        part = msg.body_part
         try:
-            chunk = skin_msg_to_chunk(msg, self._extra[part])
+            runs = skin_part_msg_to_chunks(msg, self._extra.get(part, ()))
         except SignalError as exc:
             self.faults["malformed"] += 1
-            self.get_logger().warning(f"malformed SkinCellFrame from cell {cid}: {exc}", throttle_duration_sec=5.0)
-            return
-        self._sequence(f"cell{cid}", int(msg.sequence), 1)
-        self.faults["bad_frames"] += int(msg.bad_frames)
-        self._seen(part, 1)
-        return cid, chunk
+            self.get_logger().warning(f"malformed SkinPartFrames of body part {part!r}: {exc}",
+                                      throttle_duration_sec=5.0)
+            return []
+        items = []
+        seqs = _as_list(msg.sequence)
+        bad = _as_list(msg.bad_frames)
+        for (cid, chunk), seq, nbad in zip(runs, seqs, bad):
+            owner = self._cell_part.get(cid)
+            if owner is None:
+                self.faults["unknown_cell"] += 1
+                self.get_logger().warning(f"frames from cell {cid} which is not in the served body parts; dropped",
+                                          throttle_duration_sec=5.0)
+                continue
+            if owner != part:
+                self.faults["body_part_mismatch"] += 1
+                self.get_logger().warning(f"cell {cid} sent on body part {part!r} but the robot description "
+                                          f"puts it on {owner!r}; dropped", throttle_duration_sec=5.0)
+                continue
+            self._sequence(f"cell{cid}", int(seq), 1)
+            self.faults["bad_frames"] += int(nbad)
+            items.append((cid, chunk))
+        if items:
+            self._seen(part, len(items))
+        return items
 
     def _sequence(self, key: str, first: int, count: int) -> None:
         expected = self._next_seq.get(key)
@@ -431,6 +450,7 @@ class WindowNode(Node):
             self._release_timer = None
 
     def _publish(self, window: Window) -> None:
+        started = time.perf_counter()
         try:
             desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
                                    layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n)
@@ -441,6 +461,7 @@ class WindowNode(Node):
         eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
         msg = descriptor_to_msg(desc, window, frame_id=self.frame_id, exploration_id=eid)
         self.pub.publish(msg)
+        self._describe_ms.append(1e3 * (time.perf_counter() - started))
         self.descriptors_published += 1
         self.last_quality = {bp.name: bp.quality for bp in desc.body_parts}
         if window.mode == "exploration":
@@ -461,10 +482,15 @@ class WindowNode(Node):
                         "windower_buffer_mb": round(self.windower.buffer_bytes / 2**20, 3),
                         "largest_frames_batch": self.largest_batch,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
+        for name, samples in (("frames_age", self._frames_age_ms), ("describe", self._describe_ms)):
+            if samples:
+                arr = np.fromiter(samples, np.float64, len(samples))
+                values.update({f"{name}_ms_p50": float(np.median(arr)), f"{name}_ms_p95": float(np.percentile(arr, 95)),
+                               f"{name}_ms_max": float(arr.max()), f"{name}_n": arr.size})
         now = time.monotonic()
         silent = []
         for part, meter in self._rates.items():
-            values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin messages/s
+            values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin cell batches/s
             seen = self._last_seen.get(part)
             if seen is None or now - seen > 2.0:
                 silent.append(part)
@@ -481,6 +507,21 @@ class WindowNode(Node):
             return Status("warn", "faults: " + ", ".join(f"{k}={v}" for k, v in sorted(bad.items())), values)
         return Status("ok", f"{self.descriptors_published} descriptors", values)
 
+
+
+def _newest_sample_ns(msg) -> int | None:
+    """Stamp of a frames message's newest vibration sample [ns] (None when it has none)."""
+    offsets = getattr(msg, "accel_offset_ns", None)
+    if offsets is None:
+        offsets = msg.pac_offset_ns
+    if not len(offsets):
+        return None
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + int(max(offsets))
+
+
+def _as_list(values) -> list[int]:
+    """An rclpy array field (``array.array``) or a rosbags one (ndarray) as a list of ints."""
+    return values.tolist() if hasattr(values, "tolist") else list(values)
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -15,7 +15,10 @@ batches the nodes publish:
 * :mod:`.biotac`   -- BioTac sources (SPI sampling, serial bridge) and the
   per-sensor stream (lost frames, stamps, tare, batches of consecutive frames);
 * :mod:`.skin`     -- the skin-cell stream (per cell and modality: unwrap,
-  lost frames, stamps, tare, ``batch_s`` batches).
+  lost frames, stamps, tare, ``batch_s`` batches);
+* :mod:`.skin_parts` -- one message per body part: the cells' batches as flat
+  arrays and back (chunks for the window node), and the gathering of a body
+  part's batches into one message.
 
 The drivers in :mod:`..nodes` are thin adapters over these classes:
 parameters, publishers, services and diagnostics.  Nothing here imports

@@ -97,3 +97,48 @@ def test_echo_command_reads_a_bag(tmp_path, store, capsys):
     raw = yaml.safe_load(capsys.readouterr().out.split("---")[0])
     assert raw["first_frame_sequence"] == 0 and len(raw["pac"]) == 44
     assert main(["echo", "/nope", "--bag", str(path)]) == 2  # unknown topic: a clear error, exit 2
+
+
+def _skin_part(store, stamp_ns: int, seq: int, cells=(4, 5), invalid_accel_at=()):
+    """A rosbags SkinPartFrames: per cell 10 accelerometer samples (1 kHz) and 3 force samples (250 Hz)."""
+    from conftest import _header
+
+    cls = store.types["tactile_descriptors_msgs/msg/SkinPartFrames"]
+    n = len(cells)
+    ax = np.tile(np.arange(10, dtype=np.int16), n)
+    for i in invalid_accel_at:
+        ax[i] = cls.INVALID_ACCEL
+    force = np.tile(np.array([[110, 120, 130]], dtype=np.uint16), (3 * n, 1)).reshape(-1)
+    return cls(
+        header=_header(store, stamp_ns, "chest"), body_part="chest",
+        cell_ids=np.array(cells, np.uint32), sequence=np.full(n, seq, np.uint32),
+        accel_count=np.full(n, 10, np.uint32), force_count=np.full(n, 3, np.uint32),
+        temperature_c=np.array([30.0 + k for k in range(n)]), force_tare_counts=np.tile([10.0, 20.0, 30.0], n),
+        bad_frames=np.zeros(n, np.uint32), accel_x=ax, accel_y=np.zeros(10 * n, np.int16),
+        accel_z=np.zeros(10 * n, np.int16), accel_offset_ns=np.tile(np.arange(10, dtype=np.int64) * 1_000_000, n),
+        accel_mps2_per_count=0.038, force=force, force_offset_ns=np.tile(np.arange(3, dtype=np.int64) * 4_000_000, n),
+        force_n_per_count=0.01, proximity=np.zeros(0, np.uint16), proximity_per_count=0.0)
+
+
+def test_skin_part_statistics_per_cell_health_and_lengths(store):
+    msgtype = "tactile_descriptors_msgs/msg/SkinPartFrames"
+    tracker = EchoTracker(type_constants(store))
+    s = tracker.summarize("/tactile/chest/frames", msgtype, _skin_part(store, T0, 0, invalid_accel_at=(2,)), T0)
+    assert (s["body_part"], s["cells"], s["runs"], s["accel_samples"], s["force_samples"]) == ("chest", 2, 2, 20, 6)
+    assert s["accel_rate_hz"] == pytest.approx(1000.0)
+    assert s["channels"]["accel_x"]["invalid"] == 1 and s["invalid_samples"] == 1
+    assert s["force_n"]["mean"] == pytest.approx(1.0)  # (120 - 20) counts x 0.01 N, each cell with its tare
+    assert s["temperature_c"]["min"] == 30.0 and s["temperature_c"]["max"] == 31.0
+    assert s["lost_messages"] == 0 and not s["stamp_gaps_ns"] and not s["problems"]
+    # the next batch: both cells continue exactly
+    s2 = tracker.summarize("/tactile/chest/frames", msgtype, _skin_part(store, T0 + 10_000_000, 1), T0 + 10_000_000)
+    assert s2["lost_messages"] == 0 and not s2["stamp_gaps_ns"]
+    # two batches of both cells lost: 4 cell batches, and a 20 ms stamp gap for each cell
+    s3 = tracker.summarize("/tactile/chest/frames", msgtype, _skin_part(store, T0 + 40_000_000, 4), T0 + 40_000_000)
+    assert s3["lost_messages"] == 4 and s3["stamp_gaps_ns"] == [20_000_000, 20_000_000]
+    assert s3["stream"]["lost"] == 4 and s3["stream"]["messages"] == 3
+    text = format_summary(s3)
+    assert "chest: 2 cells in 2 runs" in text and "LOST 4 cell batches" in text and "+20.000" in text
+    bad = _skin_part(store, T0, 0)
+    bad.force_count = np.array([3, 2], np.uint32)
+    assert any("force must be" in p for p in EchoTracker().summarize("/x", msgtype, bad, T0)["problems"])

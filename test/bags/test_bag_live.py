@@ -75,7 +75,7 @@ def test_bag_hashes_equal_live_rclpy_hashes(ros_context, tmp_path, ros_message_e
             node.create_publisher(type(msg), f"/hash_{i}", 1)
             bag.add_topic(f"/hash_{i}", f"tactile_descriptors_msgs/msg/{type(msg).__name__}")
     info = bag_info(path)
-    for i in range(5):
+    for i in range(len(ros_message_examples)):
         live = node.get_publishers_info_by_topic(f"/hash_{i}")
         assert len(live) == 1
         assert str(live[0].topic_type_hash) == info.topics[f"/hash_{i}"].type_hash
@@ -102,7 +102,7 @@ def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path, ros_mes
     thread = threading.Thread(target=record, args=(str(bag), TopicSelector(regex=r"^/rec_\d$")),
                               kwargs=dict(context=ros_context, stop=stop, on_start=holder.append))
     thread.start()
-    assert _wait(lambda: holder and len(holder[0].topics) == 5), "recorder did not subscribe"
+    assert _wait(lambda: holder and len(holder[0].topics) == len(examples)), "recorder did not subscribe"
     # matched on both sides: each publisher sees the recorder and each recorder subscription its publisher
     recorder_subs = holder[0]._subscriptions
     assert _wait(lambda: all(p.get_subscription_count() >= 1 for p in pubs)

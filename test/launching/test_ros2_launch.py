@@ -41,7 +41,7 @@ CLI_S = 60.0
 #: ros2 launch escalates a node to SIGTERM this long after SIGINT (its default sigterm_timeout).
 SIGTERM_AFTER_S = 5
 MSG_TYPES = {"biotac": "tactile_descriptors_msgs/msg/BioTacFrameBatch",
-             "skin": "tactile_descriptors_msgs/msg/SkinCellFrame"}
+             "skin": "tactile_descriptors_msgs/msg/SkinPartFrames"}
 
 
 def _ros_env(ros_home: Path) -> dict[str, str]:

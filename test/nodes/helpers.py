@@ -43,3 +43,16 @@ class BiotacStream:
         """Messages of one touch (2.5 s at 2 N) and release."""
         return [self.batch(2.0, freq_hz) for _ in range(touch_batches)] + \
                [self.batch(0.0, freq_hz) for _ in range(release_batches)]
+
+
+def cell_runs(messages, cell_id: int | None = None) -> list:
+    """The cell runs of received ``SkinPartFrames``: ``(cell_id, SkinFrame, tare)`` in arrival order.
+
+    With ``cell_id``, only that cell's runs.
+    """
+    from tactile_descriptors_ros.nodes.conversions import skin_part_from_msg
+
+    out = []
+    for msg in messages:
+        out += [r for r in skin_part_from_msg(msg).frames() if cell_id is None or r[0] == cell_id]
+    return out

@@ -11,7 +11,7 @@ import tty
 import numpy as np
 import pytest
 
-from helpers import spin_until
+from helpers import cell_runs, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -241,7 +241,7 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from tactile_descriptors_msgs.msg import SkinCellFrame
+    from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.codecs.skin import Modality, SkinSampleBatch
     from tactile_descriptors_ros.codecs.skin_can import encode_can_frames
     from tactile_descriptors_ros.core.robot import load_robot
@@ -272,7 +272,7 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
                          "resync_s": 0.0, "stamp_source": "clock"}.items()])
     sink = rclpy.create_node("sink", context=ros_context)
     got = []
-    sink.create_subscription(SkinCellFrame, "tactile/left_hand/frames", got.append, 1000)
+    sink.create_subscription(SkinPartFrames, "tactile/left_hand/frames", got.append, 1000)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(drv)
     ex.add_node(sink)
@@ -282,9 +282,8 @@ def test_skin_cell_silent_longer_than_a_wrap_keeps_its_stamps(ros_context):
         can.go.set()
         assert spin_until(ex, lambda: can.done.is_set() and sum(len(m.accel_offset_ns) for m in got) >= 750,
                           timeout_s=60.0)
-        mine = [m for m in got if m.cell_id == cell]
-        stamps = np.concatenate([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
-                                 + np.frombuffer(m.accel_offset_ns, np.int64) for m in mine])
+        mine = cell_runs(got, cell)
+        stamps = np.concatenate([f.stamp_ns + f.accel_offset_ns for _, f, _ in mine])
         offset = stamps - accel_true[:stamps.size]
         assert stamps.size >= 750 and np.all(offset == offset[0]), np.unique(offset)[:4]
         assert np.all(np.diff(stamps) > 0)

@@ -11,6 +11,8 @@ from tactile_descriptors_ros.codecs.skin import Modality
 from tactile_descriptors_ros.codecs.skin_can import SkinCanEncoder
 from tactile_descriptors_ros.codecs.skin_serial import SkinSerialEncoder
 
+from helpers import cell_runs
+
 pytestmark = pytest.mark.ros
 
 
@@ -25,7 +27,7 @@ def _make(ros_context, params, transport_factory=None):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    from tactile_descriptors_msgs.msg import SkinCellFrame
+    from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
 
     import rclpy
@@ -34,7 +36,7 @@ def _make(ros_context, params, transport_factory=None):
                      parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
     sink = rclpy.create_node("sink", context=ros_context)
     got = []
-    sink.create_subscription(SkinCellFrame, "tactile/left_hand/frames", got.append, 100)
+    sink.create_subscription(SkinPartFrames, "tactile/left_hand/frames", got.append, 100)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(drv)
     ex.add_node(sink)
@@ -58,12 +60,16 @@ def test_can_virtual_bus_publishes_cells_and_reports_unknown_ids(ros_context):
         bus = can.Bus(interface="virtual", channel=channel)
         enc = SkinCanEncoder()
         _samples(lambda c, m, v: bus.send(enc.encode(c, m, v)))
-        assert _spin_until(ex, lambda: {m.cell_id for m in got} >= {1, 2})
-        m = next(m for m in got if m.cell_id == 1)
-        assert m.body_part == "left_hand"
-        assert len(m.accel_x) == len(m.accel_offset_ns) > 0
-        assert list(m.force[:3]) == [100, 110, 120]
-        assert 999 not in {m.cell_id for m in got}
+        assert _spin_until(ex, lambda: {c for m in got for c in m.cell_ids} >= {1, 2})
+        assert {m.body_part for m in got} == {"left_hand"}
+        assert {m.header.frame_id for m in got} == {"left_hand"}
+        _, frame, _ = cell_runs(got, 1)[0]
+        assert frame.accel.shape[1] == len(frame.accel_offset_ns) > 0
+        assert frame.force[:, 0].tolist() == [100, 110, 120]
+        assert 999 not in {c for m in got for c in m.cell_ids}
+        # both cells' batches travel together: one message per body part and batch, not one per cell
+        assert any(set(m.cell_ids) == {1, 2} for m in got)
+        assert len(got) < sum(len(m.cell_ids) for m in got)
         _spin_until(ex, lambda: drv.decoder.stats.unknown_cells > 0, 2.0)
         bus_status = next(s for s in drv.diagnostics.statuses() if s.name.endswith(": bus"))
         assert bus_status.level == b"\x01"
@@ -79,9 +85,9 @@ def test_serial_loop_url_and_tare(ros_context):
     try:
         enc = SkinSerialEncoder()
         _samples(lambda c, m, v: drv.transport.write(enc.encode(c, m, v)), n_ms=300, unknown=())
-        assert _spin_until(ex, lambda: any(m.cell_id == 2 for m in got))
-        m = next(m for m in got if m.cell_id == 2)
-        assert len(m.force) % 3 == 0 and len(m.force) // 3 == len(m.force_offset_ns)
+        assert _spin_until(ex, lambda: any(2 in m.cell_ids for m in got))
+        m = next(m for m in got if 2 in m.cell_ids)
+        assert len(m.force) % 3 == 0 and len(m.force) // 3 == len(m.force_offset_ns) == sum(m.force_count)
         # tare while out of contact: ~0.24 N mean force is above the 0.2 N threshold -> refused
         from std_srvs.srv import Trigger
 

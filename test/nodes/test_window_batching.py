@@ -1,4 +1,4 @@
-"""The window node's per-message hot path: fast skin conversion and frames taken in batches."""
+"""The window node's per-message hot path: fast skin conversion (per cell and per body part) and frames taken in batches."""
 
 from __future__ import annotations
 
@@ -84,6 +84,109 @@ def test_fast_skin_conversion_rejects_inconsistent_lengths(field, value, match):
         skin_msg_to_chunk(msg)
 
 
+def _runs(rng, cells, *, n_a=None, n_f=None):
+    """Random cell batches with invalid markers, some without proximity, own stamps and tares."""
+    from tactile_descriptors_ros.nodes.conversions import SkinFrame
+    from tactile_descriptors_ros.streams.skin_parts import SkinRun
+
+    runs = []
+    for k, cid in enumerate(cells):
+        a = int(rng.integers(1, 60)) if n_a is None else n_a
+        f = int(rng.integers(0, 15)) if n_f is None else n_f
+        acc = rng.integers(-512, 512, (3, a)).astype(np.int16)
+        force = rng.integers(0, 4096, (3, f)).astype(np.uint16)
+        acc[rng.integers(0, 3), rng.integers(0, a)] = -32768
+        if f:
+            force[rng.integers(0, 3), rng.integers(0, f)] = 65535
+        prox = rng.integers(0, 100, f if k % 2 else 0).astype(np.uint16)
+        off_a = np.sort(rng.choice(10**8, a, replace=False)).astype(np.int64)
+        frame = SkinFrame(10**12 + int(rng.integers(0, 10**7)), acc, off_a - off_a[0],  # stamp: first accel sample
+                          force, np.sort(rng.choice(10**8, f, replace=False)).astype(np.int64), prox,
+                          temperature_c=float(rng.uniform(20, 35)) if k != 1 else math.nan,
+                          sequence=int(rng.integers(0, 2**32)), bad_frames=int(rng.integers(0, 3)))
+        runs.append(SkinRun(cid, frame, rng.uniform(0, 500, 3)))
+    return runs
+
+
+@pytest.mark.parametrize("cdr", [True, False])
+def test_part_message_chunks_equal_the_per_cell_messages(cdr):
+    """One SkinPartFrames gives, per cell, exactly the chunk its own SkinCellFrame gave (NaN where invalid)."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.nodes.conversions import (
+        skin_frame_to_msg, skin_msg_to_chunk, skin_part_msg_to_chunks, skin_part_to_msg)
+    from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
+
+    rng = np.random.default_rng(7)
+    for cells in ([3], [3, 4, 5, 6], [9, 9, 2]):  # a cell may have two consecutive runs
+        runs = _runs(rng, cells)
+        msg = skin_part_to_msg(pack_skin_part("left_hand", runs, force_n_per_count=0.0024))
+        if cdr:
+            msg = deserialize_message(serialize_message(msg), SkinPartFrames)
+        extra = ("proximity", "temperature")
+        got = skin_part_msg_to_chunks(msg, extra)
+        assert [cid for cid, _ in got] == cells
+        for (cid, chunk), run in zip(got, runs):
+            want = skin_msg_to_chunk(skin_frame_to_msg(run.frame, cell_id=cid, body_part="left_hand",
+                                                       force_n_per_count=0.0024, force_tare_counts=run.tare_counts),
+                                     extra)
+            for key in ("vibration", "vibration_t_ns", "deformation", "deformation_t_ns", "force_n", "force_t_ns",
+                        "vibration_valid", "deformation_valid", "extra", "deformation_tare"):
+                a, b = getattr(chunk, key), getattr(want, key)
+                assert a.dtype == b.dtype and a.shape == b.shape, key
+                np.testing.assert_array_equal(a, b, err_msg=key)
+
+
+def test_part_message_round_trip_gives_back_every_cell_batch():
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.nodes.conversions import skin_part_from_msg, skin_part_to_msg
+    from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
+
+    runs = _runs(np.random.default_rng(3), [11, 12, 13])
+    msg = deserialize_message(serialize_message(skin_part_to_msg(pack_skin_part("chest", runs))), SkinPartFrames)
+    assert msg.body_part == "chest" and msg.header.frame_id == "chest" and list(msg.cell_ids) == [11, 12, 13]
+    back = skin_part_from_msg(msg).frames()
+    for (cid, frame, tare), run in zip(back, runs):
+        assert cid == run.cell_id
+        np.testing.assert_array_equal(tare, run.tare_counts)
+        for key in ("stamp_ns", "sequence", "bad_frames"):
+            assert getattr(frame, key) == getattr(run.frame, key), key
+        assert (math.isnan(frame.temperature_c) and math.isnan(run.frame.temperature_c)) \
+            or frame.temperature_c == run.frame.temperature_c
+        for key in ("accel", "accel_offset_ns", "force", "force_offset_ns", "proximity"):
+            np.testing.assert_array_equal(getattr(frame, key), getattr(run.frame, key), err_msg=key)
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("accel_y", [1, 2], "axes differ"),
+    ("accel_offset_ns", [0], "accelerometer offsets"),
+    ("force", [1, 2, 3, 4], "multiple of 3"),
+    ("force_offset_ns", [0, 1, 2], "force offsets"),
+    ("proximity", [1, 2, 3, 4, 5], "proximity"),
+    ("accel_count", [1, 2], "accel"),
+    ("force_count", [5, 9], "force must be"),
+    ("force_tare_counts", [1.0, 2.0], "3 values per cell run"),
+    ("sequence", [1], "sequence values"),
+])
+def test_part_message_with_inconsistent_lengths_is_rejected(field, value, match):
+    import array
+
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.nodes.conversions import skin_part_msg_to_chunks, skin_part_to_msg
+    from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
+
+    msg = skin_part_to_msg(pack_skin_part("left_hand", _runs(np.random.default_rng(1), [1, 2], n_a=5, n_f=2)))
+    skin_part_msg_to_chunks(msg)  # consistent as built
+    code = {"accel_y": "h", "accel_offset_ns": "q", "force": "H", "force_offset_ns": "q", "proximity": "H",
+            "accel_count": "I", "force_count": "I", "force_tare_counts": "d", "sequence": "I"}[field]
+    setattr(msg, field, array.array(code, value))
+    with pytest.raises(SignalError, match=match):
+        skin_part_msg_to_chunks(msg)
+
+
 def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):
     """A node behind its input takes every waiting frame in one callback; the windows are those of one-by-one."""
     import rclpy
@@ -91,9 +194,10 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from tactile_descriptors_msgs.msg import Descriptor, SkinCellFrame
+    from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
-    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_frame_to_msg
+    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_part_to_msg
+    from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
     part = load_robot("nao").body_part("left_hand")
@@ -108,7 +212,7 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
                         cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_single"])
     io = rclpy.create_node("io", context=ros_context)
     qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-    pub = io.create_publisher(SkinCellFrame, "tactile/left_hand/frames", qos)
+    pub = io.create_publisher(SkinPartFrames, "tactile/left_hand/frames", qos)
     out = {"desc_batched": [], "desc_single": []}
     for topic, got in out.items():
         io.create_subscription(Descriptor, topic, got.append, 50)
@@ -121,21 +225,27 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     rounds, t0 = 24, 5_000_000_000  # 1.2 s of 50 ms batches: windows end at 0.5, 0.75, 1.0 s
     off_a = np.arange(50, dtype=np.int64) * 1_000_000
     off_f = np.arange(12, dtype=np.int64) * 4_000_000
+    half = len(part.cells) // 2
     for k in range(rounds):
+        runs = []
         for cell in part.cells:
             acc = np.clip(rng.normal(0, 12, (3, 50)) + [[0], [0], [256]], -512, 511).astype(np.int16)
             force = rng.integers(300, 700, (3, 12)).astype(np.uint16)
             frame = SkinFrame(t0 + k * 50_000_000, acc, off_a, force, off_f, np.zeros(0, np.uint16), sequence=k)
-            pub.publish(skin_frame_to_msg(frame, cell_id=cell.id, body_part="left_hand", force_n_per_count=0.0024))
-    n_msgs = rounds * len(part.cells)
+            runs.append(SkinRun(cell.id, frame, np.zeros(3)))
+        for piece in (runs[:half], runs[half:]):  # a body part's cells in two messages per batch
+            pub.publish(skin_part_to_msg(pack_skin_part("left_hand", piece, force_n_per_count=0.0024)))
+    n_msgs = rounds * 2
     assert spin_until(ex, lambda: batched.frames_taken == n_msgs and single.frames_taken == n_msgs
                       and len(out["desc_batched"]) == len(out["desc_single"]) == 3, 20)
     assert batched.largest_batch > 1 and batched.batches < n_msgs  # it caught up in batches
     assert single.largest_batch == 1 and single.batches == n_msgs
     assert batched.faults == single.faults and batched.windower.faults == single.windower.faults
+    assert not +batched.faults  # every run in sequence, every cell known (no count above zero)
     for a, b in zip(out["desc_batched"], out["desc_single"]):
         assert (a.window_start, a.window_end) == (b.window_start, b.window_end)
         assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
+        assert list(a.cells_total) == [len(part.cells)]
     for n in (batched, single, io):
         n.destroy_node()
 
@@ -150,7 +260,7 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
     for split in (False, True):
         spec = next(s for s in build_graph("nao", split_window_nodes=split) if s.executable == "window_node")
         params = spec.parameters
-        assert params["window.lateness_s"] == 0.01 and params["frames.drain_max"] == 1000
+        assert params["window.lateness_s"] == 0.0 and params["frames.drain_max"] == 1000
         assert params["qos.frames.depth"] == 256
     node = WindowNode(spec.name, context=ros_context,
                       parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
@@ -158,7 +268,7 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
         for key, value in params.items():
             assert node.has_parameter(key), key
             assert node.get_parameter(key).value == value, key
-        assert node.drain_max == 1000 and node.windower.lateness_ns == 10_000_000
+        assert node.drain_max == 1000 and node.windower.lateness_ns == 0
         assert [p.name for p in node.robot.body_parts] == params["body_parts"]
     finally:
         node.destroy_node()
