@@ -6,7 +6,11 @@ the *sensor time stamps*, never the wall clock, so live data, simulated time
 and replayed bags give the same windows.
 
 * Fixed mode: windows ``[t0 + k hop, t0 + k hop + length)``; a window is
-  emitted once data of a later time has arrived (plus ``lateness_s``).
+  emitted once every live cell has sent vibration data of a later time
+  (plus ``lateness_s``): cells whose messages travel separately (one per
+  body part) are all in before it is cut, whatever order they arrive in.
+  A cell more than :data:`WATERMARK_STALL_S` behind the most recent one is
+  not waited for.
 * Exploration mode (what the paper evaluates): an exploration starts when
   any cell's normal force reaches F_t (contact onset) and ends when every
   cell has stayed below the release threshold for ``release_s`` (release) or
@@ -538,11 +542,23 @@ class Windower:
         if self._next_start_ns is None:
             firsts = [st.vib._t[st.vib._lo] for st in self._cells.values() if len(st.vib)]
             self._next_start_ns = int(min(firsts))
-        while self._next_start_ns + self.length_ns + self.lateness_ns <= self._latest_ns:
+        watermark = self._vibration_watermark()
+        while self._next_start_ns + self.length_ns + self.lateness_ns <= watermark:
             start = self._next_start_ns
             out.append(self._make_window(start, start + self.length_ns, 0, "fixed"))
             self._next_start_ns += self.hop_ns
         return out
+
+    def _vibration_watermark(self) -> int:
+        """The latest vibration stamp every live cell has reached (fixed windows close on it).
+
+        A cell more than :data:`WATERMARK_STALL_S` behind the most recent one
+        (unplugged, dead) is not waited for.
+        """
+        newest = self._latest_ns
+        floor = newest - self._stall_ns
+        lasts = [t for st in self._cells.values() if (t := st.vib.last_t_ns) is not None and t >= floor]
+        return min(lasts) if lasts else newest
 
     def _watermark(self) -> int | None:
         """The latest time every live cell has force data for (None before any force).

@@ -64,6 +64,27 @@ def test_fixed_windows_have_length_and_hop():
     assert len(wins) == 6  # windows ending by 4.9 s + lateness
 
 
+def test_fixed_window_waits_for_every_live_cell_not_the_first_past_its_end():
+    """Cells whose messages travel apart (one per body part): a window is cut once all of them passed its end."""
+    rng = np.random.default_rng(5)
+    w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=1.0, lateness_s=0.0)
+    ahead, behind = 1, 2
+    for t in range(0, 1000, 100):
+        assert w.add(ahead, _chunk(t * MS, 1.0, rng)) and w.add(behind, _chunk(t * MS, 1.0, rng))
+    assert w.poll() == []
+    assert w.add(ahead, _chunk(1000 * MS, 1.0, rng))  # one cell past the end of [0, 1 s)
+    assert w.poll() == []  # the other cell's last samples of the window are still on their way
+    assert w.add(behind, _chunk(1000 * MS, 1.0, rng))
+    (win,) = w.poll()
+    assert (win.start_ns, win.end_ns) == (0, 1000 * MS) and set(win.cells) == {ahead, behind}
+    assert not any(c.gap for c in win.cells.values()) and w.faults["gap"] == 0
+    # a cell silent for longer than the stall time is not waited for
+    for t in range(1100, 2700, 100):
+        assert w.add(ahead, _chunk(t * MS, 1.0, rng))
+    (win2,) = w.poll()
+    assert win2.end_ns == 2000 * MS
+
+
 def test_faults_are_counted_not_hidden():
     rng = np.random.default_rng(3)
     w = Windower(load_robot("shadow_hand"), mode="fixed")
