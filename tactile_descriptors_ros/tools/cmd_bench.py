@@ -62,10 +62,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--latency", action="store_true",
                    help="also measure sensor stamp -> Prediction latency through window_node + classifier_node")
     p.add_argument("--latency-s", type=float, default=8.0, help="seconds of NAO data for --latency (default 8)")
-    p.add_argument("--latency-batch-s", type=float, default=0.05,
-                   help="sample time per SkinCellFrame for --latency (default 0.05, the skin driver's batch_s)")
-    p.add_argument("--latency-lateness-s", type=float, default=0.05,
-                   help="window_node window.lateness_s for --latency (default 0.05)")
+    p.add_argument("--latency-batch-s", type=float, default=None,
+                   help="sample time per SkinPartFrames for --latency (default: the skin driver's batch_s in "
+                        "config/nao.yaml)")
+    p.add_argument("--latency-lateness-s", type=float, default=None,
+                   help="window_node window.lateness_s for --latency (default: config/nao.yaml's)")
+    p.add_argument("--latency-mode", choices=("fixed", "exploration", "both"), default="both",
+                   help="window mode of --latency: fixed windows (timed from their end), explorations (timed from "
+                        "the release decision) or both runs (default)")
     p.add_argument("--latency-split-window-nodes", action="store_true",
                    help="one window node per body part, each its own process (the launcher's scale-out option)")
     p.add_argument("--latency-drain-max", type=int, default=None,
@@ -157,12 +161,14 @@ def run(args: argparse.Namespace) -> int:
     if args.latency:
         from ..perf.latency import measure_latency
 
+        kwargs = dict(duration_s=args.latency_s, batch_s=args.latency_batch_s, lateness_s=args.latency_lateness_s,
+                      in_process=args.latency_in_process, split_window_nodes=args.latency_split_window_nodes,
+                      drain_max=args.latency_drain_max)
         try:
-            report.latency = measure_latency(duration_s=args.latency_s, batch_s=args.latency_batch_s,
-                                             lateness_s=args.latency_lateness_s,
-                                             in_process=args.latency_in_process,
-                                             split_window_nodes=args.latency_split_window_nodes,
-                                             drain_max=args.latency_drain_max, micro=not args.latency_no_micro)
+            if args.latency_mode in ("fixed", "both"):
+                report.latency = measure_latency(mode="fixed", micro=not args.latency_no_micro, **kwargs)
+            if args.latency_mode in ("exploration", "both"):
+                report.latency_exploration = measure_latency(mode="exploration", micro=False, **kwargs)
         except (ImportError, RuntimeError, ValueError) as exc:
             print(f"tactile bench: error: latency measurement failed: {exc}", file=sys.stderr)
             return 1
