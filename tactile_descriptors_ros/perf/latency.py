@@ -40,6 +40,7 @@ import os
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -215,6 +216,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
                     mode: str = "fixed", length_s: float = 2.0, hop_s: float = 0.5, robot: str = "nao",
                     seed: int = 0, in_process: bool = False, discovery_timeout_s: float = 60.0,
                     split_window_nodes: bool = False, drain_max: int | None = None,
+                    groups: Sequence[str] | None = None, window_parameters: dict | None = None,
                     micro: bool = True) -> dict:
     """Publish ``duration_s`` of skin frames at full rate; time each Prediction (see the module doc).
 
@@ -243,6 +245,12 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         there is one prediction per body part and window.
     drain_max : int, optional
         The window node's ``frames.drain_max`` (default: the node's).
+    groups : sequence of str, optional
+        The window node's ``descriptor.groups`` (default: the robot's shipped
+        feature groups); ``["paper"]`` times the graph with the paper's
+        descriptor.
+    window_parameters : dict, optional
+        More window node parameters (e.g. ``{"qos.frames.reliability": "reliable"}``).
     micro : bool
         Also run :func:`message_cost` (before the graph starts).
 
@@ -308,6 +316,9 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
                      "window.hop_s": float(hop_s), "window.lateness_s": float(lateness_s)}
     if drain_max is not None:
         window_params["frames.drain_max"] = int(drain_max)
+    if groups is not None:
+        window_params["descriptor.groups"] = [str(g) for g in groups]
+    window_params.update(window_parameters or {})
     model_path = str(Path(tmp.name) / "model.json")
     cpu: dict[str, float | None] = {}
     try:
@@ -478,6 +489,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         "settings": {"batch_s": batch_s, "lateness_s": lateness_s, "window_mode": mode, "window_s": length_s,
                      "hop_s": hop_s, "release_s": release_ns / 1e9, "duration_s": duration_s,
                      "in_process": in_process, "split_window_nodes": split_window_nodes, "drain_max": drain_max,
+                     "groups": list(groups) if groups is not None else list(desc.descriptor.groups),
                      "messages_per_s": len(pubs) / batch_s},
         "window_s": length_s, "hop_s": hop_s, "duration_s": duration_s,
         "messages": n_messages, "predictions": len(received), "expected_predictions": expected,

@@ -67,6 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "config/nao.yaml)")
     p.add_argument("--latency-lateness-s", type=float, default=None,
                    help="window_node window.lateness_s for --latency (default: config/nao.yaml's)")
+    p.add_argument("--latency-groups", default=None,
+                   help="window_node descriptor.groups for --latency, joined by + (default: the robot's shipped "
+                        "groups; 'paper' times the graph with the paper's descriptor)")
     p.add_argument("--latency-mode", choices=("fixed", "exploration", "both"), default="both",
                    help="window mode of --latency: fixed windows (timed from their end), explorations (timed from "
                         "the release decision) or both runs (default)")
@@ -163,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
 
         kwargs = dict(duration_s=args.latency_s, batch_s=args.latency_batch_s, lateness_s=args.latency_lateness_s,
                       in_process=args.latency_in_process, split_window_nodes=args.latency_split_window_nodes,
-                      drain_max=args.latency_drain_max)
+                      drain_max=args.latency_drain_max,
+                      groups=args.latency_groups.split("+") if args.latency_groups else None)
         try:
             if args.latency_mode in ("fixed", "both"):
                 report.latency = measure_latency(mode="fixed", micro=not args.latency_no_micro, **kwargs)
