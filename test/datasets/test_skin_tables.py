@@ -226,3 +226,10 @@ def test_the_contact_threshold_is_the_recordings_robots(trials, tmp_path, capsys
     mapping = _mapping(tmp_path, "strict", {**HDF5_MAPPING, "robot": "strict_nao.yaml"})
     rc, err = _evaluate(capsys, source, mapping)
     assert rc == 2 and "lies wholly in contact (force >= 5 N)" in err
+
+
+def test_live_replay_of_skin_tables_is_refused_by_name(trials, tmp_path, capsys):
+    source, mapping = _write("hdf5", tmp_path, trials)
+    assert main(["evaluate", "--live", "--train", str(source), "--test", str(source), "--mapping", str(mapping)]) == 2
+    assert "--live replays BioTac recordings through the window node; these hold cell type 'skin_cell'" in \
+        capsys.readouterr().err
