@@ -26,8 +26,8 @@ from .features import (
     DEFAULT_MODE, FeatureBank, compute_bank, mode_groups, recordings_robot, select_features,
 )
 from .windows import (  # DEFAULT_BLOCK_*: re-exported
-    DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, draw_contact_windows, draw_mixed_windows,
-    draw_windows, window_lengths,
+    DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S, WINDOW_PLACEMENTS, Window, block_windows, common_length_frames, default_train_windows,
+    draw_contact_windows, draw_mixed_windows, draw_windows, window_lengths,
 )
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S", "evaluate", "evaluate_many", "trial_folds", "trial_cv", "descriptor_seconds",
@@ -59,6 +59,8 @@ class EvalConfig:
         Window positions and CV shuffles.
     train_per_trial, test_per_trial : int
         Random windows per trial (one when the window is the whole trial).
+        ``train_per_trial`` None: :func:`~.windows.default_train_windows` of
+        the training window (8 at 2 s and longer, 16 at 1 s, 32 at 0.5 s).
     scaling : str
         ``none``, ``standardize`` or ``log_standardize``.
     gate : bool
@@ -94,7 +96,7 @@ class EvalConfig:
     mode: str = DEFAULT_MODE
     classifiers: tuple[str, ...] = ("svm",)
     seed: int = 0
-    train_per_trial: int = 8
+    train_per_trial: int | None = None
     test_per_trial: int = 2
     scaling: str = "log_standardize"
     gate: bool = False
@@ -286,8 +288,8 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     rate = float(np.median([r.frame_rate_hz for r in list(train) + list(test)]))
     rate = 100.0 if abs(rate - 100.0) < 1.0 else rate
     without: list[str] = []
-    w_train, l_train = _draw(train, cfg.window, rate, common, cfg.train_per_trial, cfg.seed, cfg, without,
-                             "training")
+    per_trial = cfg.train_per_trial or default_train_windows(window_lengths(cfg.window, rate, common), rate)
+    w_train, l_train = _draw(train, cfg.window, rate, common, per_trial, cfg.seed, cfg, without, "training")
     # Each split's windows are looked up in that split's recordings only: (material, trial) names a
     # recording uniquely inside one folder, not across two.
     sub = "subwindows" in mode_groups(cfg.mode)
@@ -338,6 +340,7 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
             # one length: its frame count; a range: the list of lengths windows were drawn from
             "train_window_frames": l_train[0] if len(l_train) == 1 else list(l_train),
             "test_window_frames": l_test[0] if len(l_test) == 1 else list(l_test),
+            "train_windows_per_trial": int(per_trial),
             "n_train": int(len(y_tr)),
             "n_test": int(len(y_te)),
             "n_features": int(X_tr.shape[1]),

@@ -172,7 +172,9 @@ def register(subparsers) -> None:
     p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=RECOMMENDED_PA_AVERAGE,
                    help="predict with averaged PA weights (default on; --no-pa-average is the paper's PA-I)")
     p.add_argument("--drop", default="", help="quantities to leave out, e.g. L,N (ablation)")
-    p.add_argument("--train-windows", type=int, default=8, help="random windows per training trial (default 8)")
+    p.add_argument("--train-windows", type=int, default=None,
+                   help="random windows per training trial (default: at least 8, and 16 s of windows per trial: "
+                   "8 at 2 s and longer, 16 at 1 s, 32 at 0.5 s)")
     p.add_argument("--test-windows", type=int, default=2, help="random windows per test trial")
     p.add_argument("--cv-repeats", type=int, default=10, help="repeats of the 5-fold CV choosing C")
     p.add_argument("--seed", type=int, default=0)
@@ -202,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     mode_groups(args.channels)  # an unknown mode is refused before any data is read
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
-    if args.train_windows < 1 or args.test_windows < 1 or args.cv_repeats < 1:
+    if (args.train_windows is not None and args.train_windows < 1) or args.test_windows < 1 or args.cv_repeats < 1:
         raise ConfigError("--train-windows, --test-windows and --cv-repeats must be >= 1")
     _block_setting(args)
     classifiers = CLASSIFIERS if args.classifier == "all" else (args.classifier,)

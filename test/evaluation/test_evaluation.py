@@ -14,7 +14,7 @@ from tactile_descriptors_ros.evaluation.features import (
     DESCRIPTOR_MODES, bank_labels, compute_bank, drop_quantities, select_features,
 )
 from tactile_descriptors_ros.evaluation.windows import (
-    common_length_frames, draw_windows, format_trials, parse_trials, window_frames,
+    common_length_frames, default_train_windows, draw_windows, format_trials, parse_trials, window_frames,
 )
 from tactile_descriptors_ros.tools.cli import main
 
@@ -146,6 +146,7 @@ def test_cli_evaluate_json_shape(biotac_data_dir, tmp_path, capsys):
     assert 0.0 <= out["accuracy"] <= 1.0
     assert out["accuracy"] == out["classifiers"]["svm"]["accuracy"]
     assert out["n_test"] == 3 * 2 * 2 and out["n_features"] == 98
+    assert out["train_windows_per_trial"] == 1 and out["n_train"] == 3 * 5 * 1
     cm = np.array(out["classifiers"]["svm"]["confusion"])
     assert cm.shape == (3, 3) and cm.sum() == out["n_test"]
     assert out["classifiers"]["svm"]["best_c"] in C_GRID
@@ -156,6 +157,27 @@ def test_cli_evaluate_json_shape(biotac_data_dir, tmp_path, capsys):
         assert 0.0 <= res["accuracy"] <= 1.0
     assert 0.0 <= out["classifiers"]["gmm"]["nmi"] <= 1.0
     assert len(out["classifiers"]["pa"]["curve"]["accuracy"]) == 5
+
+
+def test_default_training_windows_add_up_to_16_s_per_trial_and_never_fewer_than_8():
+    assert default_train_windows([200], 100.0) == 8
+    assert default_train_windows([599], 100.0) == 8
+    assert default_train_windows([100], 100.0) == 16
+    assert default_train_windows([50], 100.0) == 32
+    assert default_train_windows([150], 100.0) == 11  # ceil(16 / 1.5)
+    assert default_train_windows([100, 150, 200], 100.0) == 16  # a range of lengths: its shortest
+
+
+@pytest.mark.realdata
+def test_cli_draws_the_default_training_windows_of_the_window_length(biotac_data_dir, tmp_path, capsys):
+    common = ["evaluate", "--train", str(biotac_data_dir), "--test", str(biotac_data_dir),
+              "--materials", "1-2", "--train-trials", "1-5", "--test-trials", "6", "--window", "1",
+              "--channels", "paper", "--cv-repeats", "1", "--test-windows", "1", "--jobs", "1",
+              "--cache", str(tmp_path), "--json"]
+    assert main(common) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["train_windows_per_trial"] == 16 and out["n_train"] == 2 * 5 * 16
+    assert out["config"]["train_per_trial"] is None
 
 
 @pytest.mark.realdata
