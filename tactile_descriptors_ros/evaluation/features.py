@@ -77,6 +77,7 @@ __all__ = [
     "GROUPS",
     "DESCRIPTOR_MODES",
     "DEFAULT_MODE",
+    "BANK_VERSION",
     "QUANTITIES",
     "FeatureBank",
     "biotac_cell_type",
@@ -129,7 +130,10 @@ DEFAULT_MODE = "combined"
 #: Complexity, linear and nonlinear correlation.
 QUANTITIES: tuple[str, ...] = ("A", "M", "C", "L", "N")
 
-_BANK_VERSION = 5  # bump when a group's definition changes
+#: Version of the feature groups' definitions: bumped when a group's definition changes (cached banks
+#: of another version are recomputed; the report records it with every section it measures).
+BANK_VERSION: int = 5
+_BANK_VERSION = BANK_VERSION
 
 
 def mode_groups(mode: str) -> tuple[str, ...]:

@@ -22,17 +22,31 @@ from ..datasets.biotac_slide import BiotacRecording, load_recordings
 from ..errors import ConfigError
 from .classifiers import C_GRID_TEXT
 from .experiments import DEFAULT_BLOCK_S, EvalConfig, evaluate, evaluate_many, trial_cv
-from .features import DEFAULT_MODE
+from .features import BANK_VERSION, DEFAULT_MODE
 from .windows import format_trials, is_length_range
 
-__all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "SECTIONS", "LENGTH_SECTIONS", "build_report",
-           "render_markdown", "README_BEGIN", "README_END", "what_to_expect", "update_readme"]
+__all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "SECTIONS", "LENGTH_SECTIONS", "FEATURE_DEFINITION",
+           "section_provenance", "build_report", "render_markdown", "README_BEGIN", "README_END",
+           "what_to_expect", "update_readme"]
 
 #: Sections of results.json, in report order.
 SECTIONS: tuple[str, ...] = ("headline", "sweep", "length", "length_cv", "short", "ablation", "trial_cv")
 
 #: The sections ``tactile report --only length`` recomputes (the rest is kept from results.json).
 LENGTH_SECTIONS: tuple[str, ...] = ("length", "length_cv", "short")
+
+#: How this release computes the feature groups, as a section's provenance records it: a section of
+#: results.json measured with another definition is rendered with a warning naming its date and definition.
+FEATURE_DEFINITION: str = (f"feature bank v{BANK_VERSION}: bands and band powers from one FFT per channel "
+                           "(core/features.py)")
+
+
+def section_provenance(date: str | None = None) -> dict:
+    """What a section recomputed now records: the UTC date and :data:`FEATURE_DEFINITION`."""
+    import datetime
+
+    day = date or datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
+    return {"date": day, "features": FEATURE_DEFINITION}
 
 
 class ReportPlan:
@@ -50,7 +64,9 @@ class ReportPlan:
     ``ablation_window`` windows (a range such as ``"1-6"`` draws random
     lengths), the test windows of its trial CV, and the short windows
     scored with train and test of the same length (the training length
-    itself is read from the touch-length table: the same model).
+    itself is read from the touch-length table: the same model) with
+    ``short_train_per_trial`` training windows per trial (None: the
+    evaluation's default, :func:`~.windows.default_train_windows`).
     """
 
     def __init__(self, *, headline_modes: Sequence[str], headline_windows: Sequence[str],
@@ -59,7 +75,7 @@ class ReportPlan:
                  length_tests: Sequence[str], length_cv_tests: Sequence[str], short_windows: Sequence[str],
                  ablation_modes: Sequence[str], ablation_window: str, headline_repeats: int,
                  sweep_repeats: int, cv_folds: int, train_per_trial: int, test_per_trial: int,
-                 pa_orders: int, length_repeats: int = 1) -> None:
+                 pa_orders: int, length_repeats: int = 1, short_train_per_trial: int | None = None) -> None:
         self.headline_modes = tuple(headline_modes)
         self.headline_windows = tuple(headline_windows)
         self.sweep_modes = tuple(sweep_modes)
@@ -69,6 +85,7 @@ class ReportPlan:
         self.length_cv_tests = tuple(length_cv_tests)
         self.short_windows = tuple(short_windows)
         self.length_repeats = length_repeats
+        self.short_train_per_trial = short_train_per_trial
         self.ablation_modes = tuple(ablation_modes)
         self.ablation_window = ablation_window
         self.headline_repeats = headline_repeats
@@ -97,7 +114,7 @@ QUICK_PLAN = ReportPlan(
     sweep_modes=("paper",), sweep_windows=("0.5", "whole"),
     length_variants=((DEFAULT_MODE, DEFAULT_MODE, DEFAULT_BLOCK_S), ("window", DEFAULT_MODE, None)),
     length_tests=("1", "0.5-2"), length_cv_tests=("1", "0.5-2"),
-    short_windows=("0.5",),
+    short_windows=("0.5",), short_train_per_trial=1,
     ablation_modes=("paper",), ablation_window="1",
     headline_repeats=1, sweep_repeats=1, cv_folds=2, train_per_trial=1, test_per_trial=1, pa_orders=1)
 
@@ -197,7 +214,8 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
         todo.append(("length_cv", (label, plan.length_cv_tests), replace(first, window=train_w), "cv_many"))
         for w in plan.short_windows:
             if w != train_w:  # the training length's row is the touch-length table's (same model)
-                todo.append(("short", (label, w), replace(first, window=w), "split"))
+                todo.append(("short", (label, w), replace(first, window=w, train_per_trial=plan.short_train_per_trial),
+                             "split"))
     abl = replace(base, window=plan.ablation_window, classifiers=("svm", "pa"))
     ablations = [("full descriptor", {})] + [(f"without {q}", {"drop": (q,)}) for q in ("A", "M", "C", "L", "N")] + [
         ("with the contact gate (F_t on tared PDC)", {"gate": True}), ("scaling: none", {"scaling": "none"}),
@@ -252,6 +270,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     serial["runtime_s"] = previous.get("runtime_s", runtime_s) if only is not None else runtime_s
     serial["section_runtime_s"] = {**previous.get("section_runtime_s", {}),
                                    **{sec: runtime_s for sec in wanted}} if only is not None else {}
+    serial["provenance"] = {**previous.get("provenance", {}), **{sec: section_provenance() for sec in wanted}}
     serial["split"] = {"train_trials": tr_trials, "test_trials": te_trials,
                        "trials": sorted({r.trial for r in recs}), "materials": len({r.material for r in recs})}
 
@@ -386,6 +405,33 @@ def _cv_cell(r: dict, name: str) -> str:
     return f"{_pct(c['accuracy'])} +- {_pct(c['accuracy_std'])}" if c else "-"
 
 
+def _provenance(serial: dict, section: str) -> dict | None:
+    return serial.get("provenance", {}).get(section)
+
+
+def _is_current(serial: dict, section: str) -> bool:
+    prov = _provenance(serial, section)
+    return prov is not None and prov.get("features") == FEATURE_DEFINITION
+
+
+def _provenance_lines(serial: dict, section: str) -> list[str]:
+    """The line under a section's heading: when it was measured and with which feature definition.
+
+    A section measured with another definition than this release's says so
+    in bold, so that its figures are never read as the current descriptor's.
+    """
+    prov = _provenance(serial, section)
+    redo = f"`tactile report --data DIR --out docs --only {section}`"
+    if prov is None:
+        return [f"**Not regenerated with this release's features**: when and with which feature definition "
+                f"this section was measured is not recorded. Regenerate it with {redo}.", ""]
+    if prov.get("features") != FEATURE_DEFINITION:
+        return [f"**Not regenerated with this release's features**: measured {prov['date']} with "
+                f"{prov['features']}; this release computes {FEATURE_DEFINITION}, so these figures describe "
+                f"the earlier definition. Regenerate with {redo}.", ""]
+    return [f"*Measured {prov['date']} with {prov['features']}.*", ""]
+
+
 def render_markdown(serial: dict, figs: dict[str, str]) -> str:
     """``results.md`` from the results (the content of ``results.json``) and the figures' relative paths.
 
@@ -435,6 +481,8 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
     if serial.get("headline"):
         a("## Headline (development split)")
         a("")
+        for line in _provenance_lines(serial, "headline"):
+            a(line)
         a("| mode | window | values | SVM acc % | SVM C | SVM CV acc % | PA-I acc % (all train trials) | "
           "GMM NMI | GMM acc % |")
         a("|---|---|---|---|---|---|---|---|---|")
@@ -449,6 +497,8 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
     if serial.get("sweep"):
         a("## Accuracy against window length")
         a("")
+        for line in _provenance_lines(serial, "sweep"):
+            a(line)
         a("Train and test on windows of the same length (development split). Times: descriptor = median "
           "compute time of the mode's features per window (core `cell_features` + reductions, plus band "
           "filtering for multiband); SVM update = one refit on all training windows with the chosen C; "
@@ -470,6 +520,8 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
     if serial.get("ablation"):
         a(f"## Ablations ({plan['ablation_window']} s windows, development split)")
         a("")
+        for line in _provenance_lines(serial, "ablation"):
+            a(line)
         a("Concatenated vs pooled body parts is moot here: the data has one finger, so both layouts give the "
           "same vector. PA rows change only the online learner.")
         a("")
@@ -482,6 +534,8 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
     if serial.get("trial_cv"):
         a(f"## Cross-validation over trials ({plan['ablation_window']} s windows)")
         a("")
+        for line in _provenance_lines(serial, "trial_cv"):
+            a(line)
         a(f"Trials {format_trials(sorted(set(tr) | set(te)))} in {plan['cv_folds']} contiguous blocks; each block "
           "is the test set once, the model is trained on the others.")
         a("")
@@ -543,6 +597,8 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
     minutes = serial.get("section_runtime_s", {}).get("length")
     a("## Robustness to touch length")
     a("")
+    for line in _provenance_lines(serial, "length"):
+        a(line)
     a(f"A model trained on {_wlabel(train_w, common_s)} windows (what `tactile evaluate --window {train_w}` "
       "trains) is scored on test windows of other lengths; *random a-b s* draws every test window's length "
       "uniformly from a, a + 0.5 s, ..., b (a length past the crop is the crop) and its position at random, "
@@ -579,6 +635,9 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
         cv = _keyed(serial["length_cv"])
         first = next(iter(cv.values()))
         folds = ", ".join(f"{a_}-{b}" for a_, b in first["folds"])
+        if _provenance(serial, "length_cv") != _provenance(serial, "length"):
+            for line in _provenance_lines(serial, "length_cv"):
+                a(line)
         a(f"By trial cross-validation (blocks {folds}; each fold's model trained once on "
           f"{_wlabel(train_w, common_s)} windows and scored on every test window):")
         a("")
@@ -594,19 +653,27 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
     if serial.get("short"):
         short = _keyed(serial["short"])
         label = next(iter(short))[0]
-        if (label, train_w) in length:
+        # the training length's row is the touch-length table's model, when both were measured alike
+        same = _provenance(serial, "short") == _provenance(serial, "length")
+        if (label, train_w) in length and same:
             short[(label, train_w)] = length[(label, train_w)]
         short = dict(sorted(short.items(), key=lambda kv: float(kv[0][1])))
         a("## Short windows (default mode)")
         a("")
-        a(f"Train and test on windows of the same length (development split; the {_wlabel(train_w, common_s)} "
-          "row is the touch-length table's model).")
+        for line in _provenance_lines(serial, "short"):
+            a(line)
+        a("Train and test on windows of the same length (development split" + (
+            f"; the {_wlabel(train_w, common_s)} row is the touch-length table's model)." if same and
+            (label, train_w) in length else "; the touch-length table, measured separately, has the "
+            f"{_wlabel(train_w, common_s)} model).") + " `tactile evaluate` draws at least 8 training windows per "
+          "trial, and 16 s of windows per trial at shorter lengths (`--train-windows`).")
         a("")
-        a("| mode | window | values | SVM acc % | SVM C | PA-I acc % |")
-        a("|---|---|---|---|---|---|")
+        a("| mode | window | values | training windows per trial | SVM acc % | SVM C | PA-I acc % |")
+        a("|---|---|---|---|---|---|---|")
         for (m, w), r in short.items():
             c = r["classifiers"]
-            a(f"| {m} | {_wlabel(w, common_s)} | {r['n_features']} | {_pct(c['svm']['accuracy'])} | "
+            per_trial = r.get("train_windows_per_trial") or r["config"]["train_per_trial"]
+            a(f"| {m} | {_wlabel(w, common_s)} | {r['n_features']} | {per_trial} | {_pct(c['svm']['accuracy'])} | "
               f"{c['svm']['best_c']:g} | {_pct(c['pa']['accuracy'])} |")
         a("")
 
@@ -645,6 +712,15 @@ def what_to_expect(serial: dict) -> str:
     def cv_svm(r: dict) -> str:
         return f"{_pct(r['classifiers']['svm']['accuracy'])} +- {_pct(r['classifiers']['svm']['accuracy_std'])} %"
 
+    def when(*sections: str) -> str:
+        """`` (measured <date> with ...)`` for figures of sections measured with another feature definition."""
+        old = [(sec, _provenance(serial, sec)) for sec in sections if not _is_current(serial, sec)]
+        if not old:
+            return ""
+        dates = sorted({(p or {}).get("date", "on a date not recorded") for _, p in old})
+        return (f" (measured {', '.join(dates)} with an earlier feature definition than this release's: "
+                "see `docs/results.md`)")
+
     lines = [
         f"- **Accuracy on real BioTac data** ({split['materials']} materials, one finger, train trials "
         f"{format_trials(split['train_trials'])}, test {format_trials(split['test_trials'])}; "
@@ -653,10 +729,10 @@ def what_to_expect(serial: dict) -> str:
         f"(online PA-I, one pass) with 2 s windows, {cv_svm(cv)} by cross-validation over trials; the "
         f"paper's 8-value descriptor, averaged over the same blocks, gets {svm(paper2)} at 2 s and "
         f"{svm(paper_whole)} on whole {paper_whole['common_length_s']:.0f} s trials (`--block 0` describes a "
-        "window as one eq. 17 descriptor).",
+        "window as one eq. 17 descriptor)" + when("length", "length_cv") + ".",
         f"- **Touch length**: trained on 2 s windows and tested on touches of random length 1-6 s, "
         f"{svm(mixed)} ({cv_svm(cv_mixed)} by trial cross-validation); trained and tested on short windows, "
-        f"{svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s.",
+        f"{svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s" + when("length", "length_cv", "short") + ".",
         f"- `make report` regenerates the real-data report in about {serial['runtime_s'] / 60:.0f} minutes on 2 "
         "cores" + (f"; `make report-length` its touch-length sections in about {length_min / 60:.0f} minutes."
                    if length_min else "."),

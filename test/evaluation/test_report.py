@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from tactile_descriptors_ros.evaluation.report import FEATURE_DEFINITION, SECTIONS
 from tactile_descriptors_ros.tools.cli import main
 
 
@@ -58,5 +59,8 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
             assert (again["length"]["combined | 1"]["classifiers"][name][field]
                     == res["length"]["combined | 1"]["classifiers"][name][field])
     assert set(again["section_runtime_s"]) == {"length", "length_cv", "short"}
+    # every recomputed section records when and with which feature definition it was measured
+    assert set(res["provenance"]) == set(SECTIONS)
+    assert all(p["features"] == FEATURE_DEFINITION for p in again["provenance"].values())
     md2 = (out / "results.md").read_text()
     assert "## Headline" in md2 and "## Robustness to touch length" in md2

@@ -10,7 +10,8 @@ import pytest
 
 from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.evaluation.report import (
-    FIGURES, README_BEGIN, README_END, render_markdown, update_readme, what_to_expect,
+    FEATURE_DEFINITION, FIGURES, README_BEGIN, README_END, render_markdown, section_provenance, update_readme,
+    what_to_expect,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -53,3 +54,37 @@ def test_what_to_expect_quotes_the_figures_it_is_given(tmp_path):
     readme.write_text("no block here\n")
     with pytest.raises(ConfigError, match="block"):
         update_readme(readme, res)
+
+
+def _section(md: str, heading: str) -> str:
+    text = md.split(heading, 1)[1]
+    return text.split("\n## ", 1)[0]
+
+
+def test_a_section_measured_with_another_feature_definition_says_so_with_its_date():
+    res = copy.deepcopy(_results())
+    res["provenance"]["headline"] = {"date": "2026-01-02", "features": "bands from an older filter"}
+    res["provenance"]["sweep"] = section_provenance("2026-03-04")
+    res["provenance"].pop("ablation")
+    md = render_markdown(res, {})
+    head = _section(md, "## Headline")
+    assert "**Not regenerated with this release's features**: measured 2026-01-02 with bands from an older filter" \
+        in head and "--only headline" in head
+    sweep = _section(md, "## Accuracy against window length")
+    assert f"*Measured 2026-03-04 with {FEATURE_DEFINITION}.*" in sweep and "Not regenerated" not in sweep
+    assert "is not recorded" in _section(md, "## Ablations")
+
+
+def test_what_to_expect_dates_figures_of_an_earlier_feature_definition():
+    res = copy.deepcopy(_results())
+    for sec in ("length", "length_cv", "short"):
+        res["provenance"][sec] = section_provenance("2026-03-04")
+    current = what_to_expect(res)
+    assert "earlier feature definition" not in current
+    res["provenance"]["short"] = {"date": "2026-01-02", "features": "bands from an older filter"}
+    lines = what_to_expect(res).splitlines()
+    touch = next(line for line in lines if line.startswith("- **Touch length**"))
+    assert touch.endswith("(measured 2026-01-02 with an earlier feature definition than this release's: see "
+                          "`docs/results.md`).")
+    head = next(line for line in lines if line.startswith("- **Accuracy on real BioTac data**"))
+    assert "earlier feature definition" not in head
