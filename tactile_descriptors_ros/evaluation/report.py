@@ -731,8 +731,9 @@ def what_to_expect(serial: dict) -> str:
         f"{svm(paper_whole)} on whole {paper_whole['common_length_s']:.0f} s trials (`--block 0` describes a "
         "window as one eq. 17 descriptor)" + when("length", "length_cv") + ".",
         f"- **Touch length**: trained on 2 s windows and tested on touches of random length 1-6 s, "
-        f"{svm(mixed)} ({cv_svm(cv_mixed)} by trial cross-validation); trained and tested on short windows, "
-        f"{svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s" + when("length", "length_cv", "short") + ".",
+        f"{svm(mixed)} ({cv_svm(cv_mixed)} by trial cross-validation)" + when("length", "length_cv")
+        + f"; trained and tested on short windows, {svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s"
+        + when("short") + ".",
         f"- `make report` regenerates the real-data report in about {serial['runtime_s'] / 60:.0f} minutes on 2 "
         "cores" + (f"; `make report-length` its touch-length sections in about {length_min / 60:.0f} minutes."
                    if length_min else "."),
