@@ -34,18 +34,26 @@ Every label ends in exactly one of: learned, held (and later learned or
 expired), or refused with a counter; :attr:`LabelProtocol.counts` holds the
 counters.  The protocol is deterministic: the same calls in the same order
 give the same decisions.
+
+:class:`StampOrder` makes the order of the calls that of the stamps, so
+that a replay gives the same predictions and updates however a label and a
+descriptor that arrive together are served: descriptors are predicted and
+labels applied in the order of their stamps (window end, label header), each
+waiting a bounded time for what may still come before it.
 """
 
 from __future__ import annotations
 
-from collections import Counter, OrderedDict
+from bisect import insort
+from collections import Counter, OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from ..errors import ConfigError
 
-__all__ = ["LabelDecision", "LabelProtocol", "LEARN", "HELD", "REFUSED", "EXPIRED", "REFUSAL_REASONS",
-           "DEFAULT_MAX_CLASS_NAME_CHARS"]
+__all__ = ["LabelDecision", "LabelProtocol", "StampOrder", "LEARN", "HELD", "REFUSED", "EXPIRED",
+           "REFUSAL_REASONS", "DEFAULT_MAX_CLASS_NAME_CHARS", "DEFAULT_LABEL_WAIT_S"]
 
 T = TypeVar("T")
 
@@ -96,6 +104,7 @@ class _Kept(Generic[T]):
     exploration_id: int
     item: T
     learned_as: str | None = None
+    stamp_ns: int = 0
 
 
 class LabelProtocol(Generic[T]):
@@ -134,6 +143,8 @@ class LabelProtocol(Generic[T]):
         """Forget every descriptor and held label (the counters stay)."""
         self._kept: OrderedDict[int, _Kept[T]] = OrderedDict()  # exploration id -> descriptor
         self._latest: _Kept[T] | None = None
+        self._previous: _Kept[T] | None = None  # the descriptor before the latest
+        self._recent: deque[_Kept[T]] = deque(maxlen=self.horizon)  # every kept one, for stamped id-0 labels
         self._latest_id = 0
         self._serial = 0
         self._held: OrderedDict[int, str] = OrderedDict()  # exploration id -> class name
@@ -152,6 +163,7 @@ class LabelProtocol(Generic[T]):
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ConfigError(f"must be an integer >= 1, got {horizon!r}", key="label_horizon")
         self.horizon = horizon
+        self._recent = deque(self._recent, maxlen=horizon)
         while len(self._kept) > horizon:
             self._kept.popitem(last=False)
         dropped = 0
@@ -171,17 +183,54 @@ class LabelProtocol(Generic[T]):
         """Descriptors kept for late labels."""
         return len(self._kept)
 
+    @property
+    def latest(self) -> tuple[int, int, bool] | None:
+        """The most recent descriptor as ``(exploration_id, stamp_ns, labelled)``, None before any."""
+        k = self._latest
+        return None if k is None else (k.exploration_id, k.stamp_ns, k.learned_as is not None)
+
+    @property
+    def awaits_label(self) -> bool:
+        """Whether a label for the most recent exploration is due: it has none yet, and labels are being
+        given (the exploration before it was labelled, or there was none since the start or a reset).
+
+        Fixed windows (exploration id 0) await nothing.
+        """
+        latest, previous = self._latest, self._previous
+        return (latest is not None and latest.exploration_id != 0 and latest.learned_as is None
+                and (previous is None or previous.learned_as is not None))
+
+    def target(self, exploration_id: int, stamp_ns: int = 0) -> tuple[int, int, bool] | None:
+        """The descriptor a label would teach now, as :attr:`latest` gives it (None: none seen, or not kept).
+
+        A stamped label with id 0 names the most recent descriptor whose stamp is at or before the label's;
+        a stamp before every kept descriptor (another clock) is ignored.
+        """
+        k = self._find(int(exploration_id), int(stamp_ns))
+        return None if k is None else (k.exploration_id, k.stamp_ns, k.learned_as is not None)
+
+    def _find(self, eid: int, stamp_ns: int) -> _Kept[T] | None:
+        if eid:
+            return self._kept.get(eid)
+        if stamp_ns > 0:
+            for kept in reversed(self._recent):
+                if kept.stamp_ns <= stamp_ns:
+                    return kept
+        return self._latest
+
     # ------------------------------------------------------------ descriptors
-    def add_descriptor(self, exploration_id: int, item: T) -> list[LabelDecision[T]]:
+    def add_descriptor(self, exploration_id: int, item: T, stamp_ns: int = 0) -> list[LabelDecision[T]]:
         """Register a descriptor *after* it was predicted; return what to do now.
 
         The list holds, in order, the held label of this exploration (``learn``)
-        and any held labels that expire because of it (``expired``).
+        and any held labels that expire because of it (``expired``).  ``stamp_ns``
+        (the window end) lets a stamped label with id 0 find it.
         """
         eid = int(exploration_id)
         self._serial += 1
-        kept = _Kept(self._serial, eid, item)
-        self._latest = kept
+        kept = _Kept(self._serial, eid, item, stamp_ns=int(stamp_ns))
+        self._previous, self._latest = self._latest, kept
+        self._recent.append(kept)
         out: list[LabelDecision[T]] = []
         if eid:
             self._latest_id = max(self._latest_id, eid)
@@ -203,8 +252,12 @@ class LabelProtocol(Generic[T]):
         return out
 
     # ----------------------------------------------------------------- labels
-    def add_label(self, exploration_id: int, class_name: str) -> LabelDecision[T]:
-        """Decide what a label does (``learn`` now, ``held``, or ``refused``)."""
+    def add_label(self, exploration_id: int, class_name: str, stamp_ns: int = 0) -> LabelDecision[T]:
+        """Decide what a label does (``learn`` now, ``held``, or ``refused``).
+
+        With id 0 and a ``stamp_ns`` (the label's header stamp), the label names the most recent descriptor
+        stamped at or before it (see :meth:`target`); unstamped (0), the most recent descriptor.
+        """
         eid = int(exploration_id)
         name = str(class_name).strip()
         where = f"exploration {eid}" if eid else "the most recent exploration"
@@ -217,7 +270,7 @@ class LabelProtocol(Generic[T]):
         if not name.isprintable():
             return self._refuse("bad_class_name", eid, name,
                                 f"label for {where}: class name {name!r} has non-printable characters")
-        kept = self._latest if eid == 0 else self._kept.get(eid)
+        kept = self._find(eid, int(stamp_ns))
         if kept is not None:
             return self._learn(kept, name, eid)
         if eid == 0:
@@ -252,3 +305,166 @@ class LabelProtocol(Generic[T]):
     def _refuse(self, reason: str, eid: int, name: str, message: str) -> LabelDecision[T]:
         self.counts[reason] += 1
         return LabelDecision(REFUSED, eid, name, reason=reason, message=message + "; refused")
+
+
+#: How long a descriptor or a stamped label waits, at most, for what comes before it in stamp order [s].
+DEFAULT_LABEL_WAIT_S = 2.0
+
+K = TypeVar("K")
+
+
+@dataclass
+class _Waiting(Generic[T]):
+    stamp_ns: int
+    kind: int  # 0: descriptor, 1: label (a descriptor goes before a label of the same stamp: predict first)
+    serial: int
+    arrival_s: float
+    exploration_id: int
+    descriptor: T | None = None
+    class_name: str = ""
+
+
+class StampOrder(Generic[T, K]):
+    """Predict descriptors and apply labels in the order of their stamps, whatever order they arrive in.
+
+    A descriptor's stamp is its window end, a label's its header stamp.  The
+    outcome is that of taking every descriptor and label in stamp order
+    (a descriptor before a label of the same stamp):
+
+    * a descriptor is predicted with the model that learned every label
+      stamped before its window end and none stamped after it;
+    * a stamped label with id 0 names the most recent exploration whose
+      window ended at or before the label's stamp
+      (:meth:`LabelProtocol.target`).
+
+    Nothing says when a message still in flight will come, so each one
+    waits (at most ``wait_s``, counted when it runs out) only while
+    something may still come before it:
+
+    * a **descriptor** waits while a label for the exploration before it is
+      due (:attr:`LabelProtocol.awaits_label`: labels are being given and
+      that exploration has none yet), unless a label stamped at or after
+      its window end has arrived (labels come in stamp order);
+    * a **stamped label** waits while the descriptor it names may be in
+      flight: id 0 whose most recent descriptor up to its stamp is already
+      labelled (or there is none), or an id naming a kept exploration
+      older than the most recent one; unless a descriptor whose window
+      ended after the label's stamp has arrived (descriptors come in stamp
+      order);
+    * an **unstamped label** (stamp 0) is applied when it arrives.
+
+    So the result does not depend on which of two messages ready together
+    is served first, as long as descriptors come in stamp order (one
+    window node), labels too, and each arrives within ``wait_s`` of what it
+    waits for.  Pure: the caller passes the time (any monotonic clock, in
+    seconds) and calls :meth:`poll` now and then.
+
+    Parameters
+    ----------
+    protocol : LabelProtocol
+        Decides what each label does; it keeps what ``predict`` returns.
+    predict : callable
+        ``predict(descriptor) -> kept``: predict (and publish) one descriptor;
+        return what the protocol keeps for its label, or None to skip it.
+    apply : callable
+        ``apply(decision)``: carry out one :class:`LabelDecision` (learn, or
+        report a refusal or expiry), before anything later is predicted.
+    wait_s : float, default 2.0
+        Longest wait; 0 takes everything in arrival order.
+
+    Raises
+    ------
+    ConfigError
+        For a negative or non-finite ``wait_s``.
+    """
+
+    def __init__(self, protocol: LabelProtocol[K], predict: Callable[[T], K | None],
+                 apply: Callable[[LabelDecision[K]], None], wait_s: float = DEFAULT_LABEL_WAIT_S) -> None:
+        self.protocol = protocol
+        self._predict = predict
+        self._apply = apply
+        self.wait_s = self._check_wait(wait_s)
+        #: ``descriptor_wait_expired`` / ``label_wait_expired``: released because their wait ran out;
+        #: ``labels_dropped_by_reset``: labels waiting when the model was reset.
+        self.counts: Counter[str] = Counter()
+        self._waiting: list[_Waiting[T]] = []
+        self._serial = 0
+        self._label_mark = -1        # latest stamp of a stamped label received
+        self._descriptor_mark = -1   # latest window end of a descriptor received
+
+    @staticmethod
+    def _check_wait(wait_s: float) -> float:
+        if isinstance(wait_s, bool) or not isinstance(wait_s, (int, float)) or not 0 <= wait_s < float("inf"):
+            raise ConfigError(f"must be a finite number >= 0, got {wait_s!r}", key="label_wait_s")
+        return float(wait_s)
+
+    def set_wait(self, wait_s: float) -> None:
+        """Change the longest wait (from the next :meth:`poll` on)."""
+        self.wait_s = self._check_wait(wait_s)
+
+    @property
+    def waiting(self) -> int:
+        """Descriptors and labels waiting for what comes before them."""
+        return len(self._waiting)
+
+    def reset(self) -> None:
+        """After a model reset: drop the waiting labels (counted); waiting descriptors stay."""
+        labels = [w for w in self._waiting if w.kind]
+        self.counts["labels_dropped_by_reset"] += len(labels)
+        self._waiting = [w for w in self._waiting if not w.kind]
+
+    # ------------------------------------------------------------------ input
+    def add_descriptor(self, exploration_id: int, stamp_ns: int, descriptor: T, now_s: float) -> None:
+        """A descriptor arrived (``stamp_ns``: its window end); predict what is due."""
+        stamp = int(stamp_ns)
+        self._descriptor_mark = max(self._descriptor_mark, stamp)
+        self._enqueue(_Waiting(stamp, 0, 0, now_s, int(exploration_id), descriptor=descriptor))
+        self.poll(now_s)
+
+    def add_label(self, exploration_id: int, class_name: str, stamp_ns: int, now_s: float) -> None:
+        """A label arrived (``stamp_ns``: its header stamp, 0 = none); apply what is due."""
+        stamp = int(stamp_ns)
+        if stamp <= 0:
+            self._apply(self.protocol.add_label(exploration_id, class_name))
+        else:
+            self._label_mark = max(self._label_mark, stamp)
+            self._enqueue(_Waiting(stamp, 1, 0, now_s, int(exploration_id), class_name=class_name))
+        self.poll(now_s)
+
+    def poll(self, now_s: float) -> None:
+        """Predict and apply, in stamp order, everything whose turn has come or whose wait ran out."""
+        while self._waiting:
+            head = self._waiting[0]
+            due = self._due(head)
+            if not due:
+                if now_s - head.arrival_s < self.wait_s and len(self._waiting) <= self.protocol.horizon:
+                    return
+                self.counts["label_wait_expired" if head.kind else "descriptor_wait_expired"] += 1
+            self._waiting.pop(0)
+            if head.kind:
+                self._apply(self.protocol.add_label(head.exploration_id, head.class_name, head.stamp_ns))
+                continue
+            kept = self._predict(head.descriptor)
+            if kept is not None:
+                for decision in self.protocol.add_descriptor(head.exploration_id, kept, head.stamp_ns):
+                    self._apply(decision)
+
+    # --------------------------------------------------------------- internal
+    def _enqueue(self, item: _Waiting[T]) -> None:
+        self._serial += 1
+        item.serial = self._serial
+        insort(self._waiting, item, key=lambda w: (w.stamp_ns, w.kind, w.serial))
+
+    def _due(self, head: _Waiting[T]) -> bool:
+        """Whether nothing can still come before ``head`` in stamp order (see the class docstring)."""
+        if self.wait_s == 0:
+            return True
+        if not head.kind:
+            return self._label_mark >= head.stamp_ns or not self.protocol.awaits_label
+        if self._descriptor_mark > head.stamp_ns:
+            return True
+        target = self.protocol.target(head.exploration_id, head.stamp_ns)
+        if head.exploration_id == 0:
+            return target is not None and not target[2]
+        latest = self.protocol.latest
+        return target is None or target[2] or (latest is not None and target[0] == latest[0])

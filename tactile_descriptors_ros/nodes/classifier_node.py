@@ -14,6 +14,14 @@
   exploration wins (a second one is refused, counted, warned); class names
   longer than ``max_class_name_chars`` are refused.  Every label is learned,
   held, or counted in ``/diagnostics``.
+* Descriptors and labels are taken in the order of their stamps (window end,
+  label header stamp), not of their arrival
+  (:class:`~tactile_descriptors_ros.core.labels.StampOrder`): a descriptor is
+  predicted with the model that learned every label stamped before its window
+  end, and a stamped label with id 0 names the last exploration that ended
+  before it; each waits at most ``label_wait_s`` for what may still come before
+  it.  A replay thus gives the same predictions however the executor orders a
+  label and a descriptor that are ready together.
 * Every update is made durable before it is reported ("learned exploration
   N"): one entry appended and synced to ``<model_path>.journal``
   (:class:`~tactile_descriptors_ros.core.learning.ModelStore`), compacted into
@@ -35,6 +43,7 @@ online learning curve) is reported in diagnostics as ``online_accuracy``.
 from __future__ import annotations
 
 import os
+import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -44,12 +53,13 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.features import groups_in_labels, selection_name
-from ..core.labels import DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED, LabelProtocol
+from ..core.labels import (DEFAULT_LABEL_WAIT_S, DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED,
+                           LabelProtocol, StampOrder)
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
 from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
-from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg
+from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
 from .qos import QosDefaults, declare_qos
 
 __all__ = ["ClassifierNode", "default_model_path", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "main", "layout_mismatch"]
@@ -118,6 +128,11 @@ class ClassifierNode(Node):
         max_name = declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
                            "longest class name accepted [characters]", minimum=1)
         self.labels = LabelProtocol(self.horizon, expiry, max_name)
+        self.order: StampOrder[DescriptorSample, _Predicted] = StampOrder(
+            self.labels, self._predict, self._apply,
+            declare(self, "label_wait_s", DEFAULT_LABEL_WAIT_S,
+                    "longest wait of a descriptor for the label due before it, and of a stamped label for its "
+                    "descriptor [s] (0: arrival order)", minimum=0.0, on_set=self._set_label_wait))
         self.save_after_update = declare(self, "save_after_update", True, "save the model after every update",
                                          on_set=lambda v: lambda: setattr(self, "save_after_update", v))
         self.load_on_start = declare(self, "load_model", True, "load model_path at start if it exists")
@@ -149,6 +164,8 @@ class ClassifierNode(Node):
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
                                                      minimum=0.01))
         self.diagnostics.add("classifier", self._status)
+        # what waits in stamp order is released when its wait runs out, even if nothing else arrives
+        self.order_timer = self.create_timer(0.05, lambda: self.order.poll(time.monotonic()))
         report_unknown_overrides(self)
         self.get_logger().info(f"model file {self.model_path}; predictions on {self.pub.topic_name}")
 
@@ -172,6 +189,10 @@ class ClassifierNode(Node):
 
         return apply
 
+    def _set_label_wait(self, value: float):
+        """``ros2 param set ... label_wait_s``: from the next message (or poll) on."""
+        return lambda: self.order.set_wait(value)
+
     # ------------------------------------------------------------ descriptors
 
     def _new_model(self, labels) -> OnlineClassifier:
@@ -190,21 +211,25 @@ class ClassifierNode(Node):
         if not sample.contact:
             self.counts["no_contact"] += 1
             return
+        if not np.all(np.isfinite(sample.values)):
+            self.counts["nonfinite_descriptor"] += 1
+            self.get_logger().warning("descriptor with non-finite values ignored", throttle_duration_sec=5.0)
+            return
+        self.order.add_descriptor(sample.exploration_id, sample.window_end_ns, sample, time.monotonic())
+
+    def _predict(self, sample: DescriptorSample) -> _Predicted | None:
+        """Predict one descriptor in its turn (:class:`StampOrder`); None when its layout does not fit the model."""
         if self.model is None:
             self.model = self._new_model(sample.labels)
         if sample.labels != self.model.labels:
             self.counts["layout_mismatch"] += 1
             self.layout_error = layout_mismatch(sample, self.model.labels)
             self.get_logger().error(self.layout_error, throttle_duration_sec=5.0)
-            return
+            return None
         self.layout_error = None
         # the kept descriptors (label_horizon of them) share the model's labels: one copy, not one per
         # descriptor (a NAO descriptor's 917 label strings are about 80 kB; the node grew by that per touch)
         sample = replace(sample, labels=self.model.labels)
-        if not np.all(np.isfinite(sample.values)):
-            self.counts["nonfinite_descriptor"] += 1
-            self.get_logger().warning("descriptor with non-finite values ignored", throttle_duration_sec=5.0)
-            return
         self.model.observe(sample.values)
         name, scores = self.model.predict(sample.values)
         self.pub.publish(prediction_to_msg(sample, class_name=name, class_names=self.model.classes, scores=scores,
@@ -212,13 +237,13 @@ class ClassifierNode(Node):
                                            frame_id=self.frame_id))
         self.counts["predictions"] += 1
         self.latest = sample
-        for decision in self.labels.add_descriptor(sample.exploration_id, _Predicted(sample, name)):
-            self._apply(decision)
+        return _Predicted(sample, name)
 
     # ----------------------------------------------------------------- labels
     def _on_label(self, msg) -> None:
         self.counts["labels_received"] += 1
-        self._apply(self.labels.add_label(int(msg.exploration_id), str(msg.class_name)))
+        self.order.add_label(int(msg.exploration_id), str(msg.class_name), stamp_to_ns(msg.header.stamp),
+                             time.monotonic())
 
     def _apply(self, decision) -> None:
         """Carry out a :class:`~..core.labels.LabelDecision`: learn, or warn about a refusal or expiry."""
@@ -284,6 +309,7 @@ class ClassifierNode(Node):
         self.model = None
         self.layout_error = None
         self.labels.reset()
+        self.order.reset()
         self.latest = None
         self.correct_before_label = self.scored_labels = 0
         try:
@@ -321,8 +347,9 @@ class ClassifierNode(Node):
                   "updates": self.model.pa.updates if self.model else 0,
                   "model_version": self.model.version if self.model else 0,
                   "labelled_predictions": self.scored_labels, "online_accuracy": self.online_accuracy,
-                  "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held}
-        values.update({k: v for k, v in sorted((self.counts + self.labels.counts).items())})
+                  "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held,
+                  "waiting_in_stamp_order": self.order.waiting}
+        values.update({k: v for k, v in sorted((self.counts + self.labels.counts + self.order.counts).items())})
         if self.layout_error:
             return Status("error", self.layout_error, values)
         if self.last_save_error:
