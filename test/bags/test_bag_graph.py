@@ -56,7 +56,8 @@ def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0):
     for t in spins:
         t.start()
     try:
-        player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=10), context=ros_context)
+        # discovery on a loaded machine can take seconds: wait for it (a generous bound), never play unheard
+        player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=60), context=ros_context)
         report = player.play()
         player.destroy()
         labels = report.published["/tactile/label"]
