@@ -408,10 +408,13 @@ class StampOrder(Generic[T, K]):
         return len(self._waiting)
 
     def reset(self) -> None:
-        """After a model reset: drop the waiting labels (counted); waiting descriptors stay."""
+        """After a model reset: drop the waiting labels (counted) and forget the stamps seen (a new
+        session, a bag replayed again, may start earlier); waiting descriptors stay."""
         labels = [w for w in self._waiting if w.kind]
         self.counts["labels_dropped_by_reset"] += len(labels)
         self._waiting = [w for w in self._waiting if not w.kind]
+        self._label_mark = -1
+        self._descriptor_mark = max((w.stamp_ns for w in self._waiting), default=-1)
 
     # ------------------------------------------------------------------ input
     def add_descriptor(self, exploration_id: int, stamp_ns: int, descriptor: T, now_s: float) -> None:

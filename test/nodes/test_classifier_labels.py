@@ -92,3 +92,65 @@ def test_kept_descriptors_share_the_models_labels(classifier):
     _describe(g, range(1, 6), np.random.default_rng(2))
     kept = [k.item.sample.labels for k in node.labels._kept.values()]
     assert len(kept) == 5 and all(labels is node.model.labels for labels in kept)
+
+
+def _stamp_order_run(ros_context, tmp_path, run: str, descriptor_first: bool, wait_s: float):
+    """Exploration 1, its label (id 0, stamped half a second after it ended) and exploration 2, with the
+    label reaching the node before or after exploration 2's descriptor; return exploration 2's prediction."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
+    c = ClassifierNode(context=ros_context, namespace=f"/{run}", parameter_overrides=[
+        Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s)])
+    io = rclpy.create_node("order_io", namespace=f"/{run}", context=ros_context)
+    preds: list = []
+    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
+    io.create_subscription(Prediction, "tactile/prediction", preds.append, keep_all)
+    desc = io.create_publisher(Descriptor, "tactile/descriptor", keep_all)
+    labels = io.create_publisher(Label, "tactile/label", keep_all)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(c)
+    ex.add_node(io)
+    try:
+        assert spin_until(ex, lambda: desc.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1
+                          and c.pub.get_subscription_count() >= 1, 60), "not matched"
+        rng = np.random.default_rng(3)
+        d1, d2 = descriptor_msg(1, rng), descriptor_msg(2, rng)
+        label = Label(exploration_id=0, class_name="cork")
+        label.header.stamp.sec, label.header.stamp.nanosec = 12, 500_000_000  # after 1 ended (12 s), before 2 (22 s)
+        desc.publish(d1)
+        assert spin_until(ex, lambda: len(preds) == 1, 60)
+        if descriptor_first:
+            desc.publish(d2)
+            assert spin_until(ex, lambda: c.counts["descriptors"] == 2, 60)
+            labels.publish(label)
+        else:
+            labels.publish(label)
+            assert spin_until(ex, lambda: c.counts["labels_received"] == 1, 60)
+            desc.publish(d2)
+        assert spin_until(ex, lambda: len(preds) == 2 and c.counts["labels_received"] == 1, 60), dict(c.counts)
+        return preds[1], c.order.counts.copy()
+    finally:
+        c.close()
+        ex.shutdown(timeout_sec=0.5)
+        c.destroy_node()
+        io.destroy_node()
+
+
+def test_the_label_of_the_previous_exploration_counts_whether_it_comes_before_or_after_the_next_descriptor(
+        ros_context, tmp_path):
+    """Stamp order: exploration 2 is predicted with exploration 1's label (stamped before 2 ended) whichever
+    of the two the node receives first; in arrival order (label_wait_s 0) the descriptor first misses it."""
+    label_first, _ = _stamp_order_run(ros_context, tmp_path, "label_first", False, 30.0)
+    descriptor_first, counts = _stamp_order_run(ros_context, tmp_path, "descriptor_first", True, 30.0)
+    assert (label_first.has_model, label_first.updates, list(label_first.class_names)) == (True, 1, ["cork"])
+    assert (descriptor_first.has_model, descriptor_first.updates, list(descriptor_first.scores)) == \
+        (True, 1, list(label_first.scores))
+    assert counts["descriptor_wait_expired"] == 0  # the descriptor waited for the label, not for the bound
+    arrival, _ = _stamp_order_run(ros_context, tmp_path, "arrival_order", True, 0.0)
+    assert (arrival.has_model, arrival.updates) == (False, 0)
