@@ -76,7 +76,7 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
         "robot": "string", "model_path": "string", "eta": "double", "log_activity": "bool",
         "standardize": "bool", "pa_update": "string", "pa_average": "bool", "label_horizon": "integer",
         "save_after_update": "bool", "load_model": "bool", "frame_id": "string", "diagnostics_period_s": "double",
-        "label_expiry_explorations": "integer", "max_class_name_chars": "integer",
+        "label_expiry_explorations": "integer", "max_class_name_chars": "integer", "label_wait_s": "double",
         **_qos("descriptor", "label", "prediction"),
     },
 }
