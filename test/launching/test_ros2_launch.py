@@ -38,6 +38,8 @@ BIN = Path(sys.prefix) / "bin"
 #: Generous bounds for a loaded 2-core machine: they stop a hung test, they measure nothing.
 FIRST_PREDICTION_S = 240.0
 CLI_S = 60.0
+#: How long a verb that looks its node up is asked again while discovery has not yet seen the node.
+DISCOVERY_S = 3 * CLI_S
 #: ros2 launch escalates a node to SIGTERM this long after SIGINT (its default sigterm_timeout).
 SIGTERM_AFTER_S = 5
 #: What a ``ros2`` verb says when its own discovery has not yet seen the node or its services: the node
@@ -89,20 +91,28 @@ class Graph:
             time.sleep(0.2)  # polling the log file: the event is the line appearing
 
     def ros2_node(self, *args: str, check: bool = True) -> str:
-        """``ros2 ARGS`` for a verb that looks its node up once per call (``ros2 lifecycle``, ``ros2 param``):
+        """``ros2 ARGS`` for a verb that looks its node up per call (``ros2 lifecycle``, ``param``, ``service call``):
         asked again while the CLI's own discovery has not yet seen the node or its services
-        (:data:`NOT_YET_DISCOVERED`), which on a loaded machine can take longer than one ``--spin-time``;
-        any other failure raises at once (without ``check``, its stdout and stderr are returned together)."""
-        deadline = time.monotonic() + CLI_S
+        (:data:`NOT_YET_DISCOVERED`), which on a loaded machine can take longer than one ``--spin-time``, or
+        when one call is not answered within :data:`CLI_S` (a request sent while the CLI's client and the
+        node's service are matched one way only is never answered, and the CLI waits for ever); bounded by
+        :data:`DISCOVERY_S`.  Any other failure raises at once (without ``check``, stdout and stderr are
+        returned together)."""
+        deadline = time.monotonic() + DISCOVERY_S
         while True:
-            out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
-                                 timeout=CLI_S)
-            text = out.stdout + out.stderr
-            undiscovered = any(m in text for m in NOT_YET_DISCOVERED)
-            if not undiscovered and (out.returncode == 0 or not check):
+            try:
+                out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
+                                     timeout=CLI_S)
+                code, text = out.returncode, out.stdout + out.stderr
+                undiscovered = any(m in text for m in NOT_YET_DISCOVERED)
+            except subprocess.TimeoutExpired as exc:
+                code, undiscovered = None, True
+                text = f"no answer within {CLI_S:.0f} s; output so far:\n" + "".join(
+                    o.decode(errors="replace") if isinstance(o, bytes) else o for o in (exc.stdout, exc.stderr) if o)
+            if not undiscovered and (code == 0 or not check):
                 return out.stdout if check else text
             if not undiscovered or time.monotonic() > deadline:
-                raise AssertionError(f"ros2 {' '.join(args)} exited {out.returncode}:\n{text}"
+                raise AssertionError(f"ros2 {' '.join(args)} exited {code}:\n{text}"
                                      f"\n--- launch log:\n{self.output()[-4000:]}")
 
     def wait_for_nodes(self, names: set[str]) -> None:
@@ -285,7 +295,7 @@ def _readme_label_command(repo_dir: Path) -> str:
 
 
 def _trigger(graph: Graph, service: str) -> tuple[bool, str]:
-    text = graph.ros2("service", "call", service, "std_srvs/srv/Trigger", timeout=CLI_S)
+    text = graph.ros2_node("service", "call", service, "std_srvs/srv/Trigger")
     m = re.search(r"Trigger_Response\(success=(True|False), message='(.*)'\)", text)
     assert m, text
     return m.group(1) == "True", m.group(2)
