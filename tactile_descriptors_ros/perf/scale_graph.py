@@ -87,6 +87,9 @@ WINDOW_HOP_S = 0.5
 CELLS_PER_PART = 500
 #: A driver keeps up when it decodes at least this share of its cells' samples per wall second.
 DRIVER_RTF_MIN = 0.98
+#: Longest wait for every node's diagnostics at the start and the end of the measurement [s]; a node
+#: that is later than this (an overloaded machine) is reported in ``stale_diagnostics``.
+DIAGNOSTICS_WAIT_S = 30.0
 #: Window node fault counters that mean a lost frame, and those that mean a late or missing one.
 LOST_KEYS = ("fault_lost_frames", "fault_bad_frames", "fault_sequence_restart")
 LATE_KEYS = ("fault_windower_gap", "fault_windower_out_of_order", "fault_windower_duplicate",
@@ -308,6 +311,8 @@ class ScaleGraphReport:
     exit_codes: dict[str, int | None] = field(default_factory=dict)
     #: body parts without a descriptor when the warm-up timed out (measured anyway)
     silent_at_start: list[str] = field(default_factory=list)
+    #: statuses whose last counters are older than the end of the measurement
+    stale_diagnostics: list[str] = field(default_factory=list)
 
     @property
     def kept_up(self) -> bool:
@@ -368,6 +373,7 @@ class ScaleGraphReport:
                       for p in self.parts},
             "cpus": self.cpus, "load_avg_start": list(self.load_avg_start), "load_avg_end": list(self.load_avg_end),
             "exit_codes": self.exit_codes, "silent_at_start": self.silent_at_start,
+            "stale_diagnostics": self.stale_diagnostics,
         }
 
 
@@ -416,6 +422,11 @@ class _Monitor:
         """The newest diagnostics of every node (a copy)."""
         with self.lock:
             return {k: dict(v) for k, v in self.diagnostics.items()}
+
+    def stale_since(self, t: float) -> list[str]:
+        """Statuses not published since ``t``."""
+        with self.lock:
+            return sorted(k for k, v in self.diagnostics_at.items() if v <= t)
 
     def wait_diagnostics_after(self, t: float, timeout_s: float) -> bool:
         """Wait until every node seen so far has published diagnostics after ``t`` (False on timeout)."""
@@ -475,8 +486,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     Raises
     ------
     RuntimeError
-        When a node exits (its last lines of output are in the message), or
-        publishes no diagnostics for 10 s.
+        When a node exits (its last lines of output are in the message).
     ConfigError
         For impossible sizes.
     """
@@ -513,6 +523,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     loads: list[ProcessLoad] = []
     cpu0: dict[int, float] = {}
     silent: list[str] = []
+    stale: list[str] = []
     try:
         spin.start()
         say(0.0, f"starting {len(specs)} processes")
@@ -540,8 +551,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         # the counters at the start of the measurement: the warm-up's faults (cells starting at different
         # times, the kernel loading) are not the graph's steady state
         t_mark = time.monotonic()
-        if not monitor.wait_diagnostics_after(t_mark, timeout_s=10.0):
-            raise RuntimeError("a node published no diagnostics for 10 s")
+        monitor.wait_diagnostics_after(t_mark, timeout_s=DIAGNOSTICS_WAIT_S)  # an overloaded node may be late
         before = monitor.snapshot()
         t0 = time.monotonic()
         for p in loads:
@@ -559,8 +569,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             p.cpu_percent = round(100.0 * (c.user + c.system - cpu0[p.pid]) / (t1 - t0), 2)
             p.rss_mb = round(h.memory_info().rss / 2**20, 1)
         # counters of diagnostics published after the measurement cover all of it
-        if not monitor.wait_diagnostics_after(t1, timeout_s=10.0):
-            raise RuntimeError("a node published no diagnostics for 10 s")
+        if not monitor.wait_diagnostics_after(t1, timeout_s=DIAGNOSTICS_WAIT_S):
+            stale = monitor.stale_since(t1)
         after = monitor.snapshot()
         load_end = os.getloadavg()
     finally:
@@ -578,7 +588,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         if rtf and all(x is not None for x in rtf):
             p.data_realtime_factor = round(float(np.mean(rtf)), 4)
     return ScaleGraphReport(n_cells, results, loads, float(seconds), round(warm_up_s, 2), tuple(groups), one_driver,
-                            load_start, load_end, os.cpu_count() or 1, codes, silent)
+                            load_start, load_end, os.cpu_count() or 1, codes, silent, stale)
 
 
 def _check_alive(procs: Any, t_start: float) -> None:
