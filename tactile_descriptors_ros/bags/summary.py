@@ -544,6 +544,25 @@ def _f(x: Any, digits: int = 4) -> str:
     return str(x)
 
 
+def _skin_lines(s: dict, lost: str, gap: list[str]) -> list[str]:
+    """The force line, the channel lines and the flags of a skin summary (one cell or one body part):
+    ``lost`` is the loss flag's text (shown when ``s['lost_messages']``), ``gap`` the stamp-gap flags."""
+    f = s["force_n"]
+    lines = [f"  force_n    min {_f(f['min']):>8}  max {_f(f['max']):>8}  mean {_f(f['mean']):>9}"]
+    lines += [_stats_line(name, st) for name, st in s["channels"].items()]
+    flags = []
+    if s["invalid_samples"]:
+        flags.append(f"INVALID samples {s['invalid_samples']}")
+    if s["bad_frames"]:
+        flags.append(f"bad frames {s['bad_frames']}")
+    if s["lost_messages"]:
+        flags.append(lost)
+    flags += gap
+    if flags:
+        lines.append("  !! " + "; ".join(flags))
+    return lines
+
+
 def _stats_line(name: str, st: Mapping[str, Any], width: int = 10) -> str:
     inv = f"  INVALID {st['invalid']}" if st.get("invalid") else ""
     return (f"  {name:<{width}} min {_f(st['min']):>8}  max {_f(st['max']):>8}  "
@@ -594,42 +613,17 @@ def format_summary(summary: Mapping[str, Any]) -> str:
         lines.append(f"  cell {s['cell_id']} ({s['body_part']}) seq {s['sequence']}  stamp {s['stamp_ns'] / 1e9:.6f}  "
                      f"accel {s['accel_samples']} @ {_f(s['accel_rate_hz'])} Hz, force {s['force_samples']}  "
                      f"T {_f(s['temperature_c'])} C")
-        f = s["force_n"]
-        lines.append(f"  force_n    min {_f(f['min']):>8}  max {_f(f['max']):>8}  mean {_f(f['mean']):>9}")
-        for name, st in s["channels"].items():
-            lines.append(_stats_line(name, st))
-        flags = []
-        if s["invalid_samples"]:
-            flags.append(f"INVALID samples {s['invalid_samples']}")
-        if s["bad_frames"]:
-            flags.append(f"bad frames {s['bad_frames']}")
-        if s["lost_messages"]:
-            flags.append(f"LOST {s['lost_messages']} messages before this one")
-        if s["stamp_gap_ns"] is not None:
-            flags.append(f"stamp gap {s['stamp_gap_ns'] / 1e6:+.3f} ms")
-        if flags:
-            lines.append("  !! " + "; ".join(flags))
+        gap = [] if s["stamp_gap_ns"] is None else [f"stamp gap {s['stamp_gap_ns'] / 1e6:+.3f} ms"]
+        lines += _skin_lines(s, f"LOST {s['lost_messages']} messages before this one", gap)
     elif t == _SKIN_PART:
         s = summary
         temp = s["temperature_c"]
         lines.append(f"  {s['body_part']}: {s['cells']} cells in {s['runs']} runs  stamp {s['stamp_ns'] / 1e9:.6f}  "
                      f"accel {s['accel_samples']} @ {_f(s['accel_rate_hz'])} Hz, force {s['force_samples']}  "
                      f"T {_f(temp['min'])}..{_f(temp['max'])} C")
-        f = s["force_n"]
-        lines.append(f"  force_n    min {_f(f['min']):>8}  max {_f(f['max']):>8}  mean {_f(f['mean']):>9}")
-        for name, st in s["channels"].items():
-            lines.append(_stats_line(name, st))
-        flags = []
-        if s["invalid_samples"]:
-            flags.append(f"INVALID samples {s['invalid_samples']}")
-        if s["bad_frames"]:
-            flags.append(f"bad frames {s['bad_frames']}")
-        if s["lost_messages"]:
-            flags.append(f"LOST {s['lost_messages']} cell batches before this message")
-        if s["stamp_gaps_ns"]:
-            flags.append(f"stamp gaps {', '.join(f'{g / 1e6:+.3f}' for g in s['stamp_gaps_ns'][:5])} ms")
-        if flags:
-            lines.append("  !! " + "; ".join(flags))
+        gaps = s["stamp_gaps_ns"][:5]
+        gap = [f"stamp gaps {', '.join(f'{g / 1e6:+.3f}' for g in gaps)} ms"] if gaps else []
+        lines += _skin_lines(s, f"LOST {s['lost_messages']} cell batches before this message", gap)
     elif t == _DESCRIPTOR:
         s = summary
         lines.append(f"  {s['robot']} exploration {s['exploration_id']}  window {s['window_s']:.3f} s "
