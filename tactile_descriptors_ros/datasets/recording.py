@@ -31,8 +31,42 @@ UNTARED_REST_COUNTS = 300
 REST_PERCENTILE = 5.0
 
 
+class _Trial:
+    """What a recording of one trial of any cell type does with its names and frame stamps.
+
+    A mixin of the frozen dataclasses below: fills ``class_name`` and
+    ``source_file`` when the reader left them empty, counts the frames and
+    estimates their rate.
+    """
+
+    #: Frame rate given for a trial of fewer than two frames (no rate can be estimated).
+    ONE_FRAME_RATE_HZ = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.class_name:
+            object.__setattr__(self, "class_name", f"mat{self.material}")
+        if not self.source_file:
+            object.__setattr__(self, "source_file", self.path.split("#", 1)[0])
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.frame_t_ns.shape[0])
+
+    @property
+    def frame_rate_hz(self) -> float:
+        """Frame rate estimated from the time stamps (a frame is one V sample)."""
+        if self.n_frames < 2:
+            return self.ONE_FRAME_RATE_HZ
+        return float(1e9 * (self.n_frames - 1) / (self.frame_t_ns[-1] - self.frame_t_ns[0]))
+
+    @property
+    def material_name(self) -> str:
+        """The class name (kept for callers written before classes were named by the data)."""
+        return self.class_name
+
+
 @dataclass(frozen=True)
-class BiotacRecording:
+class BiotacRecording(_Trial):
     """One trial: a BioTac touching one class of object.
 
     Attributes
@@ -80,27 +114,8 @@ class BiotacRecording:
     tare_counts: tuple[float, ...] = ()
     absent: tuple[str, ...] = ()
 
-    def __post_init__(self) -> None:
-        if not self.class_name:
-            object.__setattr__(self, "class_name", f"mat{self.material}")
-        if not self.source_file:
-            object.__setattr__(self, "source_file", self.path.split("#", 1)[0])
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.frame_t_ns.shape[0])
-
-    @property
-    def frame_rate_hz(self) -> float:
-        """Frame rate estimated from the time stamps."""
-        if self.n_frames < 2:
-            return 100.0
-        return float(1e9 * (self.n_frames - 1) / (self.frame_t_ns[-1] - self.frame_t_ns[0]))
-
-    @property
-    def material_name(self) -> str:
-        """The class name (kept for callers written before classes were named by the data)."""
-        return self.class_name
+    #: Frame rate assumed for a trial of fewer than two frames (a BioTac's 100 Hz).
+    ONE_FRAME_RATE_HZ = 100.0
 
     def crop_frames(self, start: int, stop: int) -> "BiotacRecording":
         """Frames ``start:stop`` (and their PAC samples) as a new recording."""
@@ -116,7 +131,7 @@ class BiotacRecording:
 
 
 @dataclass(frozen=True)
-class CellRecording:
+class CellRecording(_Trial):
     """One trial of one cell of any cell type a robot description declares (a skin cell, ...).
 
     The channels are the cell type's (:class:`~..core.robot.CellType`): the
@@ -173,27 +188,6 @@ class CellRecording:
     source_file: str = ""
     tare_counts: tuple[float, ...] = ()
     absent: tuple[str, ...] = ()
-
-    def __post_init__(self) -> None:
-        if not self.class_name:
-            object.__setattr__(self, "class_name", f"mat{self.material}")
-        if not self.source_file:
-            object.__setattr__(self, "source_file", self.path.split("#", 1)[0])
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.frame_t_ns.shape[0])
-
-    @property
-    def frame_rate_hz(self) -> float:
-        """Frame (V sample) rate estimated from the time stamps."""
-        if self.n_frames < 2:
-            return 0.0
-        return float(1e9 * (self.n_frames - 1) / (self.frame_t_ns[-1] - self.frame_t_ns[0]))
-
-    @property
-    def material_name(self) -> str:
-        return self.class_name
 
     def crop_frames(self, start: int, stop: int) -> "CellRecording":
         """Frames ``start:stop`` (and their S samples) as a new recording."""
