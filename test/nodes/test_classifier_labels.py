@@ -10,29 +10,39 @@ from helpers import spin_until
 pytestmark = pytest.mark.ros
 
 
-@pytest.fixture
-def classifier(ros_context, tmp_path):
+def _wired(ros_context, classifier, namespace: str = ""):
+    """A node ``label_io`` beside ``classifier`` (keep-all, reliable): publishers of descriptors and labels, the
+    predictions it receives, and an executor spinning both (the caller waits for the matching)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
-    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
 
-    model = tmp_path / "model.json"
-    c = ClassifierNode(context=ros_context, parameter_overrides=[
-        Parameter("model_path", value=str(model)), Parameter("label_horizon", value=1000),
-        Parameter("label_expiry_explorations", value=5), Parameter("max_class_name_chars", value=16)])
-    io = rclpy.create_node("label_io", context=ros_context)
+    io = rclpy.create_node("label_io", namespace=namespace or None, context=ros_context)
     preds: list = []
     keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
     io.create_subscription(Prediction, "tactile/prediction", preds.append, keep_all)
     desc = io.create_publisher(Descriptor, "tactile/descriptor", keep_all)
     labels = io.create_publisher(Label, "tactile/label", keep_all)
     ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(c)
+    ex.add_node(classifier)
     ex.add_node(io)
+    return io, ex, desc, labels, preds
+
+
+@pytest.fixture
+def classifier(ros_context, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import Label
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
+    model = tmp_path / "model.json"
+    c = ClassifierNode(context=ros_context, parameter_overrides=[
+        Parameter("model_path", value=str(model)), Parameter("label_horizon", value=1000),
+        Parameter("label_expiry_explorations", value=5), Parameter("max_class_name_chars", value=16)])
+    io, ex, desc, labels, preds = _wired(ros_context, c)
     assert spin_until(ex, lambda: desc.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1, 10)
     yield {"ex": ex, "node": c, "desc": desc, "labels": labels, "preds": preds, "model": model, "Label": Label}
     c.close()
@@ -97,25 +107,14 @@ def test_kept_descriptors_share_the_models_labels(classifier):
 def _stamp_order_run(ros_context, tmp_path, run: str, descriptor_first: bool, wait_s: float):
     """Exploration 1, its label (id 0, stamped half a second after it ended) and exploration 2, with the
     label reaching the node before or after exploration 2's descriptor; return exploration 2's prediction."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+    from tactile_descriptors_msgs.msg import Label
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
 
     c = ClassifierNode(context=ros_context, namespace=f"/{run}", parameter_overrides=[
         Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s)])
-    io = rclpy.create_node("order_io", namespace=f"/{run}", context=ros_context)
-    preds: list = []
-    keep_all = QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE)
-    io.create_subscription(Prediction, "tactile/prediction", preds.append, keep_all)
-    desc = io.create_publisher(Descriptor, "tactile/descriptor", keep_all)
-    labels = io.create_publisher(Label, "tactile/label", keep_all)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(c)
-    ex.add_node(io)
+    io, ex, desc, labels, preds = _wired(ros_context, c, namespace=f"/{run}")
     try:
         assert spin_until(ex, lambda: desc.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1
                           and c.pub.get_subscription_count() >= 1, 60), "not matched"
