@@ -183,21 +183,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _soak(args: argparse.Namespace) -> int:
+def _seconds_bar(total_s: float, desc: str):
+    """A progress bar over ``total_s`` seconds on stderr and the ``progress(elapsed_s, text)`` that moves it."""
     from tqdm import tqdm
 
-    from ..perf.soak import format_soak, run_soak
-
-    if not args.soak > 0 or not args.soak_sample_s > 0:
-        print("tactile bench: error: --soak and --soak-sample-s must be positive", file=sys.stderr)
-        return 2
-    bar = tqdm(total=round(args.soak), desc="soak", unit="s", file=sys.stderr, leave=False)
+    bar = tqdm(total=round(total_s), desc=desc, unit="s", file=sys.stderr, leave=False)
 
     def progress(elapsed_s: float, text: str) -> None:
         bar.n = min(round(elapsed_s), bar.total)
         bar.set_postfix_str(text)
         bar.refresh()
 
+    return bar, progress
+
+
+def _soak(args: argparse.Namespace) -> int:
+    from ..perf.soak import format_soak, run_soak
+
+    if not args.soak > 0 or not args.soak_sample_s > 0:
+        print("tactile bench: error: --soak and --soak-sample-s must be positive", file=sys.stderr)
+        return 2
+    bar, progress = _seconds_bar(args.soak, "soak")
     try:
         report = run_soak(args.soak, robot=args.soak_robot, sample_s=args.soak_sample_s, progress=progress)
     except (RuntimeError, ImportError) as exc:
@@ -210,8 +216,6 @@ def _soak(args: argparse.Namespace) -> int:
 
 
 def _scale_graph(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..errors import ConfigError
     from ..perf.scale_graph import format_scale_graph, run_scale_graph
 
@@ -222,13 +226,7 @@ def _scale_graph(args: argparse.Namespace) -> int:
               "--settle-s and --read-period-s at least 0", file=sys.stderr)
         return 2
     groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
-    bar = tqdm(total=round(args.seconds), desc="scale graph", unit="s", file=sys.stderr, leave=False)
-
-    def progress(measured_s: float, text: str) -> None:
-        bar.n = min(round(measured_s), bar.total)
-        bar.set_postfix_str(text)
-        bar.refresh()
-
+    bar, progress = _seconds_bar(args.seconds, "scale graph")
     try:
         report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
                                  groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
