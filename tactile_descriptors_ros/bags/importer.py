@@ -57,6 +57,7 @@ from ..datasets.bagfiles import TRIALS_KEY
 from ..datasets.recording import N_ELECTRODES, BiotacRecording
 from ..datasets.sources import LoadReport, read_source, resolve_mapping
 from ..errors import BagError, ConfigError, DataFormatError
+from ..topics import FRAMES_TOPIC, LABEL_TOPIC, absolute
 from .io import BagWriter
 from .qos import make_qos
 from .types import tactile_typestore
@@ -77,9 +78,9 @@ __all__ = [
 ]
 
 #: Default topic of BioTac frame batches, as the window node subscribes (``{body_part}`` is filled in).
-DEFAULT_BIOTAC_TOPIC = "/tactile/{body_part}/frames"
+DEFAULT_BIOTAC_TOPIC = absolute(FRAMES_TOPIC)
 #: Default topic of true labels.
-DEFAULT_LABEL_TOPIC = "/tactile/label"
+DEFAULT_LABEL_TOPIC = absolute(LABEL_TOPIC)
 #: BioTac static-pressure resolution from the SynTouch product manual (0..100 kPa over 12 bit).
 BIOTAC_PDC_PA_PER_COUNT = 36.5
 #: Offered QoS of the imported frames: reliable (matches reliable and best-effort subscribers).

@@ -30,6 +30,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..codecs.sequence import SequenceEvent, SequenceTracker
+from ..markers import INVALID_ACCEL, INVALID_COUNT
+
 __all__ = [
     "channel_stats",
     "quality_names",
@@ -45,8 +48,6 @@ _SKIN_PART = "tactile_descriptors_msgs/msg/SkinPartFrames"
 _DESCRIPTOR = "tactile_descriptors_msgs/msg/Descriptor"
 _PREDICTION = "tactile_descriptors_msgs/msg/Prediction"
 _LABEL = "tactile_descriptors_msgs/msg/Label"
-INVALID_COUNT = 65535
-INVALID_ACCEL = -32768
 
 
 def _stamp_ns(t: Any) -> int:
@@ -147,11 +148,11 @@ class _Stream:
     first_log_ns: int | None = None
     last_log_ns: int | None = None
     count: int = 0
-    next_sequence: int | None = None
     expected_stamp_ns: int | None = None
     last_stamp_ns: int | None = None
     lost: int = 0
     sequence_gaps: int = 0
+    restarts: int = 0
     stamp_gaps: int = 0
     stamp_backwards: int = 0
 
@@ -172,6 +173,7 @@ class EchoTracker:
         self.constants = dict(constants or {})
         self.top_k = top_k
         self.streams: dict[str, _Stream] = {}
+        self._sequences = SequenceTracker(1 << 32, window=0)  # message sequence numbers are 32-bit
 
     # ------------------------------------------------------------------ streams
     def _stream(self, key: str, log_ns: int) -> _Stream:
@@ -188,14 +190,19 @@ class EchoTracker:
             return None
         return (s.count - 1) * 1e9 / (s.last_log_ns - s.first_log_ns)
 
-    def _check_sequence(self, s: _Stream, seq: int, advance: int, modulo: int = 1 << 32) -> int:
-        """Lost items since the previous message (0 when in sequence or first)."""
-        lost = 0
-        if s.next_sequence is not None and seq != s.next_sequence:
-            lost = (seq - s.next_sequence) % modulo
+    def _check_sequence(self, s: _Stream, key: str, seq: int, count: int) -> int:
+        """Items lost before a message whose run of ``count`` numbers starts at ``seq`` (32-bit).
+
+        The one :class:`~tactile_descriptors_ros.codecs.sequence.SequenceTracker`
+        unwraps the numbers: a step back is a restart of the sender's count, not
+        four billion lost items.
+        """
+        event, lost = self._sequences.track_run(key, seq, max(int(count), 1))
+        if event == SequenceEvent.RESET:
+            s.restarts += 1
+        if lost:
             s.sequence_gaps += 1
             s.lost += lost
-        s.next_sequence = (seq + advance) % modulo
         return lost
 
     def _check_stamp(self, s: _Stream, stamp_ns: int, expected_next_ns: int | None, tolerance_ns: int) -> int | None:
@@ -217,6 +224,7 @@ class EchoTracker:
             "rate_hz": self._rate(s),
             "lost": s.lost,
             "sequence_gaps": s.sequence_gaps,
+            "restarts": s.restarts,
             "stamp_gaps": s.stamp_gaps,
             "stamp_backwards": s.stamp_backwards,
         }
@@ -265,7 +273,7 @@ class EchoTracker:
         period_ns = int(np.median(np.diff(frame_off))) if frame_off.size > 1 else None
         key = f"{topic}#{m.sensor_name or m.body_part}"
         s = self._stream(key, log_ns)
-        lost = self._check_sequence(s, int(m.first_frame_sequence), n_frames)
+        lost = self._check_sequence(s, key, int(m.first_frame_sequence), n_frames)
         expected = stamp + n_frames * period_ns if period_ns else None
         stamp_gap = self._check_stamp(s, stamp, expected, (period_ns or 10_000_000) // 2)
         duration_s = None
@@ -337,7 +345,7 @@ class EchoTracker:
         channels["proximity"] = channel_stats(m.proximity, INVALID_COUNT)
         key = f"{topic}#cell{int(m.cell_id)}"
         s = self._stream(key, log_ns)
-        lost = self._check_sequence(s, int(m.sequence), 1)
+        lost = self._check_sequence(s, key, int(m.sequence), 1)
         acc_off = np.asarray(m.accel_offset_ns, dtype=np.int64)
         period = int(np.median(np.diff(acc_off))) if acc_off.size > 1 else None
         expected = stamp + n_acc * period if period else None
@@ -392,9 +400,10 @@ class EchoTracker:
             forces = np.concatenate([c.force_n for _, c in chunks]) if chunks else np.zeros(0)
             force_n = channel_stats(forces)
             for (cid, chunk), seq in zip(chunks, (int(q) for q in m.sequence)):
-                cs = self.streams.setdefault(f"{topic}#cell{cid}", _Stream())
+                cell_key = f"{topic}#cell{cid}"
+                cs = self.streams.setdefault(cell_key, _Stream())
                 cs.count += 1
-                lost += self._check_sequence(cs, seq, 1)
+                lost += self._check_sequence(cs, cell_key, seq, 1)
                 t = chunk.vibration_t_ns
                 period = int(np.median(np.diff(t))) if t.size > 1 else None
                 if period and accel_rate is None:

@@ -49,9 +49,9 @@ from enum import IntEnum
 import numpy as np
 
 from ..errors import CodecError, ConfigError, ErrorWordError, FrameError, ParityError, WordFormatError
+from ..markers import INVALID_COUNT
 
 __all__ = [
-    "INVALID_COUNT",
     "MAX_VALUE",
     "MAX_SENSORS",
     "CHANNELS",
@@ -100,8 +100,6 @@ __all__ = [
     "BiotacSpiResponder",
 ]
 
-#: Value reported for a sample that could not be read (same as the message constant).
-INVALID_COUNT: int = 65535
 #: Largest 12-bit count.
 MAX_VALUE: int = 4095
 #: Most BioTacs on one SPI adapter (chip selects 0..4).

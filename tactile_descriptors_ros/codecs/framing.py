@@ -20,7 +20,7 @@ it scans for the sync, validates the header, waits for the whole frame,
 checks the CRC, and on any failure drops *one* byte and scans again, so a
 good frame right after damaged bytes is always recovered.
 
-:class:`~..streams.sequence.SequenceTracker` (re-exported here) detects lost,
+:class:`~.sequence.SequenceTracker` (re-exported here) detects lost,
 duplicated and out-of-order frames from wrapping sequence numbers.
 """
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass, fields
 from typing import Generic, TypeVar
 
 from ..errors import CodecError
-from ..streams.sequence import SequenceEvent, SequenceTracker
+from .sequence import SequenceEvent, SequenceTracker
 
 __all__ = [
     "CRC_NAME",

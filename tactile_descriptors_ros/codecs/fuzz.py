@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CodecError, ConfigError
+from ..markers import INVALID_COUNT
 from . import biotac_spi as spi
 from . import bridge_serial as bridge
 from . import skin_serial
@@ -191,7 +192,7 @@ def _spi_batch(report: FuzzReport, rng: np.random.Generator, pattern: spi.FrameP
     # values of every word in pattern order, rebuilt from the typed fields
     names = pattern.names()
     word_names = [nm for nm in names if nm != "-"]
-    vals = np.full((n, w), spi.INVALID_COUNT, dtype=np.int64)
+    vals = np.full((n, w), INVALID_COUNT, dtype=np.int64)
     valid = np.zeros((n, w), dtype=bool)
     pac_cols = [i for i, nm in enumerate(word_names) if nm == "PAC"]
     vals[:, pac_cols] = frames.pac
@@ -210,7 +211,7 @@ def _spi_batch(report: FuzzReport, rng: np.random.Generator, pattern: spi.FrameP
     ref_vals, ref_status = spi.reference_decode_words(raw)
     missing = (2 * np.arange(w)[None, :] + 2) > lengths[:, None]
     ref_status = np.where(missing, int(spi.WordStatus.MISSING), ref_status)
-    ref_vals = np.where(missing, spi.INVALID_COUNT, ref_vals)
+    ref_vals = np.where(missing, INVALID_COUNT, ref_vals)
     bad = status != ref_status
     report.violate(f"biotac_spi: {int(bad.sum())} word statuses differ from the reference decoder",
                    int(bad.any(axis=1).sum()))

@@ -24,9 +24,10 @@ load time with :class:`~tactile_descriptors_ros.errors.ConfigError`.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ __all__ = [
     "ContactSpec",
     "WindowSpec",
     "DescriptorSpec",
+    "select_body_parts",
     "RobotDescription",
     "load_robot",
     "parse_robot",
@@ -520,3 +522,22 @@ def _validate_nodes(robot: RobotDescription, source: str) -> None:
                     key=f"nodes.{node_name}.body_parts",
                     source=source,
                 )
+
+
+def select_body_parts(robot: RobotDescription, names: Sequence[str]) -> RobotDescription:
+    """The robot restricted to ``names`` (in the robot's order); all of it for an empty list.
+
+    Raises
+    ------
+    ConfigError
+        For an unknown body part (naming the known ones) or a name given twice.
+    """
+    names = [n for n in names if n]
+    if not names:
+        return robot
+    if len(set(names)) != len(names):
+        raise ConfigError(f"body part listed twice in {names}", key="body_parts")
+    for n in names:
+        robot.body_part(n)  # raises with the known names
+    parts = tuple(p for p in robot.body_parts if p.name in set(names))
+    return dataclasses.replace(robot, body_parts=parts)

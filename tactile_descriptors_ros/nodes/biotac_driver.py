@@ -49,10 +49,11 @@ from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, FramePattern
 from ..errors import ConfigError
 from ..streams.biotac import BiotacStream, BridgeFrameSource, ReadItem, SensorConfig, SensorState, SpiFrameSource
 from .common import RateMeter, Status, declare, run_node
-from .conversions import BioTacBatch, biotac_batch_to_msg
+from ..streams.frames import BioTacBatch
+from .conversions import biotac_batch_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from .window_node import FRAMES_TOPIC
+from ..topics import FRAMES_TOPIC
 
 __all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "main"]
 

@@ -58,15 +58,12 @@ from ..core.labels import (DEFAULT_LABEL_WAIT_S, DEFAULT_MAX_CLASS_NAME_CHARS, E
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
 from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
+from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
 from .qos import QosDefaults, declare_qos
 
-__all__ = ["ClassifierNode", "default_model_path", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "main", "layout_mismatch"]
-
-DESCRIPTOR_TOPIC = "tactile/descriptor"
-LABEL_TOPIC = "tactile/label"
-PREDICTION_TOPIC = "tactile/prediction"
+__all__ = ["ClassifierNode", "default_model_path", "main", "layout_mismatch"]
 
 
 def default_model_path(node_name: str, robot: str = "") -> Path:

@@ -22,11 +22,12 @@ import numpy as np
 
 from ..core.aggregation import RobotDescriptor
 from ..core.windowing import CellChunk, Window
-from ..errors import SignalError
+from ..core.robot import CellType
+from ..errors import ConfigError, SignalError
+from ..markers import INVALID_ACCEL, INVALID_COUNT
+from ..streams.frames import BioTacBatch, SkinFrame
 
 __all__ = [
-    "INVALID_COUNT",
-    "INVALID_ACCEL",
     "stamp_to_ns",
     "ns_to_stamp",
     "BioTacBatch",
@@ -46,12 +47,9 @@ __all__ = [
     "DescriptorSample",
     "descriptor_from_msg",
     "prediction_to_msg",
+    "message_kind",
 ]
 
-#: Marker of an unreadable unsigned sample (BioTacFrameBatch, SkinPartFrames, SkinCellFrame).
-INVALID_COUNT = 65535
-#: Marker of an unreadable accelerometer sample (SkinPartFrames, SkinCellFrame).
-INVALID_ACCEL = -32768
 
 
 # ----------------------------------------------------------------------- time
@@ -92,50 +90,6 @@ def _np(values, dtype) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- BioTac
-
-
-@dataclass
-class BioTacBatch:
-    """Decoded BioTac frames of one sensor, as the driver hands them to the message.
-
-    Attributes
-    ----------
-    stamp_ns : int
-        Time of the first PAC sample.
-    pac : numpy.ndarray of uint16, shape (n_pac,)
-        Counts, ``INVALID_COUNT`` where unreadable.
-    pac_offset_ns : numpy.ndarray of int64, shape (n_pac,)
-    frame_offset_ns : numpy.ndarray of int64, shape (n_frames,)
-    pdc, tac, tdc : numpy.ndarray of uint16, shape (n_frames,)
-    electrodes : numpy.ndarray of uint16, shape (n_frames, n_electrodes)
-    first_frame_sequence : int
-    bad_words : int
-    """
-
-    stamp_ns: int
-    pac: np.ndarray
-    pac_offset_ns: np.ndarray
-    frame_offset_ns: np.ndarray
-    pdc: np.ndarray
-    tac: np.ndarray
-    tdc: np.ndarray
-    electrodes: np.ndarray
-    first_frame_sequence: int = 0
-    bad_words: int = 0
-
-    def __post_init__(self) -> None:
-        n_f = len(self.frame_offset_ns)
-        if len(self.pac) != len(self.pac_offset_ns):
-            raise SignalError(f"{len(self.pac)} PAC samples but {len(self.pac_offset_ns)} PAC offsets")
-        for name in ("pdc", "tac", "tdc"):
-            if len(getattr(self, name)) != n_f:
-                raise SignalError(f"{len(getattr(self, name))} {name} samples for {n_f} frames")
-        if np.ndim(self.electrodes) != 2 or np.shape(self.electrodes)[0] != n_f:
-            raise SignalError(f"electrodes must be (frames={n_f}, n_electrodes), got {np.shape(self.electrodes)}")
-
-    @property
-    def frame_count(self) -> int:
-        return len(self.frame_offset_ns)
 
 
 def biotac_batch_to_msg(batch: BioTacBatch, *, sensor_name: str, body_part: str, chip_select: int,
@@ -242,46 +196,6 @@ def biotac_msg_to_chunk(msg, extra_channels: Sequence[str] = ()) -> CellChunk:
 
 
 # ------------------------------------------------------------------ skin cell
-
-
-@dataclass
-class SkinFrame:
-    """Decoded samples of one skin cell, as the driver hands them to the message.
-
-    Attributes
-    ----------
-    stamp_ns : int
-        Time of the first accelerometer sample.
-    accel : numpy.ndarray of int16, shape (3, n_accel)
-        x, y, z counts; ``INVALID_ACCEL`` where unreadable.
-    accel_offset_ns : numpy.ndarray of int64, shape (n_accel,)
-    force : numpy.ndarray of uint16, shape (3, n_force)
-        Three force sensors; ``INVALID_COUNT`` where unreadable.
-    force_offset_ns : numpy.ndarray of int64, shape (n_force,)
-    proximity : numpy.ndarray of uint16, shape (n_force,) or (0,)
-    temperature_c : float
-        NaN when none was read.
-    """
-
-    stamp_ns: int
-    accel: np.ndarray
-    accel_offset_ns: np.ndarray
-    force: np.ndarray
-    force_offset_ns: np.ndarray
-    proximity: np.ndarray
-    temperature_c: float = float("nan")
-    sequence: int = 0
-    bad_frames: int = 0
-
-    def __post_init__(self) -> None:
-        if np.ndim(self.accel) != 2 or np.shape(self.accel)[0] != 3 or \
-                np.shape(self.accel)[1] != len(self.accel_offset_ns):
-            raise SignalError(f"accel must be (3, {len(self.accel_offset_ns)}), got {np.shape(self.accel)}")
-        if np.ndim(self.force) != 2 or np.shape(self.force)[0] != 3 or \
-                np.shape(self.force)[1] != len(self.force_offset_ns):
-            raise SignalError(f"force must be (3, {len(self.force_offset_ns)}), got {np.shape(self.force)}")
-        if len(self.proximity) not in (0, len(self.force_offset_ns)):
-            raise SignalError(f"{len(self.proximity)} proximity samples for {len(self.force_offset_ns)} force samples")
 
 
 def skin_frame_to_msg(frame: SkinFrame, *, cell_id: int, body_part: str, frame_id: str = "",
@@ -593,3 +507,33 @@ def prediction_to_msg(sample: DescriptorSample, *, class_name: str | None, class
     msg.model_version = int(model_version) & 0xFFFFFFFF
     msg.updates = int(updates) & 0xFFFFFFFF
     return msg
+
+
+# ------------------------------------------------------------ message kinds
+
+
+def message_kind(cell_type: CellType) -> str:
+    """Which message carries a cell type: ``"biotac"`` or ``"skin"``.
+
+    A cell type with one vibration channel (PAC) is a BioTac
+    (``BioTacFrameBatch``); three vibration channels and three deformation
+    channels are a skin cell (``SkinPartFrames``, all cells of a body part per message).
+
+    Raises
+    ------
+    ConfigError
+        For a cell type no message of this package carries.
+    """
+    n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
+    kind = "biotac" if n_s == 1 else "skin" if n_s == 3 and n_v == 3 else None
+    if kind is not None:
+        carried = BIOTAC_EXTRA_CHANNELS if kind == "biotac" else SKIN_EXTRA_CHANNELS
+        missing = [c for c in cell_type.extra_channels if c not in carried]
+        if missing:
+            raise ConfigError(f"cell type {cell_type.name!r} declares extra channel {missing[0]!r}, which "
+                              f"{'BioTacFrameBatch' if kind == 'biotac' else 'SkinPartFrames'} does not carry "
+                              f"(it carries {', '.join(carried)})", key=f"cell_types.{cell_type.name}.extra_channels")
+        return kind
+    raise ConfigError(f"no message type carries cell type {cell_type.name!r} ({n_s} vibration and {n_v} "
+                      "deformation channels; BioTacFrameBatch has 1 + N, SkinPartFrames 3 + 3)",
+                      key=f"cell_types.{cell_type.name}")

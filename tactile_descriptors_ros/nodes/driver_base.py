@@ -36,7 +36,8 @@ from ..errors import ConfigError, TactileError, TransportError
 from ..streams.link import DeviceLink
 from ..transports import create_transport
 from .common import Diagnostics, Status, declare, report_unknown_overrides
-from .window_node import message_kind, select_body_parts
+from .conversions import message_kind
+from ..core.robot import select_body_parts
 
 __all__ = ["DriverBase"]
 

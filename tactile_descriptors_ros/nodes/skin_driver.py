@@ -50,7 +50,7 @@ from .common import RateMeter, Status, declare, run_node
 from .conversions import skin_part_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from .window_node import FRAMES_TOPIC
+from ..topics import FRAMES_TOPIC
 
 __all__ = ["SkinDriver", "main"]
 

@@ -40,7 +40,6 @@ Topics, parameters and QoS: ``docs/nodes.md``.
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 import time
 from collections import Counter, deque
@@ -53,72 +52,22 @@ from rclpy.node import Node
 from ..core.blocks import check_blocks, describe_blocks
 from ..core.features import check_groups, groups_of_channels, selection_name
 from ..core.fast import warm_up
-from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
+from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, load_robot, select_body_parts
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
-from ..streams.sequence import unwrap
+from ..topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC
+from ..codecs.sequence import SequenceEvent, SequenceTracker
 from .common import Diagnostics, RateMeter, Status, declare, report_unknown_overrides, run_node, steady_clock
 from .conversions import (
-    BIOTAC_EXTRA_CHANNELS,
-    SKIN_EXTRA_CHANNELS,
     biotac_msg_to_chunk,
     descriptor_to_msg,
+    message_kind,
     skin_part_msg_to_chunks,
 )
 from .qos import QosDefaults, declare_qos
 
-__all__ = ["WindowNode", "select_body_parts", "message_kind", "FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "main"]
+__all__ = ["WindowNode", "main"]
 
-#: Default frames topic of a body part (relative: node namespaces apply).
-FRAMES_TOPIC = "tactile/{body_part}/frames"
-#: Default descriptor topic.
-DESCRIPTOR_TOPIC = "tactile/descriptor"
-
-
-def message_kind(cell_type: CellType) -> str:
-    """Which message carries a cell type: ``"biotac"`` or ``"skin"``.
-
-    A cell type with one vibration channel (PAC) is a BioTac
-    (``BioTacFrameBatch``); three vibration channels and three deformation
-    channels are a skin cell (``SkinPartFrames``, all cells of a body part per message).
-
-    Raises
-    ------
-    ConfigError
-        For a cell type no message of this package carries.
-    """
-    n_s, n_v = len(cell_type.vibration.channels), len(cell_type.deformation.channels)
-    kind = "biotac" if n_s == 1 else "skin" if n_s == 3 and n_v == 3 else None
-    if kind is not None:
-        carried = BIOTAC_EXTRA_CHANNELS if kind == "biotac" else SKIN_EXTRA_CHANNELS
-        missing = [c for c in cell_type.extra_channels if c not in carried]
-        if missing:
-            raise ConfigError(f"cell type {cell_type.name!r} declares extra channel {missing[0]!r}, which "
-                              f"{'BioTacFrameBatch' if kind == 'biotac' else 'SkinPartFrames'} does not carry "
-                              f"(it carries {', '.join(carried)})", key=f"cell_types.{cell_type.name}.extra_channels")
-        return kind
-    raise ConfigError(f"no message type carries cell type {cell_type.name!r} ({n_s} vibration and {n_v} "
-                      "deformation channels; BioTacFrameBatch has 1 + N, SkinPartFrames 3 + 3)",
-                      key=f"cell_types.{cell_type.name}")
-
-
-def select_body_parts(robot: RobotDescription, names: Sequence[str]) -> RobotDescription:
-    """The robot restricted to ``names`` (in the robot's order); all of it for an empty list.
-
-    Raises
-    ------
-    ConfigError
-        For an unknown body part (naming the known ones) or a name given twice.
-    """
-    names = [n for n in names if n]
-    if not names:
-        return robot
-    if len(set(names)) != len(names):
-        raise ConfigError(f"body part listed twice in {names}", key="body_parts")
-    for n in names:
-        robot.body_part(n)  # raises with the known names
-    parts = tuple(p for p in robot.body_parts if p.name in set(names))
-    return dataclasses.replace(robot, body_parts=parts)
 
 
 class WindowNode(Node):
@@ -183,7 +132,7 @@ class WindowNode(Node):
         self.last_quality: dict[str, int] = {}
         self.faults: Counter[str] = Counter()
         self._untared: set[str] = set()
-        self._next_seq: dict[str, int] = {}
+        self._sequences = SequenceTracker(1 << 32, window=0)  # message sequence numbers are 32-bit
         self._rates: dict[str, RateMeter] = {}
         self._last_seen: dict[str, float] = {}
 
@@ -400,16 +349,10 @@ class WindowNode(Node):
         return items
 
     def _sequence(self, key: str, first: int, count: int) -> None:
-        expected = self._next_seq.get(key)
-        if expected is None:
-            self._next_seq[key] = int(first) + count
-            return
-        u = unwrap(first, expected, 1 << 32)  # message sequences are 32-bit
-        if u > expected:
-            self.faults["lost_frames"] += u - expected
-        elif u < expected:
+        event, lost = self._sequences.track_run(key, first, max(count, 1))
+        self.faults["lost_frames"] += lost
+        if event == SequenceEvent.RESET:
             self.faults["sequence_restart"] += 1
-        self._next_seq[key] = u + count
 
     # ----------------------------------------------------------- output
     def _warm_up(self) -> None:

@@ -94,7 +94,8 @@ def _probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int]
     """
     import math
 
-    from ..nodes.conversions import SkinFrame, skin_part_to_msg
+    from ..streams.frames import SkinFrame
+    from ..nodes.conversions import skin_part_to_msg
     from ..streams.skin_parts import SkinRun, pack_skin_part
 
     cell_type = next(iter(desc.cell_types.values()))
@@ -277,9 +278,11 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     from ..core.robot import load_robot
     from ..launching.graph import build_graph
     from ..launching.processes import GraphProcesses
-    from ..nodes.classifier_node import PREDICTION_TOPIC, ClassifierNode
+    from ..topics import PREDICTION_TOPIC
+    from ..nodes.classifier_node import ClassifierNode
     from ..nodes.conversions import ns_to_stamp, stamp_to_ns
-    from ..nodes.window_node import DESCRIPTOR_TOPIC, FRAMES_TOPIC, WindowNode
+    from ..topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC
+    from ..nodes.window_node import WindowNode
 
     if in_process and split_window_nodes:
         raise ValueError("split_window_nodes starts one process per body part: not with in_process")

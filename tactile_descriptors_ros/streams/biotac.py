@@ -25,8 +25,8 @@ import numpy as np
 from ..codecs.biotac_spi import BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
 from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
 from ..errors import CodecError
-from ..nodes.conversions import BioTacBatch
-from .sequence import Unwrapper
+from .frames import BioTacBatch
+from ..codecs.sequence import Unwrapper
 
 __all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream"]
 

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
-from ..nodes.conversions import SkinFrame
-from .sequence import SequenceTracker
+from .frames import SkinFrame
+from ..codecs.sequence import SequenceTracker
 
 __all__ = ["SkinStream", "CellState", "RECENT_FORCE"]
 

@@ -36,7 +36,8 @@ import numpy as np
 
 from ..core.windowing import CellChunk
 from ..errors import SignalError
-from ..nodes.conversions import INVALID_ACCEL, INVALID_COUNT, SkinFrame
+from ..markers import INVALID_ACCEL, INVALID_COUNT
+from .frames import SkinFrame
 
 __all__ = ["SkinPartFrames", "SkinRun", "pack_skin_part", "skin_part_chunks", "PartGatherer",
            "SKIN_PART_EXTRA_CHANNELS"]

@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_descriptors_ros.codecs import biotac_spi as spi
+from tactile_descriptors_ros.markers import INVALID_COUNT
 from tactile_descriptors_ros.errors import (CodecError, ConfigError, ErrorWordError, FrameError, ParityError,
                                             WordFormatError)
 
@@ -56,7 +57,7 @@ def test_error_words_are_typed():
             spi.decode_word(raw)
         assert info.value.word == word
         values, status_arr = spi.decode_words(raw)
-        assert status_arr[0] == status and values[0] == spi.INVALID_COUNT
+        assert status_arr[0] == status and values[0] == INVALID_COUNT
     # 0xA5 has even parity: an undocumented 0xA5xx word is a parity error, never data
     with pytest.raises(ParityError):
         spi.decode_word(b"\xa5\x01")
@@ -195,9 +196,9 @@ def test_bad_word_invalidates_only_its_slot():
     raw[2 * 4: 2 * 4 + 2] = b"\xa5\x2d"   # word 4 = E3 -> "sampling too soon"
     raw[2 * 5] ^= 0x10                   # word 5 = PAC #3 -> parity
     f = spi.BiotacFrameDecoder(p).decode(0, bytes(raw))
-    assert not f.electrodes_valid[2] and f.electrodes[2] == spi.INVALID_COUNT
+    assert not f.electrodes_valid[2] and f.electrodes[2] == INVALID_COUNT
     assert f.electrodes_valid[[0, 1, 3]].all() and f.electrodes[3] == el[3]
-    assert not f.pac_valid[2] and f.pac[2] == spi.INVALID_COUNT
+    assert not f.pac_valid[2] and f.pac[2] == INVALID_COUNT
     assert f.pac[1] == pac[1] and f.pac[3] == pac[3]      # neighbours untouched, not copied
     assert f.counts.error_sampling_too_soon == 1 and f.counts.parity == 1 and f.counts.bad == 2
 

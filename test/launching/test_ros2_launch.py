@@ -225,7 +225,7 @@ def test_launch_reaches_first_prediction(graph):
 
 def _topics(robot: str) -> dict[str, str]:
     """Every topic the graph publishes -> its type (frames of each body part, descriptor, prediction, diagnostics)."""
-    from tactile_descriptors_ros.nodes.window_node import message_kind
+    from tactile_descriptors_ros.nodes.conversions import message_kind
 
     desc = load_robot(robot)
     topics = {f"/tactile/{p.name}/frames": MSG_TYPES[message_kind(desc.cell_types[p.cell_type])]

@@ -25,7 +25,8 @@ class BiotacStream:
         self.seq = 0
 
     def batch(self, force_n: float, freq_hz: float, n_frames: int = 10):
-        from tactile_descriptors_ros.nodes.conversions import BioTacBatch, biotac_batch_to_msg
+        from tactile_descriptors_ros.streams.frames import BioTacBatch
+        from tactile_descriptors_ros.nodes.conversions import biotac_batch_to_msg
 
         fo = np.arange(n_frames, dtype=np.int64) * 10_000_000
         po = np.arange(n_frames * 22, dtype=np.int64) * (10_000_000 // 22)

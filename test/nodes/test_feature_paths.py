@@ -21,7 +21,8 @@ START = 37
 
 
 def _messages(rec, ct, first: int, count: int, batch: int = 10):
-    from tactile_descriptors_ros.nodes.conversions import BioTacBatch, biotac_batch_to_msg
+    from tactile_descriptors_ros.streams.frames import BioTacBatch
+    from tactile_descriptors_ros.nodes.conversions import biotac_batch_to_msg
 
     ppf = rec.pac_per_frame
     out = []
@@ -171,7 +172,7 @@ def test_extra_channel_no_message_carries_is_refused():
 
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.errors import ConfigError
-    from tactile_descriptors_ros.nodes.window_node import message_kind
+    from tactile_descriptors_ros.nodes.conversions import message_kind
 
     ct = load_robot("shadow_hand").cell_types["biotac"]
     assert message_kind(ct) == "biotac"

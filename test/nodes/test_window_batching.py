@@ -14,7 +14,8 @@ pytestmark = pytest.mark.ros
 
 def _reference_chunk(msg):
     """The straightforward conversion (via SkinFrame), the fast path's reference."""
-    from tactile_descriptors_ros.nodes.conversions import INVALID_ACCEL, INVALID_COUNT, skin_msg_to_frame
+    from tactile_descriptors_ros.markers import INVALID_ACCEL, INVALID_COUNT
+    from tactile_descriptors_ros.nodes.conversions import skin_msg_to_frame
 
     f = skin_msg_to_frame(msg)
     forces = f.force.astype(np.int32)
@@ -31,7 +32,8 @@ def _skin_msg(rng, n_a, n_f, *, proximity=True, cdr=True):
     from rclpy.serialization import deserialize_message, serialize_message
 
     from tactile_descriptors_msgs.msg import SkinCellFrame
-    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_frame_to_msg
+    from tactile_descriptors_ros.streams.frames import SkinFrame
+    from tactile_descriptors_ros.nodes.conversions import skin_frame_to_msg
 
     acc = rng.integers(-512, 512, (3, n_a)).astype(np.int16)
     force = rng.integers(0, 4096, (3, n_f)).astype(np.uint16)
@@ -86,7 +88,7 @@ def test_fast_skin_conversion_rejects_inconsistent_lengths(field, value, match):
 
 def _runs(rng, cells, *, n_a=None, n_f=None):
     """Random cell batches with invalid markers, some without proximity, own stamps and tares."""
-    from tactile_descriptors_ros.nodes.conversions import SkinFrame
+    from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.streams.skin_parts import SkinRun
 
     runs = []
@@ -196,7 +198,8 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
 
     from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
-    from tactile_descriptors_ros.nodes.conversions import SkinFrame, skin_part_to_msg
+    from tactile_descriptors_ros.streams.frames import SkinFrame
+    from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
     from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 

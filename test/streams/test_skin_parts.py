@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tactile_descriptors_ros.errors import SignalError
-from tactile_descriptors_ros.nodes.conversions import SkinFrame
+from tactile_descriptors_ros.streams.frames import SkinFrame
 from tactile_descriptors_ros.streams.skin_parts import PartGatherer, SkinRun, pack_skin_part, skin_part_chunks
 
 

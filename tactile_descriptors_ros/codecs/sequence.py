@@ -220,6 +220,44 @@ class SequenceTracker:
         self._state[key] = (low, high, seen)
         return event, u
 
+    def track_run(self, key: Hashable, first: int, count: int) -> tuple[SequenceEvent, int]:
+        """Register a run of ``count`` consecutive numbers from ``first`` (one message of a batch).
+
+        For a tracker without duplicate memory (``window=0``), as the
+        messages of one publisher need: they arrive in order, so a run that
+        starts at or before the newest number is a restart of the sender's
+        count (a node started again, a bag replayed again), never a late run.
+
+        Returns
+        -------
+        event : SequenceEvent
+            What the run's first number was (``GAP``: numbers were lost before it).
+        lost : int
+            Numbers lost between the previous run and this one (0 unless ``GAP``).
+        """
+        if self.window:
+            raise ConfigError("track_run needs a tracker without duplicate memory (window=0)")
+        if count < 1:
+            raise ConfigError(f"a run holds at least one number, not {count}")
+        m = self.modulus
+        first = int(first) % m
+        st = self._state.get(key)
+        if st is None:
+            self._state[key] = (first, first + count - 1, set())
+            return SequenceEvent.FIRST, 0
+        low, high, seen = st
+        u = unwrap(first, high + 1, m)
+        if u <= high:
+            self.resets += 1
+            self._state[key] = (first, first + count - 1, set())
+            return SequenceEvent.RESET, 0
+        lost = u - high - 1
+        if lost:
+            self.gaps += 1
+            self.lost += lost
+        self._state[key] = (low, u + count - 1, seen)
+        return (SequenceEvent.GAP if lost else SequenceEvent.IN_ORDER), lost
+
     def _set_time(self, key: Hashable, t_ns: int | None) -> None:
         if t_ns is None:
             self._t_high.pop(key, None)

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile_descriptors_ros.streams.sequence import SequenceEvent, SequenceTracker, Unwrapper, unwrap, unwrap_array
+from tactile_descriptors_ros.codecs.sequence import SequenceEvent, SequenceTracker, Unwrapper, unwrap, unwrap_array
 
 MS = 1_000_000
 
@@ -114,9 +114,28 @@ def test_stream_layer_imports_with_ros_blocked():
                                           'builtin_interfaces', 'launch', 'launch_ros'):
                     raise ImportError('blocked for this test: ' + name)
         sys.meta_path.insert(0, Block())
-        from tactile_descriptors_ros.streams import biotac, link, sequence, skin
+        from tactile_descriptors_ros.codecs import sequence
+        from tactile_descriptors_ros.streams import biotac, frames, link, skin, skin_parts
         print('ok')
         """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+def test_runs_of_a_batch_topic_count_lost_frames_and_restarts():
+    from tactile_descriptors_ros.codecs.sequence import SequenceEvent
+
+    t = SequenceTracker(1 << 32, window=0)
+    assert t.track_run("a", 10, 5) == (SequenceEvent.FIRST, 0)  # frames 10..14
+    assert t.track_run("a", 15, 5) == (SequenceEvent.IN_ORDER, 0)
+    assert t.track_run("a", 23, 2) == (SequenceEvent.GAP, 3)  # 20, 21, 22 lost
+    assert t.lost == 3 and t.gaps == 1
+    # the 32-bit count wraps: no loss
+    t.track_run("b", (1 << 32) - 2, 2)
+    assert t.track_run("b", 0, 1) == (SequenceEvent.IN_ORDER, 0)
+    # a sender that starts again from 0 is a restart, not four billion lost frames
+    assert t.track_run("a", 0, 1) == (SequenceEvent.RESET, 0)
+    assert t.resets == 1 and t.lost == 3
+    with pytest.raises(Exception, match="window=0"):
+        SequenceTracker(1 << 32, window=8).track_run("a", 0, 1)
