@@ -6,9 +6,9 @@
 #                 .venv/setup.bash (source it, like a workspace's install/setup.bash)
 #   make test     set everything up, then run the tests
 #   make demo     set everything up, then run a simulated robot through the live graph
-#   make report   regenerate docs/results.md and its plots from the real recordings
+#   make report   regenerate lab/docs/results.md and its plots from the real recordings
 #   make report-length  only its touch-length sections (minutes, not an hour)
-#   make protocols  the paper's protocols on simulated robots (docs/simulated.md)
+#   make protocols  the paper's protocols on simulated robots (lab/docs/simulated.md)
 #   make bench    time the descriptor path against a naive baseline
 #   make clean    remove the venv and build products
 
@@ -56,10 +56,10 @@ $(VENV)/.venv-created:
 	$(PIP) install --upgrade "pip>=23" "setuptools>=68" wheel
 	touch $@
 
-$(VENV)/.deps: $(VENV)/.venv-created $(ROS_REQUIREMENTS) requirements/base.txt requirements/eval.txt requirements/test.txt
+$(VENV)/.deps: $(VENV)/.venv-created $(ROS_REQUIREMENTS) requirements/base.txt requirements/lab.txt requirements/test.txt
 	$(STEP) "setup 2/7: ROS 2 wheels and libraries (3-5 minutes; each package is listed as it comes)"
 	set -o pipefail; $(PIP_LIST) install --progress-bar off -r $(ROS_REQUIREMENTS) -r requirements/base.txt \
-	  -r requirements/eval.txt -r requirements/test.txt \
+	  -r requirements/lab.txt -r requirements/test.txt \
 	  2>&1 | sed -u -n -E 's/^(Collecting|Installing|Successfully|ERROR|error)/    \1/p'
 	touch $@
 
@@ -75,9 +75,10 @@ $(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/pa
 	  || { tail -50 $(BUILD)/msgs-install.log; exit 1; }
 	touch $@
 
-$(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg
-	$(STEP) "setup 4/7: installing tactile_descriptors_ros (a few seconds)"
+$(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg lab/pyproject.toml
+	$(STEP) "setup 4/7: installing tactile_descriptors_ros and the lab beside it, tactile_descriptors_lab (a few seconds)"
 	$(PIP) install --no-deps --no-build-isolation -e .
+	$(PIP) install --no-deps --no-build-isolation -e lab
 	touch $@
 
 # The ament index entries an editable install does not make (pip installs no
@@ -141,13 +142,13 @@ demo-nao: setup
 	$(VENV)/bin/tactile demo nao $(DEMO_ARGS)
 
 report: setup
-	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs --readme README.md
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --readme README.md
 
 report-length: setup
-	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out docs --only length --readme README.md
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --only length --readme README.md
 
 protocols: setup
-	$(VENV)/bin/tactile protocols --out docs
+	$(VENV)/bin/tactile protocols --out lab/docs
 
 bench: setup
 	$(VENV)/bin/tactile bench

@@ -10,7 +10,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),
-    package_data={PACKAGE: ["sim/models/*.json", "datasets/mappings/*.yaml"]},
+    package_data={PACKAGE: ["sim/models/*.json"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
@@ -18,14 +18,9 @@ setup(
         ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
     ],
-    # What the robot needs (drivers, window node, classifier, bags, the tactile CLI);
-    # the evaluation, report, bench and simulated protocols need the "eval" extra:
-    # pip install .[eval]
-    install_requires=["numpy", "scipy", "PyYAML", "python-can", "pyserial", "rosbags"],
-    extras_require={
-        "eval": ["scikit-learn", "matplotlib", "tqdm", "threadpoolctl", "psutil"],
-        "import": ["h5py"],  # HDF5 tables for tactile import/evaluate
-    },
+    # What the robot needs (drivers, window node, classifier, bags, the tactile CLI). The
+    # evaluation, import, benches, fuzzing and reports are the lab package beside it (lab/).
+    install_requires=["numpy", "scipy", "PyYAML", "python-can", "pyserial", "rosbags", "tqdm"],
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="tactile_descriptors_ros maintainers",

@@ -202,7 +202,7 @@ class BagWriter:
         self._closed = False
 
     # ------------------------------------------------------------------ lifecycle
-    def open(self) -> "BagWriter":
+    def open(self) -> BagWriter:
         """Create the bag directory and storage file."""
         try:
             self._writer.open()
@@ -220,7 +220,7 @@ class BagWriter:
             except Exception as exc:
                 raise BagError(f"cannot finish bag {self.path}: {exc}") from exc
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self.open()
 
     def __exit__(
@@ -364,7 +364,7 @@ class BagReader:
         self._checked: set[str] = set()
         self.info: BagInfo | None = None
 
-    def open(self) -> "BagReader":
+    def open(self) -> BagReader:
         try:
             self._reader.open()
         except Exception as exc:
@@ -409,7 +409,7 @@ class BagReader:
     def close(self) -> None:
         self._reader.close()
 
-    def __enter__(self) -> "BagReader":
+    def __enter__(self) -> BagReader:
         return self.open()
 
     def __exit__(self, *exc: object) -> None:

@@ -529,7 +529,7 @@ class FramePattern:
         if electrodes and electrodes != list(range(1, 20)) and electrodes != list(range(1, 25)):
             raise ConfigError(
                 f"the frame pattern must sample electrodes E1..E19 (BioTac) or E1..E24 (BioTac SP) "
-                f"once each; it samples {['E%d' % e for e in electrodes]}", key="frame_pattern")
+                f"once each; it samples {[f'E{e}' for e in electrodes]}", key="frame_pattern")
         words = [s for s in slots if s != IDLE]
         if len(words) > 256:
             raise ConfigError(f"frame pattern too long ({len(words)} words, at most 256)", key="frame_pattern")

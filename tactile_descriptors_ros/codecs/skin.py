@@ -253,7 +253,7 @@ class SkinSampleBatch:
                                             self.values.tolist(), counts, self.stamp_ns.tolist())]
 
 
-def check_batch_ids(samples: "SkinSampleBatch") -> None:
+def check_batch_ids(samples: SkinSampleBatch) -> None:
     """Refuse a batch whose sequence numbers or cell ids do not fit the wire formats (8 and 16 bits).
 
     Raises

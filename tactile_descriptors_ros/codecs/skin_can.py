@@ -40,8 +40,19 @@ import numpy as np
 from ..errors import CodecError
 from .can_frames import CAN_FRAME_DTYPE, FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, empty_frames
 from .framing import SequenceEvent, SequenceTracker
-from .skin import (NO_STAMP, NOMINAL_RATE_HZ, check_batch_ids, PAYLOAD_SIZE, Modality, SkinSample, SkinSampleBatch, pack_values, pack_values_batch,
-                   unpack_values, unpack_values_batch)
+from .skin import (
+    NO_STAMP,
+    NOMINAL_RATE_HZ,
+    PAYLOAD_SIZE,
+    Modality,
+    SkinSample,
+    SkinSampleBatch,
+    check_batch_ids,
+    pack_values,
+    pack_values_batch,
+    unpack_values,
+    unpack_values_batch,
+)
 
 __all__ = [
     "PROTOCOL_TAG",

@@ -30,7 +30,16 @@ import numpy as np
 
 from ..errors import CodecError, FrameError
 from .framing import SequenceTracker, StreamDecoder, crc32
-from .skin import NOMINAL_RATE_HZ, Modality, SkinSample, check_batch_ids, SkinSampleBatch, pack_values, pack_values_batch, unpack_values
+from .skin import (
+    NOMINAL_RATE_HZ,
+    Modality,
+    SkinSample,
+    SkinSampleBatch,
+    check_batch_ids,
+    pack_values,
+    pack_values_batch,
+    unpack_values,
+)
 
 __all__ = ["SYNC", "HEADER_SIZE", "MAX_PAYLOAD", "encode_skin_frame", "encode_skin_frames", "crc32_rows",
            "SkinSerialEncoder", "SkinSerialDecoder"]

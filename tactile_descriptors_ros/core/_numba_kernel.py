@@ -47,7 +47,8 @@ from pathlib import Path
 import numba
 import numpy as np
 
-__all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "CACHE_DIR", "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
+__all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "CACHE_DIR", "PATH_INDEPENDENT_CACHE",
+           "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE"]
 
 

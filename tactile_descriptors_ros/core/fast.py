@@ -10,7 +10,7 @@ data, integers too large for exact sums, windows of fewer than 3 samples or
 pairs, unsorted stamps) is computed by the reference,
 :func:`.descriptors.cell_quantities`, the paper's maths as it is written.
 Both give the same values to rounding and the same quality flags; property
-tests keep them equal (``test/perf/test_fast_paths.py``).
+tests keep them equal (``test/core/test_fast_paths.py``).
 
 Backends are registered by name in :data:`BACKENDS` (module path, imported
 on first use, as python-can registers its interfaces).  The first one that

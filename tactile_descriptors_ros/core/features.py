@@ -405,7 +405,7 @@ def band_hjorth(vibration: np.ndarray, rate_hz: float, spectrum: np.ndarray | No
     ``var(y'') = sum P_k G_k^2`` over the band's bins.  Equal (float
     rounding) to the time-domain computation on ``irfft`` of the masked
     spectrum; one FFT per channel instead of a filter per band (the
-    descriptor's live cost, docs/performance.md).
+    descriptor's live cost, lab/docs/performance.md).
 
     Parameters
     ----------

@@ -35,7 +35,7 @@ eq. 30-32 exactly):
 
 On the real BioTac recordings (2 s windows, train trials 1-20, test 21-30)
 these two lift one-pass online accuracy from about 85 % to about 94 %
-(``docs/results.md``).
+(``lab/docs/results.md``).
 
 Scikit-learn's PassiveAggressiveClassifier is being deprecated and costs
 about 25 ms per single-sample update for 120 classes; this numpy version
@@ -179,7 +179,7 @@ class PassiveAggressive:
                 "weighted_sum": self._u.tolist(), "updates": self.updates, "mistakes": self.mistakes}
 
     @classmethod
-    def from_state(cls, state: dict) -> "PassiveAggressive":
+    def from_state(cls, state: dict) -> PassiveAggressive:
         """Rebuild from :meth:`state`, checked: a corrupt but parseable state raises :class:`ModelError`.
 
         Files written before ``update``, ``average`` and ``weighted_sum``
@@ -329,7 +329,7 @@ class OnlineClassifier:
                 "scaler": self.scaler.state(), "pa": self.pa.state()}
 
     @classmethod
-    def from_state(cls, state: dict) -> "OnlineClassifier":
+    def from_state(cls, state: dict) -> OnlineClassifier:
         """Rebuild from :meth:`state`; every field is checked.
 
         Raises
@@ -373,7 +373,7 @@ class OnlineClassifier:
                 raise ModelError(f"saved {path}, but cannot remove the old journal {journal}: {exc}") from None
 
     @classmethod
-    def load(cls, path: str | os.PathLike[str], labels: Sequence[str] | None = None) -> "OnlineClassifier":
+    def load(cls, path: str | os.PathLike[str], labels: Sequence[str] | None = None) -> OnlineClassifier:
         """Load a model file and replay its journal (:class:`ModelStore`), if any.
 
         With ``labels``, refuse a model of another descriptor layout.
@@ -394,7 +394,7 @@ def journal_path(path: str | os.PathLike[str]) -> Path:
     return path.with_name(path.name + ".journal")
 
 
-def _load(path: Path, labels: Sequence[str] | None) -> tuple["OnlineClassifier", int, int, int]:
+def _load(path: Path, labels: Sequence[str] | None) -> tuple[OnlineClassifier, int, int, int]:
     """The model with its journal replayed, the snapshot's size, the journal's entries and valid bytes."""
     try:
         raw = path.read_bytes()

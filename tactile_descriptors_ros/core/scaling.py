@@ -60,7 +60,7 @@ class RunningStandardizer:
         self.m2 = np.zeros(n_features)
         self.min_std = float(min_std)
 
-    def partial_fit(self, x: np.ndarray) -> "RunningStandardizer":
+    def partial_fit(self, x: np.ndarray) -> RunningStandardizer:
         """Update with one sample (1-D) or several (2-D, one per row)."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         if x.shape[1] != self.mean.shape[0]:
@@ -92,7 +92,7 @@ class RunningStandardizer:
         return {"n": self.n, "mean": self.mean.tolist(), "m2": self.m2.tolist(), "min_std": self.min_std}
 
     @classmethod
-    def from_state(cls, state: dict) -> "RunningStandardizer":
+    def from_state(cls, state: dict) -> RunningStandardizer:
         obj = cls(len(state["mean"]), state.get("min_std", 1e-9))
         obj.n = int(state["n"])
         obj.mean = np.asarray(state["mean"], dtype=np.float64)
@@ -124,7 +124,7 @@ class FeatureScaler:
             raise SignalError(f"expected {len(self.labels)} descriptor values, got {x.shape[-1]}")
         return log_activity(x, self.mask) if self.use_log else x
 
-    def partial_fit(self, x: np.ndarray) -> "FeatureScaler":
+    def partial_fit(self, x: np.ndarray) -> FeatureScaler:
         """Update the running statistics with one or more samples."""
         if self.use_std:
             self.standardizer.partial_fit(self._pre(x))
@@ -140,7 +140,7 @@ class FeatureScaler:
                 "standardizer": self.standardizer.state()}
 
     @classmethod
-    def from_state(cls, state: dict) -> "FeatureScaler":
+    def from_state(cls, state: dict) -> FeatureScaler:
         obj = cls(state["labels"], state["log_activity"], state["standardize"])
         obj.standardizer = RunningStandardizer.from_state(state["standardizer"])
         return obj

@@ -869,5 +869,6 @@ class Windower:
 def _ns(seconds: float, key: str, allow_zero: bool = False) -> int:
     value = float(seconds)
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        raise ConfigError(f"must be a {'non-negative' if allow_zero else 'positive'} duration in seconds, got {seconds!r}", key=key)
+        kind = "non-negative" if allow_zero else "positive"
+        raise ConfigError(f"must be a {kind} duration in seconds, got {seconds!r}", key=key)
     return int(round(value * 1e9))

@@ -73,8 +73,9 @@ def launch_description_for(robot: str):
         The launch arguments (``robot`` and :data:`LAUNCH_ARGUMENTS`) and one
         ``OpaqueFunction`` that builds the nodes from their values.
     """
-    from launch import LaunchDescription
     from launch.actions import DeclareLaunchArgument, OpaqueFunction
+
+    from launch import LaunchDescription
 
     return LaunchDescription([
         DeclareLaunchArgument("robot", default_value=robot,

@@ -48,12 +48,12 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, FramePattern
 from ..errors import ConfigError
 from ..streams.biotac import BiotacStream, BridgeFrameSource, ReadItem, SensorConfig, SensorState, SpiFrameSource
-from .common import RateMeter, Status, declare, run_node
 from ..streams.frames import BioTacBatch
+from ..topics import FRAMES_TOPIC
+from .common import RateMeter, Status, declare, run_node
 from .conversions import biotac_batch_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from ..topics import FRAMES_TOPIC
 
 __all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "main"]
 

@@ -53,8 +53,15 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.features import groups_in_labels, selection_name
-from ..core.labels import (DEFAULT_LABEL_WAIT_S, DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED,
-                           LabelProtocol, StampOrder)
+from ..core.labels import (
+    DEFAULT_LABEL_WAIT_S,
+    DEFAULT_MAX_CLASS_NAME_CHARS,
+    EXPIRED,
+    LEARN,
+    REFUSED,
+    LabelProtocol,
+    StampOrder,
+)
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
 from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
@@ -99,6 +106,7 @@ class ClassifierNode(Node):
     def __init__(self, node_name: str = "classifier_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         from std_srvs.srv import Trigger
+
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
 
         robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model file is per robot "

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.aggregation import RobotDescriptor
-from ..core.windowing import CellChunk, Window
 from ..core.robot import CellType
+from ..core.windowing import CellChunk, Window
 from ..errors import ConfigError, SignalError
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 from ..streams.frames import BioTacBatch, SkinFrame

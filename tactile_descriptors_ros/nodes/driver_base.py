@@ -31,13 +31,12 @@ from typing import Any
 
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
-from ..core.robot import RobotDescription, load_robot
+from ..core.robot import RobotDescription, load_robot, select_body_parts
 from ..errors import ConfigError, TactileError, TransportError
 from ..streams.link import DeviceLink
 from ..transports import create_transport
 from .common import Diagnostics, Status, declare, report_unknown_overrides
 from .conversions import message_kind
-from ..core.robot import select_body_parts
 
 __all__ = ["DriverBase"]
 

@@ -46,11 +46,11 @@ from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..streams.skin import CellState, SkinStream
 from ..streams.skin_parts import PartGatherer, SkinRun, pack_skin_part
+from ..topics import FRAMES_TOPIC
 from .common import RateMeter, Status, declare, run_node
 from .conversions import skin_part_to_msg
 from .driver_base import DriverBase
 from .qos import QosDefaults, declare_qos
-from ..topics import FRAMES_TOPIC
 
 __all__ = ["SkinDriver", "main"]
 

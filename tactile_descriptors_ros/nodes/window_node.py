@@ -15,7 +15,7 @@ already waiting on all the node's frames subscriptions (at most
 polls for finished windows once.  rclpy's executor costs about 0.2 ms of CPU
 per callback here, more than the conversion and the windowing together, so a
 node that has fallen behind catches up instead of paying that per message
-(``docs/latency.md``).
+(``lab/docs/latency.md``).
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
 its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a
@@ -49,14 +49,14 @@ import numpy as np
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
+from ..codecs.sequence import SequenceEvent, SequenceTracker
 from ..core.blocks import check_blocks, describe_blocks
-from ..core.features import check_groups, groups_of_channels, selection_name
 from ..core.fast import warm_up
+from ..core.features import check_groups, groups_of_channels, selection_name
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, load_robot, select_body_parts
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC
-from ..codecs.sequence import SequenceEvent, SequenceTracker
 from .common import Diagnostics, RateMeter, Status, declare, report_unknown_overrides, run_node, steady_clock
 from .conversions import (
     biotac_msg_to_chunk,

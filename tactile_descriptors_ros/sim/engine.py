@@ -287,7 +287,8 @@ class SimContext:
         x = np.interp(t_s, [t0, t0 + ramp_s, t1 - ramp_s, t1], [0.0, 1.0, 1.0, 0.0], left=0.0, right=0.0)
         return x
 
-    def motion_profile(self, timing: ExplorationTiming, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
+    def motion_profile(self, timing: ExplorationTiming, t_s: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
         """Speed factor 0..1 and direction (dx, dy) at ``t_s``, and the slip event times (s).
 
         Lateral and medial motions go back and forth over ``stroke_m``
@@ -525,7 +526,7 @@ def effect_normal_force(ctx: SimContext, p: Mapping[str, Any]) -> None:
         rate = g.rates[key]
         fluct = g.scratch.setdefault("pdc_fluct", {})
         shares = g.scratch.setdefault("force_share", {})
-        for j, timing, part, idx, force, sliding in _contacts(ctx, g):
+        for j, timing, part, idx, force, _sliding in _contacts(ctx, g):
             g0, g1 = _sample_range(ctx, timing, rate, g.n_total[key])
             if g1 <= g0:
                 continue
@@ -565,7 +566,7 @@ def effect_texture_vibration(ctx: SimContext, p: Mapping[str, Any]) -> None:
         key = "pac" if g.kind == "biotac" else "accel"
         rate = g.rates[key]
         frame_means = g.scratch.setdefault("pac_frame_mean", {})
-        for j, timing, part, idx, force, sliding in _contacts(ctx, g):
+        for j, timing, _part, idx, force, sliding in _contacts(ctx, g):
             if not sliding:
                 continue
             g0, g1 = _sample_range(ctx, timing, rate, g.n_total[key])
@@ -616,7 +617,7 @@ def effect_electrode_deformation(ctx: SimContext, p: Mapping[str, Any]) -> None:
             fm = g.scratch.get("pac_frame_mean", {})
             fl = g.scratch.get("pdc_fluct", {})
             n_el = len(g.channels["electrodes"])
-            for j, timing, part, idx, force, sliding in _contacts(ctx, g):
+            for j, timing, _part, idx, force, _sliding in _contacts(ctx, g):
                 g0, g1 = _sample_range(ctx, timing, rate, g.n_total["electrodes"])
                 if g1 <= g0:
                     continue
@@ -652,7 +653,7 @@ def effect_electrode_deformation(ctx: SimContext, p: Mapping[str, Any]) -> None:
         else:
             rate = g.rates["force"]
             n_per = g.cell_type.force.n_per_count
-            for j, timing, part, idx, force, sliding in _contacts(ctx, g):
+            for j, timing, _part, idx, force, sliding in _contacts(ctx, g):
                 if not sliding:
                     continue
                 g0, g1 = _sample_range(ctx, timing, rate, g.n_total["force"])
@@ -728,7 +729,7 @@ def effect_proximity(ctx: SimContext, p: Mapping[str, Any]) -> None:
         rate = g.rates["proximity"]
         full = float((1 << g.bits["proximity"][0]) - 1)
         base, n = g.base["proximity"], g.data["proximity"].shape[-1]
-        for j, timing, part, idx, force, sliding in _contacts(ctx, g, margin_s=lead + 0.5):
+        for _j, timing, _part, idx, _force, _sliding in _contacts(ctx, g, margin_s=lead + 0.5):
             g0, g1 = _sample_range(ctx, timing, rate, g.n_total["proximity"], margin_s=lead)
             lo, hi = max(g0, base), min(g1, base + n)
             if hi <= lo:
@@ -758,7 +759,10 @@ _NOISY = ("pac", "pdc", "tac", "tdc", "electrodes", "accel", "force")
 
 
 def effect_sensor_noise(ctx: SimContext, p: Mapping[str, Any]) -> None:
-    """White Gaussian noise of ``std_counts`` counts (``per_stream[name]`` overrides; proximity and temperature only when named)."""
+    """White Gaussian noise of ``std_counts`` counts.
+
+    ``per_stream[name]`` overrides it; proximity and temperature get noise only when named.
+    """
     default = float(p["std_counts"])
     per = p.get("per_stream", {}) or {}
     for g in ctx.groups:

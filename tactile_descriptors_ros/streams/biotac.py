@@ -24,9 +24,9 @@ import numpy as np
 
 from ..codecs.biotac_spi import BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
 from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
+from ..codecs.sequence import Unwrapper
 from ..errors import CodecError
 from .frames import BioTacBatch
-from ..codecs.sequence import Unwrapper
 
 __all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream"]
 

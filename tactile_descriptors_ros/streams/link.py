@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ..errors import TactileError, TransportError
+from ..errors import TactileError
 
 __all__ = ["DeviceLink"]
 

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..codecs.sequence import SequenceTracker
 from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from .frames import SkinFrame
-from ..codecs.sequence import SequenceTracker
 
 __all__ = ["SkinStream", "CellState", "RECENT_FORCE"]
 
@@ -234,7 +234,7 @@ class SkinStream:
         mono = time.monotonic()
         lost_per_group = np.add.reduceat(lost, starts)
         touched: dict[int, CellState] = {}
-        for g, (c, m, a, b, nl) in enumerate(zip(cell_of.tolist(), (gk % 4 + 1).tolist(), starts.tolist(),
+        for _g, (c, m, a, b, nl) in enumerate(zip(cell_of.tolist(), (gk % 4 + 1).tolist(), starts.tolist(),
                                                  ends.tolist(), lost_per_group.tolist())):
             cell = self._cell_list[c]
             tt, vv = t[a:b], vals[a:b]

@@ -12,9 +12,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..codecs.biotac_spi import (IDLE, PROPERTY_SERIAL_NUMBER, SERIAL_NUMBER_LENGTH, FramePattern,
-                                 command_byte, decode_property_reply, parse_serial_number,
-                                 property_command)
+from ..codecs.biotac_spi import (
+    IDLE,
+    PROPERTY_SERIAL_NUMBER,
+    SERIAL_NUMBER_LENGTH,
+    FramePattern,
+    command_byte,
+    decode_property_reply,
+    parse_serial_number,
+    property_command,
+)
 from ..errors import ConfigError
 from .base import SpiSegment, SpiTransport
 

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 import yaml
-from conftest import make_batch, make_descriptor, make_label, make_prediction
 
+from conftest import make_batch, make_descriptor, make_label, make_prediction
 from tactile_descriptors_ros.bags.echo import echo_bag, type_constants
 from tactile_descriptors_ros.bags.io import BagWriter
 from tactile_descriptors_ros.bags.summary import EchoTracker, format_summary, message_to_dict, quality_names, to_yaml

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import make_batch, make_descriptor, make_label, make_prediction
 
+from conftest import make_batch, make_descriptor, make_label, make_prediction
 from tactile_descriptors_ros.bags.io import BagReader, BagWriter, bag_info, read_messages
 from tactile_descriptors_ros.bags.qos import SENSOR_DATA_QOS, adapt_offered_qos, make_qos
 from tactile_descriptors_ros.bags.types import TACTILE_TYPES, msg_dir, tactile_typestore

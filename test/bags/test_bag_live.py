@@ -94,7 +94,7 @@ def test_record_then_replay_gives_identical_bytes(ros_context, tmp_path, ros_mes
 
     from tactile_descriptors_ros.bags.live import TopicSelector
     from tactile_descriptors_ros.bags.record import record
-    from tactile_descriptors_ros.bags.replay import PlayOptions, Player
+    from tactile_descriptors_ros.bags.replay import Player, PlayOptions
 
     examples = ros_message_examples
     qos = {0: qos_profile_sensor_data,

@@ -8,9 +8,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_descriptors_ros.codecs import biotac_spi as spi
+from tactile_descriptors_ros.errors import (
+    CodecError,
+    ConfigError,
+    ErrorWordError,
+    FrameError,
+    ParityError,
+    WordFormatError,
+)
 from tactile_descriptors_ros.markers import INVALID_COUNT
-from tactile_descriptors_ros.errors import (CodecError, ConfigError, ErrorWordError, FrameError, ParityError,
-                                            WordFormatError)
 
 
 @pytest.mark.parametrize("name,byte,channel", [

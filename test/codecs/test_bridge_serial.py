@@ -9,8 +9,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_descriptors_ros.codecs import biotac_spi as spi
-from tactile_descriptors_ros.codecs.bridge_serial import (SYNC, BridgeDecoder, BridgeEncoder, BridgeFrame,
-                                                          BridgeFrameType, encode_bridge_frame)
+from tactile_descriptors_ros.codecs.bridge_serial import (
+    SYNC,
+    BridgeDecoder,
+    BridgeEncoder,
+    BridgeFrame,
+    BridgeFrameType,
+    encode_bridge_frame,
+)
 from tactile_descriptors_ros.codecs.framing import CRC_NAME, SequenceEvent, SequenceTracker, crc32
 from tactile_descriptors_ros.errors import CodecError, ConfigError
 

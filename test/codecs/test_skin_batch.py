@@ -12,10 +12,16 @@ from hypothesis import strategies as st
 
 from tactile_descriptors_ros.codecs.can_frames import frames_from_messages, messages_from_frames
 from tactile_descriptors_ros.codecs.framing import SequenceTracker
-from tactile_descriptors_ros.codecs.skin import (Modality, SkinSample, SkinSampleBatch, pack_values,
-                                                 pack_values_batch, unpack_values, unpack_values_batch)
-from tactile_descriptors_ros.codecs.skin_can import (PROTOCOL_TAG, SkinCanDecoder, encode_can_frames,
-                                                     encode_can_message)
+from tactile_descriptors_ros.codecs.skin import (
+    Modality,
+    SkinSample,
+    SkinSampleBatch,
+    pack_values,
+    pack_values_batch,
+    unpack_values,
+    unpack_values_batch,
+)
+from tactile_descriptors_ros.codecs.skin_can import PROTOCOL_TAG, SkinCanDecoder, encode_can_frames, encode_can_message
 from tactile_descriptors_ros.errors import CodecError
 
 _RANGE = {Modality.ACCEL: (-512, 511), Modality.FORCE: (0, 4095), Modality.PROXIMITY: (0, 0xFFFE),

@@ -10,8 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tactile_descriptors_ros.codecs.skin import Modality, SkinSample, pack_values, unpack_values
-from tactile_descriptors_ros.codecs.skin_can import (PROTOCOL_TAG, SkinCanDecoder, SkinCanEncoder, arbitration_id,
-                                                     encode_can_message, split_arbitration_id)
+from tactile_descriptors_ros.codecs.skin_can import (
+    PROTOCOL_TAG,
+    SkinCanDecoder,
+    SkinCanEncoder,
+    arbitration_id,
+    encode_can_message,
+    split_arbitration_id,
+)
 from tactile_descriptors_ros.codecs.skin_serial import SYNC, SkinSerialDecoder, SkinSerialEncoder, encode_skin_frame
 from tactile_descriptors_ros.errors import CodecError, FrameError
 

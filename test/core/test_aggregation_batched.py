@@ -151,7 +151,7 @@ def test_batched_equals_per_body_part(part_sizes, seed, opts, layout, channels):
 @pytest.mark.parametrize("name", ["shadow_hand", "nao"])
 @pytest.mark.parametrize("channels", ["averaged", "per_channel"])
 def test_shipped_robots_identical_on_bench_windows(name, channels):
-    from tactile_descriptors_ros.perf.bench import biotac_window, skin_window
+    from tactile_descriptors_ros.sim.synthetic import biotac_window, skin_window
 
     robot = load_robot(name)
     cells = biotac_window(robot, 0.5, seed=3) if name == "shadow_hand" else skin_window(robot, 0.5, seed=3)
@@ -181,7 +181,7 @@ def test_single_channel_modality_in_a_large_body_part(channels):
 
 @pytest.mark.parametrize("chunk_samples", [1, 7 * 3 * 200])
 def test_chunks_of_cells_change_nothing(monkeypatch, chunk_samples):
-    from tactile_descriptors_ros.perf.bench import skin_window
+    from tactile_descriptors_ros.sim.synthetic import skin_window
 
     robot = load_robot("nao")
     cells = skin_window(robot, 0.2, seed=5)

@@ -14,14 +14,13 @@ import copy
 
 import numpy as np
 import pytest
+from test_aggregation_batched import _assert_same, _robot, _window  # noqa: E402  (same directory)
 
 from tactile_descriptors_ros.core import aggregation
 from tactile_descriptors_ros.core.aggregation import describe_window
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.errors import SignalError
-from tactile_descriptors_ros.perf.bench import biotac_window, skin_window
-
-from test_aggregation_batched import _assert_same, _robot, _window  # noqa: E402  (same directory)
+from tactile_descriptors_ros.sim.synthetic import biotac_window, skin_window
 
 _OPTS = {"missing": 0.1, "mixed_shapes": 0.0, "floats": 0.0, "own_time": 0.0, "big": 0.0, "mixed_dtypes": 0.0}
 
@@ -67,7 +66,7 @@ def test_cells_shapes_dtypes_and_modes_changing_between_calls():
     for cid in ids[:40]:  # whole body parts out of contact
         out_of_contact[cid].force_n = out_of_contact[cid].force_n * 0.0
     sequence = windows + [fewer, out_of_contact, windows[0], fewer, windows[1]]
-    for k, cells in enumerate(sequence):
+    for _k, cells in enumerate(sequence):
         for channels in ("averaged", "per_channel"):
             for layout in ("concat", "pooled"):
                 _assert_same(robot, cells, layout, channels)
@@ -77,7 +76,7 @@ def test_cells_shapes_dtypes_and_modes_changing_between_calls():
 
 def test_robots_of_different_layouts_one_after_the_other():
     rng = np.random.default_rng(11)
-    for k in range(12):
+    for _k in range(12):
         robot = _robot([int(x) for x in rng.integers(1, 13, rng.integers(1, 7))])
         cells = _window(robot, int(rng.integers(0, 2**31)), _OPTS)
         for channels in ("averaged", "per_channel"):

@@ -252,7 +252,7 @@ def test_journal_replays_to_the_same_bits_and_survives_a_torn_last_line(tmp_path
 
 def test_journal_entry_size_does_not_grow_with_the_classes(tmp_path):
     """Saving one label writes the changed rows only: its bytes are the same for 10 and 1,000 classes."""
-    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+    from tactile_descriptors_ros.core.learning import ModelStore
 
     sizes = {}
     for n_classes in (10, 1000):
@@ -339,7 +339,7 @@ def test_stale_or_corrupt_journal(tmp_path):
 
 
 def test_journal_compacts_once_it_outgrows_the_file(tmp_path):
-    from tactile_descriptors_ros.core.learning import ModelStore, journal_path
+    from tactile_descriptors_ros.core.learning import ModelStore
 
     path = tmp_path / "model.json"
     clf = OnlineClassifier(["A_x", "M_x"])

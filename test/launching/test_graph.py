@@ -7,8 +7,12 @@ import yaml
 
 from tactile_descriptors_ros.core.robot import load_robot, robot_config_path
 from tactile_descriptors_ros.errors import ConfigError
-from tactile_descriptors_ros.launching.graph import (build_graph, flatten_parameters, parameters_document,
-                                                     write_parameters_file)
+from tactile_descriptors_ros.launching.graph import (
+    build_graph,
+    flatten_parameters,
+    parameters_document,
+    write_parameters_file,
+)
 from tactile_descriptors_ros.launching.processes import node_command
 
 

@@ -29,12 +29,13 @@ from pathlib import Path
 import pytest
 
 try:
-    import launch
     import launch_testing
     import launch_testing.actions
     import launch_testing.asserts
     from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
     from launch.launch_description_sources import PythonLaunchDescriptionSource
+
+    import launch
 except ImportError as exc:  # pragma: no cover - depends on the set-up
     pytest.skip(f"launch_testing / the ros2 launch system is not installed ({exc}); make setup installs it from "
                 "../shared/ros2-cli", allow_module_level=True)

@@ -41,7 +41,7 @@ def test_messages_cross_a_real_topic(ros_context, ros_message_examples):
         executor.spin_once(timeout_sec=0.05)
     node.destroy_node()
     executor.shutdown()
-    for pub, msg, topic in pubs:
+    for _pub, msg, topic in pubs:
         assert received[topic], f"{type(msg).__name__} never arrived"
         got = received[topic][0]
         assert got == msg

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from helpers import spin_until
+from node_helpers import spin_until
 
 pytestmark = pytest.mark.ros
 

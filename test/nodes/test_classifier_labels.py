@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from descriptor_msgs import descriptor_msg
-from helpers import spin_until
+from node_helpers import spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -56,7 +56,8 @@ def _describe(g, eids, rng) -> None:
         for eid in eids[k:k + 25]:
             g["desc"].publish(descriptor_msg(eid, rng))
         want = n + len(eids[k:k + 25])
-        assert spin_until(g["ex"], lambda: len(g["preds"]) >= want, 60), f"{len(g['preds'])} of {want} predictions"
+        assert spin_until(g["ex"], lambda want=want: len(g["preds"]) >= want, 60), \
+            f"{len(g['preds'])} of {want} predictions"
 
 
 def test_a_burst_of_1000_labels_is_learned_completely_and_durably(classifier):

@@ -43,8 +43,8 @@ def test_biotac_round_trip_and_chunk():
 
 def test_inconsistent_lengths_are_errors():
     from tactile_descriptors_ros.errors import SignalError
-    from tactile_descriptors_ros.streams.frames import BioTacBatch
     from tactile_descriptors_ros.nodes.conversions import biotac_batch_to_msg, biotac_msg_to_chunk
+    from tactile_descriptors_ros.streams.frames import BioTacBatch
 
     with pytest.raises(SignalError):
         BioTacBatch(0, np.zeros(3, np.uint16), np.zeros(2, np.int64), np.zeros(1, np.int64),
@@ -56,12 +56,12 @@ def test_inconsistent_lengths_are_errors():
 
 
 def test_skin_round_trip_and_chunk():
-    from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.nodes.conversions import (
         skin_frame_to_msg,
         skin_msg_to_chunk,
         skin_msg_to_frame,
     )
+    from tactile_descriptors_ros.streams.frames import SkinFrame
 
     acc = np.array([[1, 2, -3, 4], [0, -512, 7, 8], [9, 10, 11, -32768]], np.int16)
     force = np.array([[100, 200], [110, 65535], [120, 220]], np.uint16)
@@ -106,13 +106,13 @@ def test_stamp_conversion():
 
 def test_extra_channels_and_tares_reach_the_chunk():
     from tactile_descriptors_ros.markers import INVALID_COUNT
-    from tactile_descriptors_ros.streams.frames import BioTacBatch, SkinFrame
     from tactile_descriptors_ros.nodes.conversions import (
         biotac_batch_to_msg,
         biotac_msg_to_chunk,
         skin_frame_to_msg,
         skin_msg_to_chunk,
     )
+    from tactile_descriptors_ros.streams.frames import BioTacBatch, SkinFrame
 
     b = BioTacBatch(stamp_ns=10, pac=np.array([1, 2], np.uint16), pac_offset_ns=np.array([0, 5]),
                     frame_offset_ns=np.array([0, 5]), pdc=np.array([300, INVALID_COUNT], np.uint16),

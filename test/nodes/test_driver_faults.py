@@ -10,8 +10,7 @@ import tty
 
 import numpy as np
 import pytest
-
-from helpers import cell_runs, spin_until
+from node_helpers import cell_runs, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -304,7 +303,7 @@ class _CanAdapter:
     the device openable again; the handle opened before stays dead.
     """
 
-    adapters: dict[str, "_CanAdapter"] = {}
+    adapters: dict[str, _CanAdapter] = {}
 
     def __init__(self, channel: str) -> None:
         import queue
@@ -436,13 +435,12 @@ def test_can_skin_driver_comes_back_after_the_adapter_is_unplugged_and_replugged
     transition; the absence is counted (link disconnects and reconnects, the time away) and the frames
     the cell sent meanwhile are the body part's lost frames, exactly; the bus status is OK again."""
     import can.interfaces
+    import can.util
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
-
-    import can.util
 
     # a python-can interface of its own, registered as a plugin package registers one
     monkeypatch.setitem(can.interfaces.BACKENDS, "tactile_test_unpluggable", (__name__, "UnpluggableCanBus"))

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from tactile_descriptors_ros.perf.scale_graph import scale_robot_files
+from tactile_descriptors_ros.sim.synthetic import scale_robot_files
 
 pytestmark = pytest.mark.ros
 

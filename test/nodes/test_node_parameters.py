@@ -7,8 +7,7 @@ import threading
 import time
 
 import pytest
-
-from helpers import BiotacStream, spin_until
+from node_helpers import BiotacStream, spin_until
 
 pytestmark = pytest.mark.ros
 

@@ -6,12 +6,11 @@ import time
 
 import can
 import pytest
+from node_helpers import cell_runs
 
 from tactile_descriptors_ros.codecs.skin import Modality
 from tactile_descriptors_ros.codecs.skin_can import SkinCanEncoder
 from tactile_descriptors_ros.codecs.skin_serial import SkinSerialEncoder
-
-from helpers import cell_runs
 
 pytestmark = pytest.mark.ros
 
@@ -24,13 +23,12 @@ def _spin_until(executor, cond, timeout_s=10.0):
 
 
 def _make(ros_context, params, transport_factory=None):
+    import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
-
-    import rclpy
 
     drv = SkinDriver(context=ros_context, transport_factory=transport_factory,
                      parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])

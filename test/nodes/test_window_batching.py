@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from helpers import spin_until
+from node_helpers import spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -32,8 +31,8 @@ def _skin_msg(rng, n_a, n_f, *, proximity=True, cdr=True):
     from rclpy.serialization import deserialize_message, serialize_message
 
     from tactile_descriptors_msgs.msg import SkinCellFrame
-    from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.nodes.conversions import skin_frame_to_msg
+    from tactile_descriptors_ros.streams.frames import SkinFrame
 
     acc = rng.integers(-512, 512, (3, n_a)).astype(np.int16)
     force = rng.integers(0, 4096, (3, n_f)).astype(np.uint16)
@@ -117,7 +116,11 @@ def test_part_message_chunks_equal_the_per_cell_messages(cdr):
 
     from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.nodes.conversions import (
-        skin_frame_to_msg, skin_msg_to_chunk, skin_part_msg_to_chunks, skin_part_to_msg)
+        skin_frame_to_msg,
+        skin_msg_to_chunk,
+        skin_part_msg_to_chunks,
+        skin_part_to_msg,
+    )
     from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
 
     rng = np.random.default_rng(7)
@@ -198,10 +201,10 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
 
     from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
-    from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
-    from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
     from tactile_descriptors_ros.nodes.window_node import WindowNode
+    from tactile_descriptors_ros.streams.frames import SkinFrame
+    from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
 
     part = load_robot("nao").body_part("left_hand")
     common = [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),

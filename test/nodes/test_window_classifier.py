@@ -5,10 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
+from node_helpers import BiotacStream, spin_until
 
 from tactile_descriptors_ros.core.learning import OnlineClassifier
-
-from helpers import BiotacStream, spin_until
 
 pytestmark = pytest.mark.ros
 

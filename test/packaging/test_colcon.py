@@ -9,7 +9,6 @@ package and its executables must come from ``install/``, not from the venv.
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import signal
 import subprocess

@@ -1,11 +1,10 @@
-"""The `tactile simulate` and `tactile fit-textures` commands."""
+"""The `tactile simulate` command."""
 
 from __future__ import annotations
 
 import json
 
 import numpy as np
-import pytest
 import yaml
 
 from tactile_descriptors_ros.tools.cli import main
@@ -42,14 +41,3 @@ def test_simulate_bad_scene_is_a_clear_error(tmp_path, capsys):
     path.write_text(yaml.safe_dump(bad))
     assert main(["simulate", str(path)]) == 2
     assert "effects.wind" in capsys.readouterr().err
-
-
-@pytest.mark.realdata
-def test_fit_textures_writes_small_models(biotac_data_dir, tmp_path, capsys):
-    assert main(["fit-textures", str(biotac_data_dir), "-o", str(tmp_path), "--trials", "1-3", "--json"]) == 0
-    summary = json.loads(capsys.readouterr().out)
-    assert len(summary["materials"]) == 20
-    assert all(m["bytes"] < 8000 for m in summary["materials"])
-    from tactile_descriptors_ros.sim.textures import load_material
-
-    assert load_material(tmp_path / "cork.json").source["trials"] == [1, 2, 3]

@@ -9,9 +9,9 @@ import yaml
 from tactile_descriptors_ros.codecs.skin import Modality
 from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder
 from tactile_descriptors_ros.errors import SceneError
-from tactile_descriptors_ros.perf.scale_graph import scale_robot_files
 from tactile_descriptors_ros.sim.scene import load_scene
 from tactile_descriptors_ros.sim.sources import LoopedSkinCanSource, SkinCanSource
+from tactile_descriptors_ros.sim.synthetic import scale_robot_files
 
 
 @pytest.fixture(scope="module")

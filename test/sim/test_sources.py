@@ -12,8 +12,13 @@ from tactile_descriptors_ros.codecs.bridge_serial import BridgeDecoder
 from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder
 from tactile_descriptors_ros.codecs.skin_serial import SkinSerialDecoder
 from tactile_descriptors_ros.sim import parse_scene, simulate
-from tactile_descriptors_ros.sim.sources import (BiotacBridgeSource, SkinCanSource, SkinSerialSource,
-                                                  biotac_spi_bus, bridge_frames)
+from tactile_descriptors_ros.sim.sources import (
+    BiotacBridgeSource,
+    SkinCanSource,
+    SkinSerialSource,
+    biotac_spi_bus,
+    bridge_frames,
+)
 from tactile_descriptors_ros.transports.simulated import SimulatedTransport
 
 HAND = {

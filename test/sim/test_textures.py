@@ -119,18 +119,6 @@ def test_unknown_material_names_the_known_ones():
         tx.get_material("unobtainium")
 
 
-@pytest.mark.realdata
-def test_fit_reproduces_the_shipped_model(biotac_data_dir):
-    """The shipped JSON is exactly what fit-textures computes from the data (trials 1-30)."""
-    from tactile_descriptors_ros.datasets.biotac_slide import load_recordings
-
-    recs = load_recordings(biotac_data_dir, materials=[18])
-    fitted = tx.fit_material(recs, "soft_sponge")
-    shipped = tx.get_material("soft_sponge")
-    assert np.allclose(fitted.vibration.ar, shipped.vibration.ar, rtol=1e-9)
-    assert fitted.deformation.electrode_mean == pytest.approx(shipped.deformation.electrode_mean)
-
-
 def test_slow_parametric_textures_have_a_finite_variance():
     """Poles near z = 1 defeat the step-down recursion; the impulse-response sum still gives the variance."""
     a = -np.real(np.poly([0.9995, 0.9994 * np.exp(0.01j), 0.9994 * np.exp(-0.01j), 0.985]))[1:]

@@ -1,11 +1,9 @@
-"""Command-line arguments: replay --clock BAG, record -e repeated, demo --speed, fit-textures output, progress."""
+"""Command-line arguments: replay --clock BAG, record -e repeated, demo --speed, progress."""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
-import numpy as np
 import pytest
 
 from tactile_descriptors_ros.errors import ConfigError
@@ -73,46 +71,3 @@ def test_demo_summary_names_touches_never_windowed():
     assert never_windowed([(1, 9), (41, 60)], touches) == [1]
     assert never_windowed([(0, 100)], touches) == [1, 2]  # one window over all counts for one touch only
     assert never_windowed([(-5, 12), (19, 31), (45, 46)], touches) == []
-
-
-@pytest.mark.realdata
-def test_fit_textures_writes_into_the_current_directory_by_default(biotac_data_dir, tmp_path, monkeypatch):
-    from tactile_descriptors_ros.sim.textures import models_dir
-
-    shipped = {p.name: p.stat().st_mtime_ns for p in models_dir().glob("*.json")}
-    monkeypatch.chdir(tmp_path)
-    assert main(["fit-textures", str(biotac_data_dir), "--trials", "1-2", "--json"]) == 0
-    written = sorted(p.name for p in (tmp_path / "texture_models").glob("*.json"))
-    assert written and {p.name: p.stat().st_mtime_ns for p in models_dir().glob("*.json")} == shipped
-
-
-@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")  # the reference grid search's
-def test_choosing_c_shows_progress_and_scores_as_a_grid_search(capsys):
-    from sklearn.model_selection import GridSearchCV
-
-    from tactile_descriptors_ros.evaluation.classifiers import _svm_pipeline, cv_splits, fit_svm
-
-    rng = np.random.default_rng(0)
-    y = np.repeat(np.arange(3), 12)
-    X = rng.normal(size=(36, 4)) + y[:, None]
-    groups = np.arange(36)
-    labels = [f"f{i}" for i in range(4)]
-    grid = (0.01, 1.0, 100.0)
-    res = fit_svm(X, y, groups, labels, scaling="standardize", folds=3, repeats=2, c_grid=grid, progress=True)
-    err = capsys.readouterr().err
-    assert "choosing C" in err and "3/3" in err
-    search = GridSearchCV(_svm_pipeline("standardize", labels), {"svc__C": list(grid)},
-                          cv=cv_splits(y, groups, 3, 2, 0), refit=False).fit(X, y)
-    assert res.cv_scores == {c: float(m) for c, m in zip(grid, search.cv_results_["mean_test_score"])}
-
-
-def test_fit_svm_is_quiet_without_progress(capsys):
-    from tactile_descriptors_ros.evaluation.classifiers import fit_svm
-
-    rng = np.random.default_rng(1)
-    y = np.repeat(np.arange(2), 10)
-    fit_svm(rng.normal(size=(20, 3)) + y[:, None], y, np.arange(20), ["a", "b", "c"], scaling="standardize",
-            folds=2, repeats=1, c_grid=(1.0,))
-    assert capsys.readouterr().err == ""
-
-

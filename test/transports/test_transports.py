@@ -11,10 +11,13 @@ import pytest
 
 from tactile_descriptors_ros.codecs import biotac_spi as spi
 from tactile_descriptors_ros.errors import ConfigError, TransportError, TransportUnavailableError
-from tactile_descriptors_ros.transports import (TRANSPORTS, ByteTransport, SpiSegment, create_transport,
-                                                transport_class)
-from tactile_descriptors_ros.transports.biotac import (frame_segments, read_frame, read_serial_number,
-                                                       split_frame_replies)
+from tactile_descriptors_ros.transports import TRANSPORTS, ByteTransport, SpiSegment, create_transport, transport_class
+from tactile_descriptors_ros.transports.biotac import (
+    frame_segments,
+    read_frame,
+    read_serial_number,
+    split_frame_replies,
+)
 from tactile_descriptors_ros.transports.simulated import SpiBus
 
 

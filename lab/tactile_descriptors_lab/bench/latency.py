@@ -1,0 +1,558 @@
+"""Sensor stamp -> Prediction latency through the ROS node graph (``tactile bench --latency``).
+
+A probe node publishes ``SkinPartFrames`` messages for every body part of
+the NAO at full rate (accelerometer 1 kHz, force 250 Hz, one message per
+body part per ``batch_s`` of sample time holding all its cells, stamped with
+the wall clock as a driver stamps its samples) into the real ``window_node`` and ``classifier_node`` (fixed
+windows), and records when each ``Prediction`` arrives.  By default the two
+nodes run as their own processes, as ``ros2 launch`` starts them
+(``in_process=True`` runs them in the probe's process instead).  Reported
+per prediction:
+
+* ``e2e``: arrival time minus the window's end stamp (what a user waits
+  after the last sample of a window was taken);
+* ``wait``: the part of it spent waiting for data: a fixed window closes when
+  a sample later than its end plus ``lateness_s`` arrives, i.e. when the
+  batch holding that sample has been acquired and published;
+* ``processing``: arrival minus the time that closing batch was published
+  (window cut, descriptor, classifier, two topic hops and callbacks).
+
+``publish_lag`` -- how late batches went out compared with their
+acquisition time -- is reported too: a growing lag means the probe itself
+did not keep up.
+
+Also reported: the CPU time each node process spent during the run (from
+``/proc/<pid>/stat``) and per frame message for the window node(s), the
+window node's fault counters and frames per callback (from its last
+``/diagnostics``), the load average, whether the ``TARGET_MS`` median is
+met, and (:func:`message_cost`) a micro benchmark of the window node's
+per-message work outside the executor: deserialisation, message -> chunk
+conversion, ``Windower.add`` / ``add_many``.  ``split_window_nodes=True``
+starts one window node per body part (``tactile launch --split-window-nodes``,
+:func:`~tactile_descriptors_ros.launching.graph.build_graph`).
+Write-up: ``lab/docs/latency.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["measure_latency", "message_cost", "shipped_latency_settings", "TARGET_MS", "DESIGN_WAIT_TARGET_MS",
+           "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
+
+#: Target: sensor stamp (fixed: window end; exploration: release decision) -> prediction, p95, at NAO full rate.
+TARGET_MS = 20.0
+#: Target: the wait by design, batch_s + lateness_s, of the shipped NAO graph.
+DESIGN_WAIT_TARGET_MS = 10.0
+
+
+def _summary(values_ms: list[float]) -> dict:
+    if not values_ms:
+        return {"n": 0}
+    arr = np.asarray(values_ms)
+    return {"n": int(arr.size), "median_ms": float(np.median(arr)), "p95_ms": float(np.percentile(arr, 95)),
+            "max_ms": float(arr.max())}
+
+
+def _cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of a process so far (``/proc/<pid>/stat``; None where unavailable)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@dataclasses.dataclass
+class _ProbeFrames:
+    """The probe's messages: ``templates[k % len(templates)]`` is batch ``k`` (one message per body part).
+
+    Samples lie on the absolute grids of the nominal rates (a batch starting at
+    a multiple of ``period_ns`` is template 0), so 250 Hz force in 10 ms
+    batches is 3, 2, 3, 2 ... samples, as a driver cuts them.
+    """
+
+    templates: list[list[tuple[str, object]]]
+    last_accel_offset_ns: np.ndarray  # per template: offset of its last accelerometer sample
+    last_force_offset_ns: np.ndarray  # per template: offset of its last force sample
+    period_ns: int
+
+
+def _probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700)) -> _ProbeFrames:
+    """The probe's ``SkinPartFrames`` for every body part (see :class:`_ProbeFrames`).
+
+    Force counts are drawn from ``force_counts`` (untared: 300-700 counts are
+    0.7-1.7 N, every cell in contact; 0-20 counts are below the release threshold).
+    """
+    import math
+
+    from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
+    from tactile_descriptors_ros.streams.frames import SkinFrame
+    from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
+
+    cell_type = next(iter(desc.cell_types.values()))
+    fs_a, fs_f = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
+    n_per_count = cell_type.force.n_per_count if cell_type.force else 0.002442
+    batch_ns = int(round(batch_s * 1e9))
+    ta_ns, tf_ns = int(round(1e9 / fs_a)), int(round(1e9 / fs_f))
+    if batch_ns < max(ta_ns, tf_ns):
+        raise ValueError(f"batch_s={batch_s} is shorter than a sample period at {fs_a} / {fs_f} Hz")
+    period_ns = math.lcm(batch_ns, ta_ns, tf_ns)
+    rng = np.random.default_rng(seed)
+    templates, last_a, last_f = [], [], []
+    for j in range(period_ns // batch_ns):
+        t0 = j * batch_ns
+        offsets_a = np.arange(-(-t0 // ta_ns) * ta_ns, t0 + batch_ns, ta_ns, dtype=np.int64) - t0
+        offsets_f = np.arange(-(-t0 // tf_ns) * tf_ns, t0 + batch_ns, tf_ns, dtype=np.int64) - t0
+        out = []
+        for part in desc.body_parts:
+            runs = []
+            for cell in part.cells:
+                accel = np.clip(rng.normal(0, 12, (3, offsets_a.size)) + [[0], [0], [256]], -512, 511
+                                ).astype(np.int16)
+                force = rng.integers(force_counts[0], force_counts[1], (3, offsets_f.size)).astype(np.uint16)
+                frame = SkinFrame(0, accel, offsets_a - offsets_a[0], force, offsets_f - offsets_a[0],
+                                  np.zeros(0, dtype=np.uint16))
+                runs.append(SkinRun(cell.id, frame, np.zeros(3)))
+            msg = skin_part_to_msg(pack_skin_part(part.name, runs, force_n_per_count=n_per_count))
+            out.append((part.name, msg))
+        templates.append(out)
+        last_a.append(int(offsets_a[-1]))
+        last_f.append(int(offsets_f[-1]) if offsets_f.size else -1)
+    return _ProbeFrames(templates, np.array(last_a, np.int64), np.array(last_f, np.int64), period_ns)
+
+
+def _set_sequence(msg, k: int) -> None:
+    """Every cell run of a probe message is batch ``k`` of its cell."""
+    import array
+
+    msg.sequence = array.array("I", [k & 0xFFFFFFFF]) * len(msg.cell_ids)
+
+
+def shipped_latency_settings(robot: str = "nao") -> tuple[float, float]:
+    """The skin driver's ``batch_s`` and the window node's ``window.lateness_s`` of a robot's shipped graph."""
+    from tactile_descriptors_ros.launching.graph import build_graph
+
+    specs = build_graph(robot)
+    driver = next(s for s in specs if s.executable == "skin_driver")
+    window = next(s for s in specs if s.executable == "window_node")
+    return float(driver.parameters.get("batch_s", 0.05)), float(window.parameters.get("window.lateness_s", 0.05))
+
+
+#: Touch schedule of the exploration run: released, then touching, per cycle [s].
+EXPLORATION_RELEASED_S = 0.4
+EXPLORATION_TOUCH_S = 1.2
+
+
+def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40, repeat: int = 5,
+                 seed: int = 0) -> dict:
+    """Per-message CPU cost of the window node's work outside the executor, in microseconds.
+
+    ``rounds`` batches of one ``SkinPartFrames`` per body part (fixed 2 s
+    windows, 0.5 s hop) go through CDR deserialisation (what rclpy does
+    before the callback),
+    :func:`~tactile_descriptors_ros.nodes.conversions.skin_part_msg_to_chunks`,
+    and ``Windower.add`` one cell chunk at a time or ``Windower.add_many`` once
+    per batch (what the window node does with the frames it takes in one
+    callback), each followed by ``poll`` (window cutting included).  Minimum
+    over ``repeat`` runs of the thread's CPU time (this machine is shared).
+    """
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.core.windowing import Windower
+    from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, skin_part_msg_to_chunks
+
+    desc = load_robot(robot)
+    probe = _probe_frames(desc, batch_s, seed)
+    batch_ns = int(round(batch_s * 1e9))
+    t0 = probe.period_ns * (1_000_000_000_000 // probe.period_ns)
+    raws = []
+    for k in range(rounds):
+        round_raw = []
+        for _, msg in probe.templates[k % len(probe.templates)]:
+            msg.header.stamp = ns_to_stamp(t0 + k * batch_ns)
+            round_raw.append(serialize_message(msg))
+        raws.append(round_raw)
+    n = rounds * len(desc.body_parts)
+    best = {"deserialize": np.inf, "convert": np.inf, "add_poll": np.inf, "add_many_poll": np.inf}
+    for _ in range(repeat):
+        c = time.thread_time()
+        msgs = [[deserialize_message(r, SkinPartFrames) for r in rr] for rr in raws]
+        best["deserialize"] = min(best["deserialize"], time.thread_time() - c)
+        c = time.thread_time()
+        chunks = [[item for m in mm for item in skin_part_msg_to_chunks(m)] for mm in msgs]
+        best["convert"] = min(best["convert"], time.thread_time() - c)
+        for key in ("add_poll", "add_many_poll"):
+            w = Windower(desc, mode="fixed", length_s=2.0, hop_s=0.5, lateness_s=0.0)
+            c = time.thread_time()
+            for batch in chunks:
+                if key == "add_poll":
+                    for cid, chunk in batch:
+                        w.add(cid, chunk)
+                        w.poll()
+                else:
+                    w.add_many(batch)
+                    w.poll()
+            best[key] = min(best[key], time.thread_time() - c)
+    per = {k: 1e6 * v / n for k, v in best.items()}
+    return {"robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "messages": n,
+            "us_per_message": per,
+            "us_per_message_batched": per["deserialize"] + per["convert"] + per["add_many_poll"],
+            "note": "CPU time, minimum of the repeats; rclpy's executor adds its own cost per callback "
+                    "(see window_cpu_us_per_message of the live run)"}
+
+
+def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, lateness_s: float | None = None,
+                    mode: str = "fixed", length_s: float = 2.0, hop_s: float = 0.5, robot: str = "nao",
+                    seed: int = 0, in_process: bool = False, discovery_timeout_s: float = 60.0,
+                    split_window_nodes: bool = False, drain_max: int | None = None,
+                    groups: Sequence[str] | None = None, window_parameters: dict | None = None,
+                    micro: bool = True) -> dict:
+    """Publish ``duration_s`` of skin frames at full rate; time each Prediction (see the module doc).
+
+    Parameters
+    ----------
+    duration_s : float
+        Seconds of data.
+    batch_s, lateness_s : float, optional
+        Sample time per ``SkinPartFrames`` (the skin driver's ``batch_s``) and
+        the window node's ``window.lateness_s``; default: the robot's shipped
+        graph (:func:`shipped_latency_settings`).
+    mode : {"fixed", "exploration"}
+        ``fixed``: every cell in contact, fixed windows of ``length_s`` every
+        ``hop_s``, timed from the window's end stamp.  ``exploration``: every
+        cell touches for :data:`EXPLORATION_TOUCH_S` and lets go for
+        :data:`EXPLORATION_RELEASED_S` in turn; each exploration is timed from
+        its release decision (window end + ``release_s``: the first sample
+        time at which the release is known).
+    length_s, hop_s : float
+        The fixed windows.
+    in_process : bool
+        Run one window node and the classifier in the probe's process.
+    split_window_nodes : bool
+        One window node process per body part (the launcher's scale-out
+        option); each publishes a pooled descriptor of its body part, so
+        there is one prediction per body part and window.
+    drain_max : int, optional
+        The window node's ``frames.drain_max`` (default: the node's).
+    groups : sequence of str, optional
+        The window node's ``descriptor.groups`` (default: the robot's shipped
+        feature groups); ``["paper"]`` times the graph with the paper's
+        descriptor.
+    window_parameters : dict, optional
+        More window node parameters (e.g. ``{"qos.frames.reliability": "reliable"}``).
+    micro : bool
+        Also run :func:`message_cost` (before the graph starts).
+
+    Returns
+    -------
+    dict
+        JSON-able: settings, ``e2e``, ``wait``, ``processing`` and
+        ``publish_lag`` summaries (median, p95, max in ms), ``complete``
+        (reference -> last prediction of that window), ``parts_ms`` (what each
+        part of ``e2e`` costs: design wait, frames age when the window node
+        takes them, window node, describing, classifier), message counts,
+        ``design_wait_ms``, ``target_ms`` / ``target_met`` (p95), per-process
+        CPU, the window nodes' faults, the load average, and ``per_message``
+        (:func:`message_cost`).
+    """
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, Prediction, SkinPartFrames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.launching.graph import build_graph
+    from tactile_descriptors_ros.launching.processes import GraphProcesses
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+    from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, stamp_to_ns
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+    from tactile_descriptors_ros.topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC, PREDICTION_TOPIC
+
+    if in_process and split_window_nodes:
+        raise ValueError("split_window_nodes starts one process per body part: not with in_process")
+    if mode not in ("fixed", "exploration"):
+        raise ValueError(f"mode must be fixed or exploration, not {mode!r}")
+    shipped_batch_s, shipped_lateness_s = shipped_latency_settings(robot)
+    batch_s = shipped_batch_s if batch_s is None else float(batch_s)
+    lateness_s = shipped_lateness_s if lateness_s is None else float(lateness_s)
+    desc = load_robot(robot)
+    release_ns = int(round(desc.window.release_s * 1e9))
+    load_before = os.getloadavg()
+    per_message = message_cost(robot=robot, batch_s=batch_s, seed=seed) if micro else None
+    if mode == "fixed":
+        phases = {"contact": _probe_frames(desc, batch_s, seed)}
+    else:
+        phases = {"contact": _probe_frames(desc, batch_s, seed, (800, 1000)),
+                  "released": _probe_frames(desc, batch_s, seed + 1, (0, 20))}
+    probe_frames = phases["contact"]
+    n_templates = len(probe_frames.templates)
+    batch_ns = int(round(batch_s * 1e9))
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    tmp = tempfile.TemporaryDirectory(prefix="tactile_bench_")
+    received: list[tuple[int, int]] = []  # (arrival ns, window end ns)
+    descriptors: dict[int, list[int]] = {}  # window end ns -> arrival ns of its descriptors
+    diagnostics: dict[str, dict[str, str]] = {}
+    diag_arrival = [0]  # monotonic ns of the last window node diagnostics
+    lock = threading.Lock()
+    stop = threading.Event()
+    nodes = []
+    graph: GraphProcesses | None = None
+    window_params = {"window.mode": mode, "window.length_s": float(length_s),
+                     "window.hop_s": float(hop_s), "window.lateness_s": float(lateness_s)}
+    if drain_max is not None:
+        window_params["frames.drain_max"] = int(drain_max)
+    if groups is not None:
+        window_params["descriptor.groups"] = [str(g) for g in groups]
+    window_params.update(window_parameters or {})
+    model_path = str(Path(tmp.name) / "model.json")
+    cpu: dict[str, float | None] = {}
+    try:
+        if in_process:
+            nodes += [WindowNode(context=context, parameter_overrides=[
+                          Parameter(k, value=v) for k, v in {"robot": robot, **window_params}.items()]),
+                      ClassifierNode(context=context, parameter_overrides=[
+                          Parameter("model_path", value=model_path)])]
+        else:
+            specs = [dataclasses.replace(s, parameters={**s.parameters, **window_params})
+                     if s.executable == "window_node" else s
+                     for s in build_graph(desc, split_window_nodes=split_window_nodes, model_path=model_path)
+                     if s.executable in ("window_node", "classifier_node")]
+            graph = GraphProcesses(specs, output=None, workdir=tmp.name)
+            graph.start()
+        probe = rclpy.create_node("tactile_bench_probe", context=context)
+        nodes.append(probe)
+
+        def on_prediction(msg) -> None:
+            now = time.time_ns()
+            with lock:
+                received.append((now, stamp_to_ns(msg.window_end)))
+
+        def on_descriptor(msg) -> None:
+            now = time.time_ns()
+            with lock:
+                descriptors.setdefault(stamp_to_ns(msg.window_end), []).append(now)
+
+        def on_diagnostics(msg) -> None:
+            for st in msg.status:
+                values = {kv.key: kv.value for kv in st.values}
+                if "descriptors_published" in values:
+                    with lock:
+                        diagnostics[st.name] = values
+                        diag_arrival[0] = time.monotonic_ns()
+
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        probe.create_subscription(Prediction, PREDICTION_TOPIC, on_prediction, reliable)
+        probe.create_subscription(Descriptor, DESCRIPTOR_TOPIC, on_descriptor, reliable)
+        probe.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, reliable)
+        by_part = {part.name: probe.create_publisher(SkinPartFrames, FRAMES_TOPIC.format(body_part=part.name),
+                                                     QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
+                   for part in desc.body_parts}
+        pubs = list(by_part.values())
+        executor = SingleThreadedExecutor(context=context)
+        for node in nodes:
+            executor.add_node(node)
+        spinner = threading.Thread(target=lambda: _spin(executor, stop), daemon=True)
+        spinner.start()
+        deadline = time.monotonic() + discovery_timeout_s
+        while time.monotonic() < deadline and not (
+                all(p.get_subscription_count() > 0 for p in pubs)
+                and probe.count_publishers(PREDICTION_TOPIC) > 0):
+            time.sleep(0.1)
+        if not all(p.get_subscription_count() > 0 for p in pubs):
+            tail = "; ".join(f"{n.spec.name}: {' | '.join(n.lines[-3:]) or 'no output'}"
+                             for n in graph.nodes) if graph else ""
+            raise RuntimeError(f"window_node did not subscribe to the frames within {discovery_timeout_s} s"
+                               + (f" ({tail})" if tail else ""))
+        time.sleep(0.5)
+
+        pids = {n.spec.name: n.process.pid for n in graph.nodes} if graph else {"probe (all nodes)": os.getpid()}
+        cpu_start = {name: _cpu_s(pid) for name, pid in pids.items()}
+        start_ns = (time.time_ns() // probe_frames.period_ns + 1) * probe_frames.period_ns  # template 0 first
+        n_batches = int(round(duration_s / batch_s))
+        cycle_ns = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
+        released_ns = int(round(EXPLORATION_RELEASED_S * 1e9))
+        published: list[tuple[int, int]] = []  # (first sample stamp of the batch, publish start ns)
+        for k in range(n_batches):
+            t0 = start_ns + k * batch_ns
+            due = t0 + batch_ns  # every sample of the batch has been taken
+            delay = (due - time.time_ns()) / 1e9
+            if delay > 0:
+                time.sleep(delay)
+            touching = mode == "fixed" or (k * batch_ns) % cycle_ns >= released_ns
+            sent = time.time_ns()
+            stamp = ns_to_stamp(t0)
+            for pub, (_, msg) in zip(pubs, phases["contact" if touching else "released"].templates[k % n_templates]):
+                msg.header.stamp = stamp
+                _set_sequence(msg, k)
+                pub.publish(msg)
+            published.append((t0, sent))
+        done_ns = time.monotonic_ns()
+        # the last predictions: until every window the data closed has its prediction (a node behind its input
+        # answers late), or nothing came for 10 s; then one diagnostics period
+        expected = _expected_predictions(mode, start_ns, n_batches * batch_ns, length_s, hop_s, lateness_s,
+                                         release_ns) * (len(desc.body_parts) if split_window_nodes else 1)
+        time.sleep(max(1.2, 2 * lateness_s + 2 * batch_s))
+        deadline = time.monotonic() + 60.0
+        last_count, quiet_since = -1, time.monotonic()
+        while time.monotonic() < deadline:
+            with lock:
+                count = len(received)
+            if count >= expected:
+                break
+            if count != last_count:
+                last_count, quiet_since = count, time.monotonic()
+            elif time.monotonic() - quiet_since > 10.0:
+                break
+            time.sleep(0.05)
+        deadline = time.monotonic() + 5.0  # a loaded machine delays the diagnostics timer: wait for a fresh one
+        while diag_arrival[0] < done_ns and time.monotonic() < deadline:
+            time.sleep(0.05)
+        for name, pid in pids.items():
+            end = _cpu_s(pid)
+            cpu[name] = None if end is None or cpu_start[name] is None else end - cpu_start[name]
+    finally:
+        stop.set()
+        if graph is not None:
+            graph.stop()
+        for node in nodes:
+            node.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
+        tmp.cleanup()
+
+    t0s = np.array([p[0] for p in published], dtype=np.int64)
+    sends = np.array([p[1] for p in published], dtype=np.int64)
+    which = np.arange(len(t0s)) % n_templates
+    if mode == "fixed":
+        # a fixed window closes once every cell has a vibration sample at or after end + lateness
+        closing_sample = t0s + probe_frames.last_accel_offset_ns[which]
+        delay_ns = int(round(lateness_s * 1e9))
+        reference_delay_ns = 0
+    else:
+        # an exploration ends once every cell's force stayed below release for release_s
+        last_f = probe_frames.last_force_offset_ns[which]
+        closing_sample = np.maximum.accumulate(np.where(last_f >= 0, t0s + last_f, 0))
+        delay_ns = release_ns
+        reference_delay_ns = release_ns
+    e2e, wait, proc, window_stage, classifier_stage = [], [], [], [], []
+    complete: dict[int, int] = {}
+    for arrival, end in received:
+        ref = end + reference_delay_ns
+        k = int(np.searchsorted(closing_sample, end + delay_ns, side="left"))
+        if k >= len(sends):
+            continue
+        e2e.append((arrival - ref) / 1e6)
+        wait.append((sends[k] - ref) / 1e6)
+        proc.append((arrival - sends[k]) / 1e6)
+        before = [t for t in descriptors.get(end, []) if t <= arrival]
+        if before:
+            window_stage.append((max(before) - sends[k]) / 1e6)
+            classifier_stage.append((arrival - max(before)) / 1e6)
+        complete[ref] = max(complete.get(ref, 0), arrival)
+    lag = ((sends - (t0s + batch_ns)) / 1e6).tolist()
+    n_messages = len(published) * len(pubs)
+    window_cpu = [v for k, v in cpu.items() if k.startswith("window_node") or k.startswith("probe")]
+    window_cpu_s = float(sum(window_cpu)) if window_cpu and all(v is not None for v in window_cpu) else None
+    faults: dict[str, int] = {}
+    per_callback = []
+    node_timing: dict[str, dict[str, float]] = {}
+    for name, values in diagnostics.items():
+        for key, value in values.items():
+            if key.startswith("fault_"):
+                faults[key[6:]] = faults.get(key[6:], 0) + int(float(value))
+        if "frames_per_callback" in values:
+            per_callback.append(float(values["frames_per_callback"]))
+        node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "frames_age_"))}
+    e2e_summary = _summary(e2e)
+    design_wait_ms = 1e3 * (batch_s + (lateness_s if mode == "fixed" else 0.0))
+    return {
+        "robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "lateness_s": lateness_s, "mode": mode,
+        "reference": "window end stamp" if mode == "fixed" else
+                     f"release decision (window end + release_s = {release_ns / 1e6:g} ms)",
+        "nodes": "in process" if in_process else (
+            "separate processes, one window node per body part" if split_window_nodes else "separate processes"),
+        "settings": {"batch_s": batch_s, "lateness_s": lateness_s, "window_mode": mode, "window_s": length_s,
+                     "hop_s": hop_s, "release_s": release_ns / 1e9, "duration_s": duration_s,
+                     "in_process": in_process, "split_window_nodes": split_window_nodes, "drain_max": drain_max,
+                     "groups": list(groups) if groups is not None else list(desc.descriptor.groups),
+                     "messages_per_s": len(pubs) / batch_s},
+        "window_s": length_s, "hop_s": hop_s, "duration_s": duration_s,
+        "messages": n_messages, "predictions": len(received), "expected_predictions": expected,
+        "e2e": e2e_summary, "wait": _summary(wait), "processing": _summary(proc),
+        "e2e_ms": [round(v, 2) for v in e2e],  # in arrival order: a slow start shows here
+        "wait_ms": [round(v, 2) for v in wait], "processing_ms": [round(v, 2) for v in proc],
+        "parts_ms": {
+            "design_wait": _summary(wait),
+            "frames_age_at_window_node": _node_summary(node_timing, "frames_age"),
+            "window_node": _summary(window_stage),
+            "describe": _node_summary(node_timing, "describe"),
+            "classifier": _summary(classifier_stage),
+        },
+        "complete": _summary([(arr - ref) / 1e6 for ref, arr in complete.items()]),
+        "publish_lag": _summary(lag),
+        "publish_lag_last_ms": float(lag[-1]) if lag else None,
+        "design_wait_ms": design_wait_ms,
+        "design_wait_target_ms": DESIGN_WAIT_TARGET_MS,
+        "target_ms": TARGET_MS,
+        "target_met": bool(e2e_summary.get("n") and e2e_summary["p95_ms"] <= TARGET_MS),
+        "cpu_s": cpu,
+        "window_cpu_us_per_message": 1e6 * window_cpu_s / n_messages if window_cpu_s and n_messages else None,
+        "window_cpu_fraction_of_core": window_cpu_s / (n_batches * batch_s) if window_cpu_s else None,
+        "window_faults": faults,
+        "frames_per_callback": float(np.mean(per_callback)) if per_callback else None,
+        "per_message": per_message,
+        "load_average": {"before": list(load_before), "after": list(os.getloadavg())},
+    }
+
+
+def _expected_predictions(mode: str, start_ns: int, span_ns: int, length_s: float, hop_s: float,
+                          lateness_s: float, release_ns: int) -> int:
+    """Windows the probe's data close (one prediction each with one window node)."""
+    if mode == "fixed":
+        usable = span_ns - 1_000_000 - int(round(lateness_s * 1e9)) - int(round(length_s * 1e9))  # last sample
+        return max(0, usable // int(round(hop_s * 1e9)) + 1) if usable >= 0 else 0
+    cycle_ns = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
+    first_end = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
+    usable = span_ns - first_end - release_ns - 50_000_000  # the release shows after release_s (and smoothing)
+    return max(0, usable // cycle_ns + 1) if usable >= 0 else 0
+
+
+def _node_summary(node_timing: dict[str, dict[str, float]], prefix: str) -> dict:
+    """A window node timing (``<prefix>_ms_p50`` / ``_p95`` / ``_max`` in its diagnostics); the worst over nodes."""
+    rows = [t for t in node_timing.values() if f"{prefix}_ms_p50" in t]
+    if not rows:
+        return {"n": 0}
+    return {"n": int(sum(t.get(f"{prefix}_n", 0) for t in rows)),
+            "median_ms": max(t[f"{prefix}_ms_p50"] for t in rows), "p95_ms": max(t[f"{prefix}_ms_p95"] for t in rows),
+            "max_ms": max(t[f"{prefix}_ms_max"] for t in rows), "source": "window node diagnostics"}
+
+
+def _spin(executor, stop: threading.Event) -> None:
+    while not stop.is_set():
+        try:
+            executor.spin_once(timeout_sec=0.05)
+        except Exception:  # noqa: BLE001 - the context was shut down under us: stop spinning
+            if stop.is_set():
+                return
+            raise
+
+
+if __name__ == "__main__":  # pragma: no cover - manual run
+    import json
+
+    print(json.dumps(measure_latency(), indent=1, default=float))

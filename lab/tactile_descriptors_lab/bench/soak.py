@@ -1,0 +1,397 @@
+"""Soak test of a robot's node graph at full rate (``tactile bench --soak SECONDS``).
+
+The robot's graph (``nodes:`` of its description: drivers on the simulated
+transport, window node(s), classifier) runs as separate processes, as
+``tactile launch`` starts it, for a given time at the sensors' real rate
+(``sim.speed`` 1; device stamps, as in the demo).  The scene is the robot's demo scene with its
+explorations repeated until it lasts the whole soak, and without the
+simulated frame drops and corruptions, so every lost frame the report shows
+was lost by the graph itself.
+
+Every ``sample_s`` the soak samples each node's resident memory (RSS) and
+CPU time (psutil, by PID) and keeps the newest ``/diagnostics`` of every node.
+The report gives per node RSS over time (and at every whole minute), mean
+CPU, the RSS growth after the first minute (the goal: at most 5 % over 10
+minutes), the window node's sample buffers, and the frames in three parts:
+
+* **never sent**: the frames real sensors would have sent while the driver
+  ran (the scene's frame rate times that time) that the simulated bus did
+  not put out, because the simulator, on the same loaded machine, fell
+  behind real time.  The paced simulator drops nothing: what it did not send
+  in time is simply not part of the soak.  The share of the real rate it
+  sent says whether the machine kept up;
+* **lost on the bus**: sequence gaps the driver found between the frames
+  the bus delivered (the soak's scene injects none);
+* **sent and lost**: messages the driver published that the window node
+  never received (gaps in the messages' sequence numbers, counted when a
+  later message arrives): the graph's own loss, in messages and in frames.
+
+Late frames (out of order, duplicates, clock jumps, windows with gaps) are
+counted apart, and the load of the machine is part of the result: on a
+shared machine lost frames are a fact about the machine as much as about the
+graph.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = ["NodeSamples", "SoakReport", "soak_scene", "scene_frames_per_s", "run_soak", "format_soak",
+           "GROWTH_GOAL_PERCENT", "KEEPS_UP_FRACTION"]
+
+#: Goal: RSS growth after the first minute, at most this many percent.
+GROWTH_GOAL_PERCENT = 5.0
+#: Window node fault counters that mean a lost frame.
+LOST_KEYS = ("fault_lost_frames", "fault_bad_frames", "fault_sequence_restart")
+#: The machine kept up when the simulated bus sent at least this share of the real rate.
+KEEPS_UP_FRACTION = 0.99
+#: Window node fault counters that mean a late (or out-of-order) frame.
+LATE_KEYS = ("fault_windower_out_of_order", "fault_windower_duplicate", "fault_windower_clock_jump",
+             "fault_windower_gap", "fault_windower_unsorted_stamps")
+
+
+@dataclass
+class NodeSamples:
+    """RSS and CPU of one node process over the soak."""
+
+    name: str
+    executable: str
+    pid: int
+    t_s: list[float] = field(default_factory=list)
+    rss_mb: list[float] = field(default_factory=list)
+    cpu_s: list[float] = field(default_factory=list)
+
+    def growth_after_s(self, after_s: float) -> float | None:
+        """Largest RSS after ``after_s`` relative to the RSS at ``after_s`` [%] (``None`` if too short)."""
+        idx = [i for i, t in enumerate(self.t_s) if t >= after_s]
+        if len(idx) < 2:
+            return None
+        ref = self.rss_mb[idx[0]]
+        return 100.0 * (max(self.rss_mb[i] for i in idx) - ref) / ref
+
+    def rate_mb_per_min(self, after_s: float) -> float | None:
+        """Least-squares slope of RSS after ``after_s`` [MB/min]."""
+        pts = [(t, r) for t, r in zip(self.t_s, self.rss_mb) if t >= after_s]
+        if len(pts) < 3:
+            return None
+        n = len(pts)
+        mt = sum(t for t, _ in pts) / n
+        mr = sum(r for _, r in pts) / n
+        den = sum((t - mt) ** 2 for t, _ in pts)
+        return 60.0 * sum((t - mt) * (r - mr) for t, r in pts) / den if den else None
+
+    def cpu_percent(self) -> float | None:
+        """Mean CPU over the soak [% of one core]."""
+        if len(self.t_s) < 2 or self.t_s[-1] <= self.t_s[0]:
+            return None
+        return 100.0 * (self.cpu_s[-1] - self.cpu_s[0]) / (self.t_s[-1] - self.t_s[0])
+
+
+@dataclass
+class SoakReport:
+    """What :func:`run_soak` measured."""
+
+    robot: str
+    scene_s: float
+    seconds: float
+    sample_s: float
+    nodes: list[NodeSamples]
+    diagnostics: dict[str, dict[str, str]]
+    load_avg_start: tuple[float, float, float]
+    load_avg_end: tuple[float, float, float]
+    cpus: int
+    nice: int
+    exit_codes: dict[str, int | None]
+    scene_frames_per_s: float = 0.0
+    driver_run_s: float = 0.0
+    frames_sent_in_run: int = 0
+
+    def lost_frames(self) -> dict[str, int]:
+        """Lost-frame counters of the window node(s), summed over nodes."""
+        return self._sum(LOST_KEYS)
+
+    def late_frames(self) -> dict[str, int]:
+        """Late / out-of-order counters of the window node(s), summed over nodes."""
+        return self._sum(LATE_KEYS)
+
+    def _sum(self, keys: tuple[str, ...]) -> dict[str, int]:
+        out = {k.removeprefix("fault_"): 0 for k in keys}
+        for name, values in self.diagnostics.items():
+            if name.split(": ")[-1] != "windows":
+                continue
+            for k in keys:
+                out[k.removeprefix("fault_")] += int(float(values.get(k, 0)))
+        return out
+
+    def _node_sum(self, executable: str, key: str) -> int:
+        """``key`` summed over the newest diagnostics of the nodes running ``executable``."""
+        names = {n.name for n in self.nodes if n.executable == executable}
+        total = 0
+        for name, values in self.diagnostics.items():
+            node = name.rpartition(": ")[0].split("/")[-1]
+            if node in names and key in values:
+                total += int(float(values[key]))
+        return total
+
+    def frames_split(self) -> dict[str, Any]:
+        """Frames never sent (the simulator behind real time), lost on the bus, and sent but lost.
+
+        See the module docstring.  The rate is judged from the driver's first
+        diagnostics with frames to its last (``driver_run_s``, start-up left
+        out): ``frames_sent_meanwhile`` against ``frames_due_at_real_rate``.
+        ``machine_kept_up``: the simulated bus sent at least
+        :data:`KEEPS_UP_FRACTION` of the real rate.
+        """
+        due = int(round(self.scene_frames_per_s * self.driver_run_s))
+        sent = self._node_sum("skin_driver", "bus_frames")
+        messages = self._node_sum("skin_driver", "messages")
+        lost_msgs = self._sum(("fault_lost_frames",))["lost_frames"]
+        rate = self.frames_sent_in_run / due if due else None
+        return {"driver_run_s": self.driver_run_s, "frames_due_at_real_rate": due,
+                "frames_sent_meanwhile": self.frames_sent_in_run, "never_sent": max(0, due - self.frames_sent_in_run),
+                "sent_percent_of_real_rate": None if rate is None else 100.0 * rate, "frames_sent": sent,
+                "machine_kept_up": rate is not None and rate >= KEEPS_UP_FRACTION,
+                "lost_on_bus": self._node_sum("skin_driver", "bus_lost_frames"),
+                "messages_sent": messages,
+                "messages_received": self._sum(("frames_messages_taken",))["frames_messages_taken"],
+                "messages_sent_and_lost": lost_msgs,
+                "frames_sent_and_lost": int(round(lost_msgs * sent / messages)) if messages else 0}
+
+    def rss_per_minute(self) -> dict[str, list[float]]:
+        """Per node, the RSS of the first sample at or after every whole minute, from 0 [MB]."""
+        out = {}
+        for n in self.nodes:
+            row = []
+            for minute in range(int(self.seconds // 60) + 1):
+                r = next((r for t, r in zip(n.t_s, n.rss_mb) if t >= 60.0 * minute), None)
+                if r is not None:
+                    row.append(round(r, 1))
+            out[n.name] = row
+        return out
+
+    def descriptors(self) -> int:
+        """Descriptors published by the window node(s)."""
+        return sum(int(float(v.get("descriptors_published", 0))) for n, v in self.diagnostics.items()
+                   if n.split(": ")[-1] == "windows")
+
+    def to_dict(self) -> dict[str, Any]:
+        nodes = {}
+        for n in self.nodes:
+            nodes[n.name] = {
+                "executable": n.executable, "pid": n.pid, "t_s": n.t_s, "rss_mb": n.rss_mb,
+                "rss_start_mb": n.rss_mb[0] if n.rss_mb else None,
+                "rss_at_60s_mb": next((r for t, r in zip(n.t_s, n.rss_mb) if t >= 60.0), None),
+                "rss_end_mb": n.rss_mb[-1] if n.rss_mb else None,
+                "rss_growth_after_60s_percent": n.growth_after_s(60.0),
+                "rss_rate_after_60s_mb_per_min": n.rate_mb_per_min(60.0),
+                "cpu_percent": n.cpu_percent()}
+        growth = [v["rss_growth_after_60s_percent"] for v in nodes.values()
+                  if v["rss_growth_after_60s_percent"] is not None]
+        lost = self.lost_frames()
+        split = self.frames_split()
+        graph_lost = split["lost_on_bus"] + split["messages_sent_and_lost"] + lost["bad_frames"] \
+            + lost["sequence_restart"]
+        buffers = [float(v["windower_buffer_mb"]) for n, v in self.diagnostics.items()
+                   if n.split(": ")[-1] == "windows" and "windower_buffer_mb" in v]
+        return {"robot": self.robot, "seconds": self.seconds, "scene_s": self.scene_s, "sample_s": self.sample_s,
+                "cpus": self.cpus, "nice": self.nice, "load_avg_start": list(self.load_avg_start),
+                "load_avg_end": list(self.load_avg_end), "nodes": nodes, "rss_per_minute_mb": self.rss_per_minute(),
+                "windower_buffer_mb": sum(buffers) if buffers else None, "scene_frames_per_s": self.scene_frames_per_s,
+                "driver_run_s": self.driver_run_s, "frames": split, "lost_frames": lost,
+                "late_frames": self.late_frames(), "descriptors": self.descriptors(),
+                "exit_codes": self.exit_codes,
+                "goal": {"rss_growth_max_percent": GROWTH_GOAL_PERCENT,
+                         "rss_met": bool(growth) and max(growth) <= GROWTH_GOAL_PERCENT,
+                         "no_lost_frames": not graph_lost,
+                         "machine_kept_up": split["machine_kept_up"]},
+                "diagnostics": self.diagnostics}
+
+
+def soak_scene(seconds: float, robot: str, out_dir: str | os.PathLike[str]) -> tuple[Path, float]:
+    """The robot's demo scene repeated to last ``seconds`` (plus 10 %), without simulated frame faults.
+
+    Returns the scene file and its duration [s].
+    """
+    from tactile_descriptors_ros.sim.scene import load_scene, scene_path
+
+    base = scene_path(f"demo_{robot}")
+    data = yaml.safe_load(base.read_text())
+    one = load_scene(base).duration_s
+    effects = data.get("effects") or {}
+    for fault in ("dropped_frames", "corrupt_frames"):
+        effects.pop(fault, None)
+    data["effects"] = effects
+    times = max(1, math.ceil(1.1 * float(seconds) / one))
+    for e in data.get("explorations", []):
+        e["repeat"] = int(e.get("repeat", 1)) * times
+    data["scene"]["name"] = f"soak_{robot}"
+    path = Path(out_dir) / f"soak_{robot}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path, load_scene(path).duration_s
+
+
+def scene_frames_per_s(scene: str | os.PathLike[str], first_s: float = 10.0) -> float:
+    """Frames per second the scene's sensors send at real rate: every stream's samples over its first ``first_s``."""
+    from tactile_descriptors_ros.sim.engine import iter_simulate
+    from tactile_descriptors_ros.sim.scene import load_scene
+
+    result = next(iter_simulate(load_scene(scene), max_chunk_s=first_s))
+    frames, start, end = 0, None, None
+    for cell in result.cells.values():
+        for st in cell.streams.values():
+            if st.t_ns.size:
+                frames += int(st.t_ns.size)
+                start = int(st.t_ns[0]) if start is None else min(start, int(st.t_ns[0]))
+                end = int(st.t_ns[-1]) if end is None else max(end, int(st.t_ns[-1]))
+    return frames / ((end - start) / 1e9) if frames and end > start else 0.0
+
+
+def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
+             progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> SoakReport:
+    """Run the robot's graph at full rate for ``seconds`` and sample it (see the module docstring).
+
+    Raises
+    ------
+    RuntimeError
+        When a node exits during the soak (its last output lines are in the message).
+    """
+    import psutil
+
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.launching.graph import build_graph
+    from tactile_descriptors_ros.launching.processes import GraphProcesses, localhost_environment
+
+    rob = load_robot(robot)
+    tmp = tempfile.TemporaryDirectory(prefix="tactile_soak_")
+    scene, scene_s = soak_scene(seconds, rob.name, tmp.name)
+    # device stamps (the simulator's sample times), as the demo: on a loaded machine the simulator can
+    # fall behind real time, and clock stamps would then be re-anchored instead of measuring the graph
+    overrides = {name: {"sim.speed": 1.0, "stamp_source": "device"} for name, e in rob.nodes.items()
+                 if e.get("executable") in ("biotac_driver", "skin_driver")}
+    specs = build_graph(rob, sim_scene=scene, model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
+    procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("tactile_soak", context=context)
+    diagnostics: dict[str, dict[str, str]] = {}
+    bus_frames: dict[str, list[tuple[float, int]]] = {}  # per bus status: (time, frames) from its first frames on
+
+    def on_diag(msg) -> None:
+        now = time.monotonic()
+        for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            diagnostics[st.name] = values
+            if "bus_frames" in values and (int(values["bus_frames"]) or st.name in bus_frames):
+                bus_frames.setdefault(st.name, []).append((now, int(values["bus_frames"])))
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 100)
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=context)
+    ex.add_node(node)
+    load_start = os.getloadavg()
+    samples: list[NodeSamples] = []
+    try:
+        procs.start()
+        handles = []
+        for running in procs.nodes:
+            samples.append(NodeSamples(running.spec.name, running.spec.executable, running.process.pid))
+            handles.append(psutil.Process(running.process.pid))
+        t0 = time.monotonic()
+        next_sample = t0
+        while True:
+            now = time.monotonic()
+            if now >= next_sample:
+                for s, h in zip(samples, handles):
+                    try:
+                        mem = h.memory_info()
+                        cpu = h.cpu_times()
+                    except psutil.NoSuchProcess:
+                        continue
+                    s.t_s.append(round(now - t0, 3))
+                    s.rss_mb.append(mem.rss / 2**20)
+                    s.cpu_s.append(cpu.user + cpu.system)
+                if progress is not None:
+                    progress(now - t0, ", ".join(f"{s.name} {s.rss_mb[-1]:.0f} MB" for s in samples if s.rss_mb))
+                next_sample += sample_s
+            dead = [r for r in procs.nodes if r.returncode is not None]
+            if dead:
+                lines = "\n".join(dead[0].lines[-20:])
+                raise RuntimeError(f"node {dead[0].spec.name} exited with {dead[0].returncode} after "
+                                   f"{now - t0:.0f} s:\n{lines}")
+            if now - t0 >= seconds:
+                break
+            ex.spin_once(timeout_sec=min(0.2, max(0.0, next_sample - time.monotonic())))
+        end = time.monotonic() + 2.0  # the newest diagnostics of every node
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.1)
+    finally:
+        procs.stop()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    try:
+        frames_per_s = scene_frames_per_s(scene)  # after the graph: it loads the machine for a few seconds
+    finally:
+        tmp.cleanup()
+    runs = [(h[-1][0] - h[0][0], h[-1][1] - h[0][1]) for h in bus_frames.values() if len(h) >= 2]
+    run_s = max((r for r, _ in runs), default=0.0)
+    return SoakReport(robot=rob.name, scene_s=scene_s, seconds=float(seconds), sample_s=float(sample_s),
+                      nodes=samples, diagnostics=diagnostics, load_avg_start=load_start,
+                      load_avg_end=os.getloadavg(), cpus=os.cpu_count() or 1, nice=os.nice(0),
+                      exit_codes={r.spec.name: r.returncode for r in procs.nodes},
+                      scene_frames_per_s=frames_per_s, driver_run_s=run_s,
+                      frames_sent_in_run=sum(n for _, n in runs))
+
+
+def format_soak(report: SoakReport) -> str:
+    """The soak report as text."""
+    d = report.to_dict()
+    lines = [f"soak: {d['robot']} graph, {d['seconds']:.0f} s at full rate (scene {d['scene_s']:.0f} s), "
+             f"{d['cpus']} CPUs, nice {d['nice']}, load {d['load_avg_start'][0]:.1f} -> {d['load_avg_end'][0]:.1f}",
+             f"{'node':<18} {'RSS start':>10} {'at 60 s':>8} {'end':>8} {'growth':>8} {'MB/min':>8} {'CPU %':>7}"]
+
+    def f(x, fmt):
+        return "-" if x is None else format(x, fmt)
+
+    for name, n in d["nodes"].items():
+        lines.append(f"{name:<18} {f(n['rss_start_mb'], '10.1f')} {f(n['rss_at_60s_mb'], '8.1f')} "
+                     f"{f(n['rss_end_mb'], '8.1f')} {f(n['rss_growth_after_60s_percent'], '7.1f')}% "
+                     f"{f(n['rss_rate_after_60s_mb_per_min'], '8.2f')} {f(n['cpu_percent'], '7.1f')}")
+    for name, row in d["rss_per_minute_mb"].items():
+        lines.append(f"{name:<18} RSS per minute [MB]: {' '.join(f'{r:.0f}' for r in row)}")
+    if d["windower_buffer_mb"] is not None:
+        lines.append(f"window node sample buffers: {d['windower_buffer_mb']:.1f} MB")
+    fr = d["frames"]
+    pct = fr["sent_percent_of_real_rate"]
+    lines.append(f"frames over {fr['driver_run_s']:.0f} s of the driver's: {fr['frames_due_at_real_rate']} due at the "
+                 f"real rate, {fr['frames_sent_meanwhile']} sent by the simulated bus "
+                 f"({'-' if pct is None else format(pct, '.1f')} %), never sent {fr['never_sent']} (the simulator "
+                 f"behind real time); lost on the bus {fr['lost_on_bus']}; sent and lost between driver and window "
+                 f"node {fr['messages_sent_and_lost']} of {fr['messages_sent']} messages "
+                 f"({fr['frames_sent_and_lost']} frames)")
+    lines.append(f"descriptors {d['descriptors']}; window node counters: lost {d['lost_frames']}; "
+                 f"late {d['late_frames']}")
+    g = d["goal"]
+    lost_goal = ("met" if g["no_lost_frames"] else "NOT met") + ("" if g["machine_kept_up"] else
+                                                                 " (not judged: the machine did not keep up)")
+    lines.append(f"goal: RSS growth after the first minute <= {g['rss_growth_max_percent']:.0f} %: "
+                 f"{'met' if g['rss_met'] else 'NOT met'}; no lost frames when the machine keeps up: {lost_goal}")
+    return "\n".join(lines)
+

@@ -1,0 +1,341 @@
+"""Read BioTac trials from tables (CSV, NPZ, HDF5) as a mapping file describes them.
+
+A *unit* is what one trial (or, with a class or trial column, several) is
+read from: a CSV or NPZ file, or one group of an HDF5 file.  Each unit is
+read into a :class:`Table` (column name -> array) and cut into trials; the
+mapping says which column is which channel (see :mod:`.mapping`).
+"""
+
+from __future__ import annotations
+
+import csv
+import fnmatch
+import io
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tactile_descriptors_lab.datasets.mapping import Mapping, expand_channel
+from tactile_descriptors_lab.datasets.recording import N_ELECTRODES
+from tactile_descriptors_ros.errors import ConfigError, DataFormatError
+
+__all__ = ["Unit", "Table", "find_units", "read_table", "table_channels", "cell_channels", "frame_stamps_ns",
+           "seconds_to_ns"]
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A file (or an HDF5 group of it) holding trials."""
+
+    file: Path
+    group: str | None = None
+
+    @property
+    def path(self) -> str:
+        return f"{self.file}#{self.group}" if self.group else str(self.file)
+
+    def name_of(self, source: str, what: str) -> str:
+        """The folder, file or group name a class or trial rule reads."""
+        if source == "folder":
+            return self.file.parent.name
+        if source == "file":
+            return self.file.name.split(".", 1)[0] if self.file.suffix else self.file.name
+        if source == "group":
+            if self.group is None:
+                raise ConfigError(f"{self.file}: {what} from 'group' needs an HDF5 file with groups",
+                                  key=f"{what}.from")
+            return self.group
+        raise ValueError(source)
+
+
+class Table:
+    """Columns of one unit, by name (arrays of one row per frame, or 2-D for NPZ/HDF5 channels)."""
+
+    def __init__(self, columns: dict[str, np.ndarray], where: str, text: bool) -> None:
+        self.columns = columns
+        self.where = where
+        self.text = text  # CSV: values are strings until converted
+
+    @property
+    def n_rows(self) -> int:
+        return int(next(iter(self.columns.values())).shape[0]) if self.columns else 0
+
+    def column(self, name: str, key: str) -> np.ndarray:
+        if name not in self.columns:
+            raise DataFormatError(f"{self.where}: no column {name!r} (mapping key {key}); the file has "
+                                  f"{_list(self.columns)}")
+        return self.columns[name]
+
+    def rows(self, sel: np.ndarray) -> Table:
+        return Table({k: v[sel] for k, v in self.columns.items()}, self.where, self.text)
+
+
+def _list(names) -> str:
+    names = list(names)
+    return ", ".join(names[:12]) + (f" ... ({len(names)} in all)" if len(names) > 12 else "")
+
+
+def find_units(root: Path, mapping: Mapping) -> list[Unit]:
+    """Units below ``root`` (or ``root`` itself when it is a file), sorted by path.
+
+    Raises
+    ------
+    DataFormatError
+        When nothing matches the mapping's ``files`` glob.
+    """
+    if root.is_file():
+        files = [root]
+    elif root.is_dir():
+        files = sorted(p for p in root.glob(mapping.files) if p.is_file())
+    else:
+        raise DataFormatError(f"{root}: no such file or folder")
+    if not files:
+        raise DataFormatError(f"{root}: no files match {mapping.files!r} (mapping key files, {mapping.source})")
+    if mapping.format != "hdf5":
+        return [Unit(f) for f in files]
+    h5py = _h5py()
+    units = []
+    for f in files:
+        try:
+            with h5py.File(f, "r") as h5:
+                groups: list[str] = []
+                h5.visititems(lambda name, obj, found=groups: found.append(name) if isinstance(obj, h5py.Group) else None)
+        except OSError as exc:
+            raise DataFormatError(f"{f}: not an HDF5 file ({exc})") from None
+        if mapping.groups is None:
+            units.append(Unit(f))
+            continue
+        chosen = sorted(g for g in groups if fnmatch.fnmatchcase(g, mapping.groups))
+        if not chosen:
+            raise DataFormatError(f"{f}: no group matches {mapping.groups!r} (mapping key groups); groups: "
+                                  f"{_list(groups) or 'none'}")
+        units.extend(Unit(f, g) for g in chosen)
+    return units
+
+
+def _h5py():
+    try:
+        import h5py
+    except ImportError:
+        raise ConfigError("reading HDF5 needs h5py: pip install 'tactile_descriptors_ros[import]' "
+                          "(or pip install h5py)", key="format") from None
+    return h5py
+
+
+def _read_csv(path: Path) -> Table:
+    raw = path.read_bytes()
+    if b"\x00" in raw[:65536]:
+        raise DataFormatError(f"{path}: binary data, not a CSV text file")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise DataFormatError(f"{path}: not a UTF-8 text file (byte {exc.start}); is it a CSV table?") from None
+    rows = list(csv.reader(io.StringIO(text)))
+    rows = [r for r in rows if r and any(x.strip() for x in r)]
+    if not rows:
+        raise DataFormatError(f"{path}: empty file")
+    header = [h.strip() for h in rows[0]]
+    while header and header[-1] == "":
+        header.pop()  # a trailing comma on every line
+    body = rows[1:]
+    if not body:
+        raise DataFormatError(f"{path}: a header but no rows")
+    n = len(header)
+    for lineno, r in enumerate(body, start=2):
+        if len(r) > n and not any(x.strip() for x in r[n:]):
+            del r[n:]
+        if len(r) != n:
+            raise DataFormatError(f"{path}:{lineno}: {len(r)} fields, the header has {n}")
+    # Columns of Python strings (object arrays): converting those to int64 is several times faster than
+    # numpy's fixed-width unicode arrays.
+    return Table({h: np.array(col, dtype=object) for h, col in zip(header, zip(*body))}, str(path), True)
+
+
+def _read_npz(path: Path) -> Table:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            cols = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+        raise DataFormatError(f"{path}: not an NPZ archive ({str(exc).splitlines()[0]})") from None
+    return Table(cols, str(path), False)
+
+
+def _read_hdf5(unit: Unit) -> Table:
+    h5py = _h5py()
+    try:
+        with h5py.File(unit.file, "r") as h5:
+            node = h5[unit.group] if unit.group else h5
+            cols = {k: np.asarray(v[()]) for k, v in node.items() if isinstance(v, h5py.Dataset)}
+    except OSError as exc:
+        raise DataFormatError(f"{unit.file}: not an HDF5 file ({exc})") from None
+    for k, v in cols.items():
+        if v.dtype.kind in "SO":
+            cols[k] = v.astype(str)
+    return Table(cols, unit.path, False)
+
+
+def read_table(unit: Unit, fmt: str) -> Table:
+    """Read one unit's columns."""
+    if fmt == "csv":
+        return _read_csv(unit.file)
+    if fmt == "npz":
+        return _read_npz(unit.file)
+    if fmt == "hdf5":
+        return _read_hdf5(unit)
+    raise ValueError(fmt)
+
+
+def _as_counts(values: np.ndarray, table: Table, name: str) -> np.ndarray:
+    try:
+        if table.text:
+            return values.astype(np.int64)
+        if values.dtype.kind == "f":
+            if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
+                raise ValueError("non-integer counts")
+            return values.astype(np.int64)
+        return values.astype(np.int64)
+    except ValueError as exc:
+        raise DataFormatError(f"{table.where}: column {name!r}: not integer counts ({exc})") from None
+
+
+def _channel(table: Table, mapping: Mapping, key: str, count: int) -> np.ndarray:
+    """Counts of one channel, shape (n_frames, count)."""
+    names = expand_channel(mapping.channels[key], count)
+    if len(names) == 1 and count > 1:
+        arr = _as_counts(table.column(names[0], f"channels.{key}"), table, names[0])
+        if arr.ndim == 1 and arr.shape[0] == table.n_rows * count and not table.text:
+            arr = arr.reshape(-1, count)
+        if arr.ndim != 2 or arr.shape[1] != count:
+            raise DataFormatError(f"{table.where}: {names[0]!r} (mapping key channels.{key}) has shape "
+                                  f"{arr.shape}, expected (frames, {count})")
+        return arr
+    if len(names) != count:
+        raise ConfigError(f"{len(names)} columns listed, {count} expected", key=f"channels.{key}",
+                          source=mapping.source)
+    missing = [n for n in names if n not in table.columns]
+    if missing:
+        raise DataFormatError(f"{table.where}: missing column{'s' if len(missing) > 1 else ''} "
+                              f"{', '.join(missing)} (mapping key channels.{key}); the file has "
+                              f"{_list(table.columns)}")
+    cols = [_as_counts(table.columns[n], table, n) for n in names]
+    for n, c in zip(names, cols):
+        if c.ndim != 1:
+            raise DataFormatError(f"{table.where}: {n!r} has shape {c.shape}, expected one value a frame")
+    return np.stack(cols, axis=1)
+
+
+def table_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
+    """PAC (n_frames, samples_per_frame), PDC/TAC/TDC (n_frames,) and electrodes (19, n_frames)."""
+    pac = _channel(table, mapping, "pac", mapping.samples_per_frame)
+    out = {"pac": pac}
+    for key in ("pdc", "tac", "tdc"):
+        out[key] = _channel(table, mapping, key, 1)[:, 0]
+    out["electrodes"] = _channel(table, mapping, "electrodes", N_ELECTRODES).T.copy()
+    n = {k: v.shape[-1] if k == "electrodes" else v.shape[0] for k, v in out.items()}
+    if len(set(n.values())) != 1:
+        raise DataFormatError(f"{table.where}: channels have different frame counts {n}")
+    return out
+
+
+def _values(table: Table, mapping: Mapping, key: str) -> np.ndarray:
+    """One value a frame of channel ``key`` as float (an extra channel: proximity counts, degrees C, ...)."""
+    names = expand_channel(mapping.channels[key], 1)
+    if len(names) != 1:
+        raise ConfigError(f"{len(names)} columns listed, 1 expected", key=f"channels.{key}", source=mapping.source)
+    col = table.column(names[0], f"channels.{key}")
+    try:
+        v = np.asarray(col).astype(np.float64)
+    except ValueError as exc:
+        raise DataFormatError(f"{table.where}: column {names[0]!r} (mapping key channels.{key}): not numbers "
+                              f"({exc})") from None
+    if v.ndim != 1:
+        raise DataFormatError(f"{table.where}: {names[0]!r} (mapping key channels.{key}) has shape {v.shape}, "
+                              "expected one value a frame")
+    return v
+
+
+def cell_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
+    """The channels of a mapping's cell type (``mapping.cell``, a skin cell ...) from one table.
+
+    Returns
+    -------
+    dict
+        ``vibration`` (n_s, n_frames * samples_per_frame) int64 counts, one
+        row a vibration channel, samples in time order; ``deformation``
+        (n_v, n_frames) int64 counts; ``extra`` (n_extra, n_frames) float64,
+        NaN for an extra channel the mapping does not name; ``absent`` the
+        extra channels it does not name.
+
+    Raises
+    ------
+    DataFormatError
+        Naming the file, the column and the mapping key of a channel the
+        table lacks, or whose values are not integer counts.
+    """
+    ct = mapping.cell
+    assert ct is not None
+    k = mapping.samples_per_frame
+    vib = np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
+    dfm = np.stack([_channel(table, mapping, c, 1)[:, 0] for c in ct.deformation.channels])
+    n = dfm.shape[1]
+    absent = tuple(c for c in ct.extra_channels if c not in mapping.channels)
+    extra = np.full((len(ct.extra_channels), n), np.nan)
+    for i, c in enumerate(ct.extra_channels):
+        if c not in absent:
+            extra[i] = _values(table, mapping, c)
+    if vib.shape[1] != n * k:
+        raise DataFormatError(f"{table.where}: {vib.shape[1]} vibration samples for {n} frames of {k}")
+    return {"vibration": vib, "deformation": dfm, "extra": extra, "absent": absent}
+
+
+def seconds_to_ns(text: str, ns_per_unit: int = 1_000_000_000) -> int:
+    """Exact conversion of a decimal time string (in a unit of ``ns_per_unit`` ns) to integer ns."""
+    t = text.strip()
+    neg = t.startswith("-")
+    whole, _, frac = t.lstrip("+-").partition(".")
+    digits = len(str(ns_per_unit)) - 1
+    frac = (frac + "0" * digits)[:digits] if digits else ""
+    try:
+        v = int(whole or "0") * ns_per_unit + (int(frac) if frac else 0)
+    except ValueError:
+        raise DataFormatError(f"bad time stamp {text!r}") from None
+    return -v if neg else v
+
+
+def frame_stamps_ns(table: Table, mapping: Mapping, n_frames: int) -> np.ndarray:
+    """Frame stamps in ns: from the stamp column, a frame rate, or the first stamp plus the rate."""
+    st = mapping.stamps
+    first = 0
+    stamps = None
+    if st.column is not None:
+        col = table.column(st.column, "stamps.column")
+        if table.text:
+            stamps = np.array([seconds_to_ns(v, st.ns_per_unit) for v in col], dtype=np.int64)
+        elif col.dtype.kind in "iu":
+            stamps = col.astype(np.int64) * st.ns_per_unit
+        else:
+            try:
+                stamps = np.round(col.astype(np.float64) * st.ns_per_unit).astype(np.int64)
+            except ValueError:
+                raise DataFormatError(f"{table.where}: stamp column {st.column!r} is not numeric") from None
+        first = int(stamps[0]) if stamps.size else 0
+    if st.rate_hz is not None:
+        return first + np.round(np.arange(n_frames) * (1e9 / st.rate_hz)).astype(np.int64)
+    assert stamps is not None
+    return stamps
+
+
+def split_runs(keys: list[np.ndarray]) -> Iterator[np.ndarray]:
+    """Index arrays of the runs of equal values across ``keys`` (each one value a row)."""
+    n = keys[0].shape[0]
+    change = np.zeros(n, dtype=bool)
+    change[0] = True
+    for k in keys:
+        change[1:] |= k[1:] != k[:-1]
+    starts = np.flatnonzero(change)
+    ends = np.append(starts[1:], n)
+    for s, e in zip(starts, ends):
+        yield np.arange(s, e)

@@ -1,0 +1,91 @@
+"""``tactile bench --latency``: frames through window_node + classifier_node to a Prediction."""
+
+from __future__ import annotations
+
+import pytest
+
+from tactile_descriptors_lab.bench import bench
+
+
+@pytest.mark.ros
+def test_latency_through_the_node_graph_in_process():
+    from tactile_descriptors_lab.bench.latency import TARGET_MS, measure_latency
+
+    res = measure_latency(duration_s=3.5, batch_s=0.05, lateness_s=0.05, in_process=True, micro=False)
+    assert res["messages"] == 70 * 7  # one SkinPartFrames per body part and batch (116 cells in 7 parts)
+    assert res["predictions"] == res["expected_predictions"] == 3  # windows ending at 2, 2.5 and 3 s
+    e2e, wait, _proc = res["e2e"], res["wait"], res["processing"]
+    assert e2e["n"] >= 1 and e2e["median_ms"] > 0
+    # the window closes only once the batch holding end + lateness was acquired
+    assert wait["median_ms"] >= 50.0
+    # per prediction, end-to-end = waiting for the closing batch + processing it (each list rounded to 0.01 ms)
+    assert len(res["e2e_ms"]) == len(res["wait_ms"]) == len(res["processing_ms"]) == e2e["n"]
+    for total, waited, processed in zip(res["e2e_ms"], res["wait_ms"], res["processing_ms"]):
+        assert total == pytest.approx(waited + processed, abs=0.02)
+        assert processed > 0.0                     # a prediction never arrives before its closing batch was sent
+    assert min(res["wait_ms"]) >= 50.0 - 0.01        # every window waited for end + lateness
+    assert res["target_ms"] == TARGET_MS and res["target_met"] == (e2e["p95_ms"] <= TARGET_MS)
+    assert res["design_wait_ms"] == pytest.approx(100.0) and res["mode"] == "fixed"
+    # what each part costs: the descriptor of each window was seen on its way, the window node reported its timing
+    parts = res["parts_ms"]
+    assert parts["window_node"]["n"] == parts["classifier"]["n"] == e2e["n"]
+    assert parts["describe"]["n"] >= 1 and parts["frames_age_at_window_node"]["n"] >= 1
+    for total, waited in zip(res["e2e_ms"], res["wait_ms"]):
+        assert total >= waited
+    assert res["settings"]["batch_s"] == 0.05 and res["settings"]["messages_per_s"] == pytest.approx(140)
+    # one prediction per window: the last prediction of a window is the only one
+    assert res["complete"]["n"] == e2e["n"]
+    assert res["window_cpu_us_per_message"] > 0 and len(res["load_average"]["before"]) == 3
+    # the window node's diagnostics arrived (faults counted, frames taken per callback)
+    assert res["frames_per_callback"] is not None and res["frames_per_callback"] >= 1.0
+    assert isinstance(res["window_faults"], dict)
+    text = bench.format_report(bench.BenchReport([], [], None, {"numpy": "x", "cpus": 2, "load_average": [0]},
+                                                 latency=res))
+    assert "Prediction received" in text and "what each part costs" in text
+
+
+@pytest.mark.ros
+def test_exploration_latency_is_timed_from_the_release_decision():
+    """Touch, let go, touch: each exploration's Prediction is timed from window end + release_s."""
+    from tactile_descriptors_lab.bench.latency import (
+        EXPLORATION_RELEASED_S,
+        EXPLORATION_TOUCH_S,
+        measure_latency,
+    )
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    # reliable frames: on a loaded machine the in-process node falls behind, and a lost release is no release
+    res = measure_latency(duration_s=4.6, batch_s=0.01, lateness_s=0.0, mode="exploration", in_process=True,
+                          window_parameters={"qos.frames.reliability": "reliable", "qos.frames.depth": 2000},
+                          micro=False)
+    assert res["mode"] == "exploration" and res["design_wait_ms"] == pytest.approx(10.0)
+    release_ms = 1e3 * load_robot("nao").window.release_s
+    assert res["settings"]["release_s"] == pytest.approx(release_ms / 1e3)
+    # a touch of 1.2 s every 1.6 s, the first from 0.4 s: released at 1.6 and 3.2 s; the third touch is still on
+    cycle_s = EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S
+    assert res["expected_predictions"] == int((4.6 - EXPLORATION_RELEASED_S) // cycle_s) == 2
+    assert res["predictions"] == res["expected_predictions"] == res["e2e"]["n"]
+    for total, waited, processed in zip(res["e2e_ms"], res["wait_ms"], res["processing_ms"]):
+        assert total == pytest.approx(waited + processed, abs=0.02) and processed > 0.0
+        assert waited > 0.0  # the batch holding the release decision goes out after its samples were taken
+    assert res["target_met"] == (res["e2e"]["p95_ms"] <= 20.0)
+
+
+@pytest.mark.ros
+def test_split_window_nodes_need_processes():
+    from tactile_descriptors_lab.bench.latency import measure_latency
+
+    with pytest.raises(ValueError, match="split_window_nodes"):
+        measure_latency(in_process=True, split_window_nodes=True)
+
+
+@pytest.mark.ros
+def test_message_cost_reports_each_step_per_message():
+    from tactile_descriptors_lab.bench.latency import message_cost
+
+    res = message_cost(batch_s=0.02, rounds=3, repeat=1)
+    assert res["messages"] == 3 * 7
+    per = res["us_per_message"]
+    assert set(per) == {"deserialize", "convert", "add_poll", "add_many_poll"}
+    assert all(v > 0 for v in per.values())
+    assert res["us_per_message_batched"] == pytest.approx(per["deserialize"] + per["convert"] + per["add_many_poll"])

@@ -1,0 +1,93 @@
+"""``tactile bench --soak``: the graph at full rate, RSS and CPU per node, lost and late frames."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tactile_descriptors_lab.bench.soak import NodeSamples, SoakReport, soak_scene
+
+
+def test_growth_is_measured_after_the_first_minute_and_the_slope_per_minute():
+    s = NodeSamples("window_node", "window_node", 1, t_s=[0, 30, 60, 120, 180], rss_mb=[10, 200, 200, 205, 210],
+                    cpu_s=[0, 3, 6, 12, 18])
+    assert s.growth_after_s(60.0) == pytest.approx(5.0)  # start-up (10 -> 200 MB) is not growth
+    assert s.rate_mb_per_min(60.0) == pytest.approx(5.0)
+    assert s.cpu_percent() == pytest.approx(10.0)
+    assert NodeSamples("n", "n", 1, t_s=[0, 30], rss_mb=[1, 2], cpu_s=[0, 1]).growth_after_s(60.0) is None
+
+
+def test_lost_and_late_frames_come_from_every_window_node_and_nothing_else():
+    diag = {"window_node: windows": {"fault_lost_frames": "3", "fault_windower_gap": "2", "descriptors_published": "4"},
+            "window_node_chest: windows": {"fault_lost_frames": "1", "fault_windower_out_of_order": "5"},
+            "skin_driver: chest": {"lost_frames": "99"}}
+    r = SoakReport("nao", 10.0, 10.0, 1.0, [], diag, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {})
+    assert r.lost_frames()["lost_frames"] == 4 and r.late_frames()["windower_gap"] == 2
+    assert r.late_frames()["windower_out_of_order"] == 5 and r.descriptors() == 4
+    d = r.to_dict()
+    assert d["goal"]["no_lost_frames"] is False and json.dumps(d)
+
+
+def test_soak_scene_lasts_the_soak_without_simulated_frame_faults(tmp_path):
+    import yaml
+
+    path, seconds = soak_scene(600, "nao", tmp_path)
+    assert seconds >= 600
+    data = yaml.safe_load(path.read_text())
+    assert "dropped_frames" not in data["effects"] and "corrupt_frames" not in data["effects"]
+
+
+@pytest.mark.ros
+def test_bench_soak_command_reports_every_node(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--soak", "8",
+                          "--soak-sample-s", "1", "--json"], capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    d = json.loads(out.stdout)
+    assert set(d["nodes"]) == {"skin_driver", "window_node", "classifier_node"}
+    for n in d["nodes"].values():
+        assert len(n["rss_mb"]) >= 5 and n["rss_end_mb"] > 0 and n["cpu_percent"] is not None
+    assert set(d["lost_frames"]) == {"lost_frames", "bad_frames", "sequence_restart"}
+    assert "windower_gap" in d["late_frames"] and d["exit_codes"]
+    f = d["frames"]  # 8 s may end before the driver's first frames: the split is consistent either way
+    assert f["frames_sent_meanwhile"] + f["never_sent"] >= f["frames_due_at_real_rate"]
+    assert f["frames_sent_meanwhile"] <= f["frames_sent"] and d["scene_frames_per_s"] > 0
+    # the window node reports its sample buffers with its diagnostics (none yet if it was still starting)
+    assert (d["windower_buffer_mb"] is None) == ("window_node: windows" not in d["diagnostics"])
+    assert all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
+
+
+def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
+    """Frames the simulator did not send in time are not losses; the bus's gaps and the messages the
+    window node never received are, each counted apart; lost frames are judged only when the
+    simulated bus kept up with the real rate."""
+    nodes = [NodeSamples("skin_driver", "skin_driver", 1), NodeSamples("window_node", "window_node", 2)]
+    diag = {"skin_driver: bus": {"bus_frames": "9000", "bus_lost_frames": "7"},
+            "skin_driver: left_hand": {"messages": "60", "lost_frames": "7"},
+            "skin_driver: chest": {"messages": "40"},
+            "window_node: windows": {"fault_lost_frames": "2", "frames_messages_taken": "97",
+                                     "windower_buffer_mb": "82.5"}}
+    r = SoakReport("nao", 10.0, 10.0, 1.0, nodes, diag, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=9000)
+    f = r.frames_split()
+    assert f["frames_due_at_real_rate"] == 10000 and f["frames_sent_meanwhile"] == 9000 and f["never_sent"] == 1000
+    assert f["frames_sent"] == 9000
+    assert f["sent_percent_of_real_rate"] == pytest.approx(90.0) and f["machine_kept_up"] is False
+    assert f["lost_on_bus"] == 7 and f["messages_sent"] == 100 and f["messages_received"] == 97
+    assert f["messages_sent_and_lost"] == 2 and f["frames_sent_and_lost"] == 180  # 90 frames a message
+    d = r.to_dict()
+    assert d["goal"]["no_lost_frames"] is False and d["goal"]["machine_kept_up"] is False
+    assert d["windower_buffer_mb"] == 82.5
+    kept_up = SoakReport("nao", 10.0, 10.0, 1.0, nodes, {"skin_driver: bus": {"bus_frames": "9950"}},
+                         (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {}, scene_frames_per_s=1000.0, driver_run_s=10.0,
+                         frames_sent_in_run=9950)
+    assert kept_up.frames_split()["machine_kept_up"] is True and kept_up.to_dict()["goal"]["no_lost_frames"]
+
+
+def test_rss_per_minute_takes_the_first_sample_of_every_minute():
+    s = NodeSamples("window_node", "window_node", 1, t_s=[0, 30, 61, 90, 120], rss_mb=[10, 20, 30, 40, 50],
+                    cpu_s=[0] * 5)
+    r = SoakReport("nao", 10.0, 150.0, 1.0, [s], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {})
+    assert r.rss_per_minute() == {"window_node": [10, 30, 50]}

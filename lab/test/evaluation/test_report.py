@@ -1,0 +1,66 @@
+"""``tactile report`` end to end on a small slice of the real recordings (the quick plan)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tactile_descriptors_lab.evaluation.report import FEATURE_DEFINITION, SECTIONS
+from tactile_descriptors_ros.tools.cli import main
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path, capsys):
+    out = tmp_path / "docs"
+    rc = main(["report", "--data", str(biotac_data_dir), "--out", str(out), "--materials", "1-3",
+               "--trials", "1-12", "--quick", "--jobs", "1", "--cache", str(tmp_path / "cache"), "--json"])
+    assert rc == 0
+    capsys.readouterr()
+    md = (out / "results.md").read_text()
+    for heading in ("## Headline", "## Accuracy against window length", "## Robustness to touch length",
+                    "## Short windows", "## Ablations", "## Cross-validation over trials"):
+        assert heading in md
+    assert "train trials 1-8, test trials 9-12" in md
+    for fig in ("accuracy_vs_window", "time_vs_window", "length_robustness", "pa_curves", "confusion_svm"):
+        png = out / "figures" / f"{fig}.png"
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    res = json.loads((out / "results.json").read_text())
+    head = res["headline"]["combined | 1"]
+    assert head["n_features"] == 261 and head["config"]["gate"] is False
+    assert set(head["classifiers"]) == {"svm", "pa", "gmm"}
+    # three well-separated materials: far above chance (1/3) even on 1 s windows and 8 trials
+    assert head["classifiers"]["svm"]["accuracy"] >= 0.75
+    pa_rows = {k: v for k, v in res["ablation"].items() if "PA:" in k}
+    assert len(pa_rows) == 3 and all(set(v["classifiers"]) == {"pa"} for v in pa_rows.values())
+    assert res["ablation"]["paper | with the contact gate (F_t on tared PDC)"]["config"]["gate"] is True
+    # the touch-length sections: one model per variant scored on every test length, the block-averaged
+    # default first, trial CV of the default
+    assert set(res["length"]) == {"combined | 1", "combined | 0.5-2", "window | 1", "window | 0.5-2"}
+    assert res["length"]["combined | 0.5-2"]["test_window_frames"] == [50, 100, 150, 200]
+    assert res["length"]["combined | 1"]["config"]["block_s"] == 1.0
+    assert res["length"]["window | 1"]["config"]["block_s"] is None
+    assert set(res["length_cv"]) == {"combined | 1", "combined | 0.5-2"}
+    assert len(res["length_cv"]["combined | 1"]["classifiers"]["svm"]["fold_accuracy"]) == 2
+    assert "| combined | 1 s | random 0.5-2 s |" in md
+
+    # --only length recomputes those sections alone, keeps the rest and renders the page again
+    head_before = res["headline"]
+    (out / "results.md").write_text("stale")
+    rc = main(["report", "--data", str(biotac_data_dir), "--out", str(out), "--materials", "1-3",
+               "--trials", "1-12", "--quick", "--jobs", "1", "--cache", str(tmp_path / "cache"),
+               "--only", "length"])
+    assert rc == 0
+    again = json.loads((out / "results.json").read_text())
+    assert again["headline"] == head_before
+    for name in ("svm", "pa"):  # the same results (times differ from run to run)
+        for field in ("accuracy", "confusion"):
+            assert (again["length"]["combined | 1"]["classifiers"][name][field]
+                    == res["length"]["combined | 1"]["classifiers"][name][field])
+    assert set(again["section_runtime_s"]) == {"length", "length_cv", "short"}
+    # every recomputed section records when and with which feature definition it was measured
+    assert set(res["provenance"]) == set(SECTIONS)
+    assert all(p["features"] == FEATURE_DEFINITION for p in again["provenance"].values())
+    md2 = (out / "results.md").read_text()
+    assert "## Headline" in md2 and "## Robustness to touch length" in md2
