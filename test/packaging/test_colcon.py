@@ -59,6 +59,9 @@ def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir
                            capture_output=True, text=True, timeout=BUILD_S)
     assert build.returncode == 0, build.stdout[-4000:] + build.stderr[-4000:]
     assert "Summary: 2 packages finished" in build.stdout, build.stdout[-3000:]
+    # the robot's build holds no lab code (the lab is a pip package beside it, lab/)
+    installed = [p.relative_to(ws / "install") for p in (ws / "install").rglob("*.py")]
+    assert installed and not [p for p in installed if "tactile_descriptors_lab" in str(p)]
 
     sourced = f"source {ws}/install/setup.bash && "
     prefixes = subprocess.run(
