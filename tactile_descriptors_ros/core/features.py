@@ -335,7 +335,7 @@ def power_spectrum(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x)
     n = x.shape[-1]
     X = sfft.rfft(x, axis=-1)
-    kernel = fast._kernel() if X.size and X.dtype == np.complex128 else None
+    kernel = fast.kernel_module() if X.size and X.dtype == np.complex128 else None
     if kernel is not None:  # one compiled pass, the same operations as below (the live path's cost)
         out = np.empty(X.shape, dtype=np.float64)
         m = X.shape[-1]
@@ -452,7 +452,7 @@ def moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     and kurtosis 0, never NaN.
     """
     x = np.asarray(x)
-    kernel = fast._kernel() if x.dtype in (np.int32, np.int64) and x.size and x.shape[-1] else None
+    kernel = fast.kernel_module() if x.dtype in (np.int32, np.int64) and x.size and x.shape[-1] else None
     if kernel is not None:  # integer counts (live and recorded data): the compiled two-pass sums
         out = np.empty((x.size // x.shape[-1], 5))
         kernel.central_moments(np.ascontiguousarray(x).reshape(-1, x.shape[-1]), out)
