@@ -61,6 +61,9 @@ __all__ = [
     "reduce_body_part",
     "describe_window",
     "pool_body_parts",
+    "resolve_groups",
+    "RobotPlan",
+    "robot_plan",
 ]
 
 _QUANTITIES = ("A", "M", "C")
@@ -423,8 +426,22 @@ def _finite_mean(a: np.ndarray, axis: int | None = None) -> np.ndarray:
 
 
 # ------------------------------------------------------------ batched path
-class _RobotPlan(NamedTuple):
-    """What :func:`describe_window` needs of a robot, computed once per robot object."""
+class RobotPlan(NamedTuple):
+    """What :func:`describe_window` needs of a robot, computed once per robot object (:func:`robot_plan`).
+
+    Attributes
+    ----------
+    index : dict of int to (BodyPart, Cell)
+        Every cell id's body part and cell (:meth:`.robot.RobotDescription.cell_index`).
+    types : tuple
+        Per cell type, in the order of its first body part: the cell type and
+        its ``(position, body part)`` pairs.
+    part_ids : tuple
+        Per cell type as in ``types``: the cell ids of each of its body parts.
+    concat_labels : dict
+        The ``concat`` labels per group selection, filled on first use
+        (descriptions are immutable).
+    """
 
     index: dict[int, tuple[BodyPart, Cell]]
     # per cell type, in the order of its first body part: (cell type, [(position, body part)])
@@ -435,12 +452,16 @@ class _RobotPlan(NamedTuple):
     concat_labels: dict[tuple[str, ...], tuple[str, ...]]
 
 
-_PLANS: dict[int, tuple[weakref.ref, _RobotPlan]] = {}
+_PLANS: dict[int, tuple[weakref.ref, RobotPlan]] = {}
 _PLANS_LOCK = threading.Lock()
 
 
-def _plan(robot: RobotDescription) -> _RobotPlan:
-    """The robot's cell index and body parts by cell type (cached; descriptions are immutable)."""
+def robot_plan(robot: RobotDescription) -> RobotPlan:
+    """The robot's cell index and body parts by cell type (:class:`RobotPlan`).
+
+    Cached per robot object (descriptions are immutable) while the object
+    lives; :func:`describe_window` and :func:`.blocks.describe_blocks` share it.
+    """
     hit = _PLANS.get(id(robot))
     if hit is not None and hit[0]() is robot:
         return hit[1]
@@ -448,7 +469,7 @@ def _plan(robot: RobotDescription) -> _RobotPlan:
     for pos, part in enumerate(robot.body_parts):
         by_type.setdefault(part.cell_type, []).append((pos, part))
     types = tuple((robot.cell_types[name], tuple(parts)) for name, parts in by_type.items())
-    plan = _RobotPlan(robot.cell_index(), types,
+    plan = RobotPlan(robot.cell_index(), types,
                       tuple(tuple(tuple(c.id for c in part.cells) for _, part in parts) for _, parts in types),
                       {})
     with _PLANS_LOCK:
@@ -820,7 +841,11 @@ def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ..
     return np.concatenate(values), tuple(labels)
 
 
-def _selection(robot: RobotDescription, channels: str | None, groups) -> tuple[str, ...]:
+def resolve_groups(robot: RobotDescription, channels: str | None = None,
+                   groups: tuple[str, ...] | None = None) -> tuple[str, ...]:
+    """The feature-group selection a description asks for: ``groups`` when given, else the groups of the
+    legacy ``channels`` mode (:func:`.features.groups_of_channels`), else the robot description's
+    ``descriptor.groups`` (as :func:`describe_window` resolves its arguments)."""
     if groups is not None:
         return tuple(groups)
     if channels is not None:
@@ -1011,9 +1036,9 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         For a group selection a cell type cannot feed (:func:`.features.check_groups`).
     """
     layout = layout or robot.descriptor.layout
-    groups = _selection(robot, channels, groups)
+    groups = resolve_groups(robot, channels, groups)
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
-    plan = _plan(robot)
+    plan = robot_plan(robot)
     unknown = cells.keys() - plan.index.keys()
     if unknown:
         unknown = sorted(unknown)

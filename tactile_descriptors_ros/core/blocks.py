@@ -53,10 +53,10 @@ from .aggregation import (
     BodyPartDescriptor,
     CellSignals,
     RobotDescriptor,
-    _plan,
-    _selection,
     describe_window,
     pool_body_parts,
+    resolve_groups,
+    robot_plan,
 )
 from .descriptors import Quality
 from .robot import BodyPart, Cell, RobotDescription
@@ -313,7 +313,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     layout = layout or robot.descriptor.layout
     if layout not in ("concat", "pooled"):
         describe_window(robot, pieces[0], layout=layout, **kw)  # raises the layout error
-    plan = _plan(robot)
+    plan = robot_plan(robot)
     unknown = cells.keys() - plan.index.keys()
     if unknown:
         describe_window(robot, {cid: cells[cid] for cid in unknown}, layout=layout, **kw)  # raises naming them
@@ -326,7 +326,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         values, labels = pool_body_parts(robot, parts)
     else:
         values = np.concatenate([bp.values for bp in parts])
-        selection = _selection(robot, channels, groups)
+        selection = resolve_groups(robot, channels, groups)
         labels = plan.concat_labels.get(selection)
         if labels is None:
             labels = plan.concat_labels[selection] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)
