@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from ..core.robot import CellType
+from ..core.cell_types import CellType
 from ..errors import ConfigError
 
 __all__ = ["Mapping", "NameRule", "Stamps", "FORMATS", "TARE_MODES", "shipped_mappings", "load_mapping",

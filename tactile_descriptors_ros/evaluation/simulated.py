@@ -55,7 +55,8 @@ import numpy as np
 import yaml
 
 from ..core.aggregation import CellSignals, describe_window
-from ..core.robot import CellType, RobotDescription
+from ..core.cell_types import CellType
+from ..core.robot import RobotDescription
 from ..errors import ConfigError, SceneError
 from ..sim.engine import CellRecord, ExplorationTiming, SimResult, Stream, iter_simulate
 from ..sim.scene import Scene, parse_scene, scene_path

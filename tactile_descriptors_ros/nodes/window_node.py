@@ -50,10 +50,11 @@ import numpy as np
 from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
-from ..core.blocks import check_blocks, describe_blocks
-from ..core.features import check_groups, groups_of_channels, selection_name
+from ..core.blocks import describe_blocks
+from ..core.cell_types import CellType
 from ..core.fast import warm_up
-from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, CellType, RobotDescription, load_robot
+from ..core.groups import check_groups, groups_of_channels, selection_name
+from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, RobotDescription, check_blocks, load_robot
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..streams.sequence import unwrap

@@ -54,13 +54,13 @@ from ..core.aggregation import (
     CellFeatures,
     CellSignals,
     RobotDescriptor,
-    body_part_layout,
     contact_gate,
     describe_window,
     reduce_body_part,
 )
 from ..core.alignment import zero_order_hold
 from ..core.blocks import describe_blocks
+from ..core.groups import body_part_layout
 from ..core.robot import RobotDescription, load_robot, parse_robot, robot_config_path
 from ..core.windowing import CellChunk, Windower
 from ..errors import TactileError

@@ -35,7 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from ..core.robot import BodyPart, CellType
+from ..core.cell_types import CellType
+from ..core.robot import BodyPart
 from ..errors import SceneError
 from .scene import Exploration, Scene, _kind_of, sensor_defaults
 from .textures import MaterialModel, get_material, render_ar, rescale_ar

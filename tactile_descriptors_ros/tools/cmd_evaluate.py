@@ -100,7 +100,7 @@ def check_recordings(recordings, mode: str) -> None:
         Naming the first recording lacking a channel, the feature group that
         reads it, and the groups the recordings can feed.
     """
-    from ..core.features import check_present
+    from ..core.groups import check_present
     from ..evaluation.features import mode_groups, recording_channels, recordings_cell_type
 
     ct = recordings_cell_type(recordings)

@@ -17,7 +17,7 @@ import pytest
 import yaml
 from writers import SKIN_SAMPLES_PER_FRAME, simulated_skin_trials, write_skin_csv, write_skin_hdf5, write_skin_npz
 
-from tactile_descriptors_ros.core.features import selection_labels
+from tactile_descriptors_ros.core.groups import selection_labels
 from tactile_descriptors_ros.datasets.mapping import load_mapping
 from tactile_descriptors_ros.datasets.recording import CellRecording
 from tactile_descriptors_ros.datasets.sources import LoadReport, read_source
