@@ -35,9 +35,9 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import SignalError
+from .cell_types import CellType
 from .descriptors import Quality
 from .fast import cell_bounds, cell_quantities, cell_quantities_bounded, exact_integer_ok, scratch
-from .cell_types import CellType
 from .features import band_hjorth, level_values, power_spectrum, statistics_values
 from .groups import (
     KERNEL_GROUPS,
