@@ -55,7 +55,8 @@ import numpy as np
 import yaml
 
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
-from tactile_descriptors_ros.core.robot import CellType, RobotDescription
+from tactile_descriptors_ros.core.cell_types import CellType
+from tactile_descriptors_ros.core.robot import RobotDescription
 from tactile_descriptors_ros.errors import ConfigError, SceneError
 from tactile_descriptors_ros.sim.engine import CellRecord, ExplorationTiming, SimResult, Stream, iter_simulate
 from tactile_descriptors_ros.sim.scene import Scene, parse_scene, scene_path

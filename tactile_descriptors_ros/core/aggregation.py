@@ -35,20 +35,19 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import SignalError
+from .cell_types import CellType
 from .descriptors import Quality
 from .fast import cell_bounds, cell_quantities, cell_quantities_bounded, exact_integer_ok, scratch
-from .features import (
+from .features import band_hjorth, level_values, power_spectrum, statistics_values
+from .groups import (
     KERNEL_GROUPS,
-    band_hjorth,
+    body_part_layout,
     check_groups,
     groups_of_channels,
-    level_values,
-    power_spectrum,
     selection_labels,
     selection_name,
-    statistics_values,
 )
-from .robot import BodyPart, Cell, CellType, RobotDescription
+from .robot import BodyPart, Cell, RobotDescription
 
 __all__ = [
     "CellSignals",
@@ -57,13 +56,14 @@ __all__ = [
     "RobotDescriptor",
     "cell_features",
     "contact_gate",
-    "body_part_layout",
     "reduce_body_part",
     "describe_window",
     "pool_body_parts",
+    "resolve_groups",
+    "RobotPlan",
+    "robot_plan",
 ]
 
-_QUANTITIES = ("A", "M", "C")
 _GAP = int(Quality.GAP)
 _INVALID = int(Quality.INVALID)
 _NO_CONTACT = int(Quality.NO_CONTACT)
@@ -98,7 +98,7 @@ class CellSignals:
         Invalid samples already removed from this window's arrays: the body
         part is flagged ``INVALID`` but the cell still counts.
     extra : numpy.ndarray, shape (n_extra_channels, n_slow), optional
-        The cell type's extra channels (:attr:`.robot.CellType.extra_channels`:
+        The cell type's extra channels (:attr:`.cell_types.CellType.extra_channels`:
         BioTac PDC, TDC, TAC; skin proximity, temperature), one value per
         deformation sample (float, NaN where missing).  Only the feature
         groups that use them read them (``levels``); ``None`` reads as all
@@ -159,7 +159,7 @@ class RobotDescriptor:
     """Whole-robot descriptor of one window (eq. 12, 18, 29, or pooled).
 
     ``channels`` names the feature-group selection (``"paper"``,
-    ``"per_channel+bands+levels+statistics"``; :func:`.features.selection_name`).
+    ``"per_channel+bands+levels+statistics"``; :func:`.groups.selection_name`).
     """
 
     robot: str
@@ -245,42 +245,6 @@ def _mean_forces(force_n) -> np.ndarray:
         if f.size:
             out[k] = f.mean()
     return out
-
-
-def _axis_suffix(name: str) -> str:
-    return f"_{name}" if name else ""
-
-
-def body_part_layout(cell_type: CellType, channels: str = "averaged") -> tuple[str, ...]:
-    """Labels of a body part's values, in eq. 11 order.
-
-    Averaged (eq. 11/17/28): ``A_<S>[_axis]`` per S axis, ``A_<V>[_axis]``
-    per V axis, the same for M and C, then ``L_<S>_<V>[_axis]`` and
-    ``N_<S>_<V>[_axis]`` per correlation pair.  Per channel: one label per
-    S channel, V channel and (S channel, V channel) pair.
-    """
-    vib, dfm = cell_type.vibration, cell_type.deformation
-    pairs = cell_type.correlation_pairs()
-    labels: list[str] = []
-    if channels == "averaged":
-        for q in _QUANTITIES:
-            labels += [f"{q}_{vib.symbol}{_axis_suffix(a)}" for a in vib.axis_names]
-            labels += [f"{q}_{dfm.symbol}{_axis_suffix(a)}" for a in dfm.axis_names]
-        multi_v = len(dfm.axes) > 1 and cell_type.correlate != "pairwise"
-        for q in ("L", "N"):
-            for i, j in pairs:
-                suffix = _axis_suffix(vib.axis_names[i]) + (_axis_suffix(dfm.axis_names[j]) if multi_v else "")
-                labels.append(f"{q}_{vib.symbol}_{dfm.symbol}{suffix}")
-    elif channels == "per_channel":
-        for q in _QUANTITIES:
-            labels += [f"{q}_{ch}" for ch in vib.channels]
-            labels += [f"{q}_{ch}" for ch in dfm.channels]
-        for q in ("L", "N"):
-            for i, j in pairs:
-                labels += [f"{q}_{sc}_{vc}" for sc in vib.axes[i] for vc in dfm.axes[j]]
-    else:
-        raise SignalError(f"channels must be 'averaged' or 'per_channel', got {channels!r}")
-    return tuple(labels)
 
 
 def _channel_slices(axes: tuple[tuple[str, ...], ...]) -> list[slice]:
@@ -423,8 +387,22 @@ def _finite_mean(a: np.ndarray, axis: int | None = None) -> np.ndarray:
 
 
 # ------------------------------------------------------------ batched path
-class _RobotPlan(NamedTuple):
-    """What :func:`describe_window` needs of a robot, computed once per robot object."""
+class RobotPlan(NamedTuple):
+    """What :func:`describe_window` needs of a robot, computed once per robot object (:func:`robot_plan`).
+
+    Attributes
+    ----------
+    index : dict of int to (BodyPart, Cell)
+        Every cell id's body part and cell (:meth:`.robot.RobotDescription.cell_index`).
+    types : tuple
+        Per cell type, in the order of its first body part: the cell type and
+        its ``(position, body part)`` pairs.
+    part_ids : tuple
+        Per cell type as in ``types``: the cell ids of each of its body parts.
+    concat_labels : dict
+        The ``concat`` labels per group selection, filled on first use
+        (descriptions are immutable).
+    """
 
     index: dict[int, tuple[BodyPart, Cell]]
     # per cell type, in the order of its first body part: (cell type, [(position, body part)])
@@ -435,12 +413,16 @@ class _RobotPlan(NamedTuple):
     concat_labels: dict[tuple[str, ...], tuple[str, ...]]
 
 
-_PLANS: dict[int, tuple[weakref.ref, _RobotPlan]] = {}
+_PLANS: dict[int, tuple[weakref.ref, RobotPlan]] = {}
 _PLANS_LOCK = threading.Lock()
 
 
-def _plan(robot: RobotDescription) -> _RobotPlan:
-    """The robot's cell index and body parts by cell type (cached; descriptions are immutable)."""
+def robot_plan(robot: RobotDescription) -> RobotPlan:
+    """The robot's cell index and body parts by cell type (:class:`RobotPlan`).
+
+    Cached per robot object (descriptions are immutable) while the object
+    lives; :func:`describe_window` and :func:`.blocks.describe_blocks` share it.
+    """
     hit = _PLANS.get(id(robot))
     if hit is not None and hit[0]() is robot:
         return hit[1]
@@ -448,7 +430,7 @@ def _plan(robot: RobotDescription) -> _RobotPlan:
     for pos, part in enumerate(robot.body_parts):
         by_type.setdefault(part.cell_type, []).append((pos, part))
     types = tuple((robot.cell_types[name], tuple(parts)) for name, parts in by_type.items())
-    plan = _RobotPlan(robot.cell_index(), types,
+    plan = RobotPlan(robot.cell_index(), types,
                       tuple(tuple(tuple(c.id for c in part.cells) for _, part in parts) for _, parts in types),
                       {})
     with _PLANS_LOCK:
@@ -456,11 +438,6 @@ def _plan(robot: RobotDescription) -> _RobotPlan:
             del _PLANS[key]
         _PLANS[id(robot)] = (weakref.ref(robot), plan)
     return plan
-
-
-@functools.lru_cache(maxsize=256)
-def _layout(cell_type: CellType, channels: str) -> tuple[str, ...]:
-    return body_part_layout(cell_type, channels)
 
 
 def _force_means(forces: list) -> np.ndarray:
@@ -601,7 +578,7 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     for exact moments take that path.  ``part_ids``: each body part's cell
     ids (from the robot's cached plan).
     """
-    labels = _layout(cell_type, channels)
+    labels = body_part_layout(cell_type, channels)
     red = _reduction(cell_type, channels)
     if part_ids is None:
         part_ids = tuple(tuple(c.id for c in part.cells) for _, part in parts)
@@ -820,7 +797,11 @@ def pool_body_parts(robot: RobotDescription, parts: tuple[BodyPartDescriptor, ..
     return np.concatenate(values), tuple(labels)
 
 
-def _selection(robot: RobotDescription, channels: str | None, groups) -> tuple[str, ...]:
+def resolve_groups(robot: RobotDescription, channels: str | None = None,
+                   groups: tuple[str, ...] | None = None) -> tuple[str, ...]:
+    """The feature-group selection a description asks for: ``groups`` when given, else the groups of the
+    legacy ``channels`` mode (:func:`.groups.groups_of_channels`), else the robot description's
+    ``descriptor.groups`` (as :func:`describe_window` resolves its arguments)."""
     if groups is not None:
         return tuple(groups)
     if channels is not None:
@@ -910,7 +891,7 @@ def _cells_mean(rows: np.ndarray) -> tuple[np.ndarray, bool]:
 def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
                      cells: Mapping[int, CellSignals], threshold_n: float, groups: tuple[str, ...],
                      part_ids: tuple[tuple[int, ...], ...]) -> list[BodyPartDescriptor]:
-    """The body parts of one cell type described by a group selection (:mod:`.features`).
+    """The body parts of one cell type described by a group selection (:mod:`.groups`, :mod:`.features`).
 
     The kernel groups (``paper``, ``per_channel``) come from
     :func:`_describe_type`, which also decides contact, cell counts, mean
@@ -990,7 +971,7 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         The legacy channel mode: ``averaged`` is the groups ``("paper",)``,
         ``per_channel`` the groups ``("per_channel",)``.
     groups : tuple of str, optional
-        Feature groups in descriptor order (:mod:`.features`); defaults to
+        Feature groups in descriptor order (:mod:`.groups`); defaults to
         ``channels``' groups when that is given, else the robot
         description's ``descriptor.groups``.
     force_threshold_n : float, optional
@@ -1008,12 +989,12 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         For a cell id not in the robot description, or channel counts that do
         not match the cell type.
     ConfigError
-        For a group selection a cell type cannot feed (:func:`.features.check_groups`).
+        For a group selection a cell type cannot feed (:func:`.groups.check_groups`).
     """
     layout = layout or robot.descriptor.layout
-    groups = _selection(robot, channels, groups)
+    groups = resolve_groups(robot, channels, groups)
     threshold = robot.contact.force_threshold_n if force_threshold_n is None else float(force_threshold_n)
-    plan = _plan(robot)
+    plan = robot_plan(robot)
     unknown = cells.keys() - plan.index.keys()
     if unknown:
         unknown = sorted(unknown)

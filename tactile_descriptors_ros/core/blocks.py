@@ -53,51 +53,16 @@ from .aggregation import (
     BodyPartDescriptor,
     CellSignals,
     RobotDescriptor,
-    _plan,
-    _selection,
     describe_window,
     pool_body_parts,
+    resolve_groups,
+    robot_plan,
 )
 from .descriptors import Quality
-from .robot import BodyPart, Cell, RobotDescription
+from .robot import BodyPart, Cell, RobotDescription, check_blocks
 from .scaling import activity_mask, log_activity
 
-__all__ = ["check_blocks", "block_starts", "block_mean", "split_cells", "block_robot", "describe_blocks"]
-
-
-def check_blocks(block_s: float, block_hop_s: float, *, key: str = "descriptor", source: str | None = None,
-                 rates_hz: Sequence[float] = ()) -> tuple[float, float]:
-    """Check a block setting: ``block_s`` >= 0 (0 = off) and ``0 < block_hop_s <= block_s``.
-
-    ``rates_hz`` are the deformation rates of the cell types in use: a block
-    must hold at least 3 frames of each.
-
-    Returns
-    -------
-    (float, float)
-        The setting as floats.
-
-    Raises
-    ------
-    ConfigError
-        Naming ``<key>.block_s`` or ``<key>.block_hop_s``.
-    """
-    try:
-        block, hop = float(block_s), float(block_hop_s)
-    except (TypeError, ValueError):
-        raise ConfigError(f"block_s and block_hop_s must be numbers, got {block_s!r} and {block_hop_s!r}",
-                          key=f"{key}.block_s", source=source) from None
-    if not np.isfinite(block) or block < 0.0:
-        raise ConfigError(f"must be >= 0 seconds (0 = one descriptor of the whole window), got {block_s!r}",
-                          key=f"{key}.block_s", source=source)
-    if block and not (np.isfinite(hop) and 0.0 < hop <= block):
-        raise ConfigError(f"must be > 0 and at most block_s ({block:g} s), got {block_hop_s!r}",
-                          key=f"{key}.block_hop_s", source=source)
-    for rate in rates_hz:
-        if block and round(block * float(rate)) < 3:
-            raise ConfigError(f"a block of {block:g} s holds fewer than 3 frames at {float(rate):g} Hz",
-                              key=f"{key}.block_s", source=source)
-    return block, hop
+__all__ = ["block_starts", "block_mean", "split_cells", "block_robot", "describe_blocks"]
 
 
 def block_starts(n_frames: int, block_frames: int, hop_frames: int) -> np.ndarray:
@@ -187,7 +152,7 @@ def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: f
     Raises
     ------
     ConfigError
-        For a bad block setting (:func:`check_blocks`), or a block shorter than 3 frames.
+        For a bad block setting (:func:`.robot.check_blocks`), or a block shorter than 3 frames.
     """
     block_s, block_hop_s = check_blocks(block_s, block_hop_s)
     period = _frame_period_ns(cells)
@@ -313,7 +278,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     layout = layout or robot.descriptor.layout
     if layout not in ("concat", "pooled"):
         describe_window(robot, pieces[0], layout=layout, **kw)  # raises the layout error
-    plan = _plan(robot)
+    plan = robot_plan(robot)
     unknown = cells.keys() - plan.index.keys()
     if unknown:
         describe_window(robot, {cid: cells[cid] for cid in unknown}, layout=layout, **kw)  # raises naming them
@@ -326,7 +291,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         values, labels = pool_body_parts(robot, parts)
     else:
         values = np.concatenate([bp.values for bp in parts])
-        selection = _selection(robot, channels, groups)
+        selection = resolve_groups(robot, channels, groups)
         labels = plan.concat_labels.get(selection)
         if labels is None:
             labels = plan.concat_labels[selection] = tuple(f"{bp.name}/{lab}" for bp in parts for lab in bp.labels)

@@ -5,7 +5,7 @@
 report``, ``tactile bench``).  It hands integer sensor data (ADC counts, as
 every driver and dataset delivers them) to a compiled backend, which
 computes every quantity from exact integer sums in one pass per cell
-(:mod:`._numba_kernel`); whatever a backend cannot compute exactly (float
+(:mod:`.numba_kernel`); whatever a backend cannot compute exactly (float
 data, integers too large for exact sums, windows of fewer than 3 samples or
 pairs, unsorted stamps) is computed by the reference,
 :func:`.descriptors.cell_quantities`, the paper's maths as it is written.
@@ -43,6 +43,7 @@ __all__ = [
     "BACKENDS",
     "REFERENCE",
     "backend",
+    "kernel_module",
     "set_backend",
     "cell_quantities",
     "cell_quantities_bounded",
@@ -57,8 +58,8 @@ __all__ = [
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
 #: ``central_moments``, ``power_spectrum``, the status ``OK`` and ``CACHE_DIR``
-#: (:mod:`._numba_kernel` documents them).  The first name that imports serves.
-BACKENDS: dict[str, str] = {"numba": f"{__package__}._numba_kernel"}
+#: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
+BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 
 #: The name of the reference (:func:`.descriptors.cell_quantities`, no compiled code).
 REFERENCE: str = "reference"
@@ -119,8 +120,13 @@ def _load(name: str) -> ModuleType:
     return importlib.import_module(BACKENDS[name])
 
 
-def _kernel() -> ModuleType | None:
-    """The compiled backend's module, or None when the reference serves."""
+def kernel_module() -> ModuleType | None:
+    """The compiled backend's module (loaded on first call), or None when the reference serves.
+
+    A backend module provides what :data:`BACKENDS` lists; the feature
+    groups (:mod:`.features`) call its ``central_moments`` and
+    ``power_spectrum`` directly.
+    """
     if _STATE["resolved"]:
         return _STATE["module"]
     with _LOCK:
@@ -143,7 +149,7 @@ def _kernel() -> ModuleType | None:
 
 def backend() -> str:
     """The name of the backend in use: a key of :data:`BACKENDS`, or :data:`REFERENCE`."""
-    _kernel()
+    kernel_module()
     return _STATE["name"]
 
 
@@ -239,7 +245,7 @@ def cell_quantities(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_v_ns: np
 def _compiled(s: np.ndarray, ts: np.ndarray, v: np.ndarray, tv: np.ndarray, fs_s: float, fs_v: float
               ) -> tuple[tuple[np.ndarray, ...], np.ndarray] | None:
     """The compiled backend's quantities and per-cell bounds, or None when it cannot compute the batch exactly."""
-    kernel = _kernel()
+    kernel = kernel_module()
     if kernel is None or not (min(s.shape) and min(v.shape) and s.shape[2] >= 3 and v.shape[2] >= 3):
         return None
     s_c, v_c = _compiled_int(s), _compiled_int(v)
@@ -281,7 +287,7 @@ def cell_quantities_bounded(s: np.ndarray, t_s_ns: np.ndarray, v: np.ndarray, t_
 
 def cell_bounds(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Smallest and largest value of each cell of integer data (n_cells, channels, samples)."""
-    kernel = _kernel()
+    kernel = kernel_module()
     xc = _compiled_int(x) if kernel is not None and x.ndim == 3 and x.shape[1] * x.shape[2] else None
     if xc is None:
         return x.min(axis=(1, 2)), x.max(axis=(1, 2))
@@ -301,7 +307,7 @@ def warm_up() -> dict:
     "cache_dir", "error"}`` (``accelerator``: the backend's name).
     """
     t0 = time.perf_counter()
-    kernel = _kernel()
+    kernel = kernel_module()
     import_s = time.perf_counter() - t0
     info = {"accelerator": backend(), "import_s": import_s, "first_call_s": 0.0, "cache_dir": None,
             "error": _STATE["error"]}

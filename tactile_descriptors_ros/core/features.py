@@ -1,87 +1,29 @@
-"""Feature groups: the pieces a descriptor is made of, over one window's cell signals.
+"""Feature groups' values: the computations behind the groups of :mod:`.groups`, over one window's cells.
 
-A robot's descriptor is a *selection* of feature groups (``descriptor.groups``
-in the robot description, the window node's ``descriptor.groups``
-parameter, ``tactile evaluate --mode``).  Each group is computed per cell from
-every channel its cell type declares, then averaged over the cells of a body
-part that are in contact (eq. 13-15, 19-26), like the paper's quantities.
-Labels are ``<group>/<label>`` in a body part (``<body part>/<group>/<label>``
-in the whole-robot descriptor), so a descriptor tells which selection made
-it and a model refuses descriptors of another selection.
-
-Groups (labels for a BioTac: S = ``pac``, V = ``e1..e19``, extra channels
-``pdc tdc tac``; for a skin cell: S = ``ax ay az``, V = ``f1 f2 f3``, extra
-``proximity temperature``):
-
-``paper``
-    The paper's descriptor, eq. 11 / 17 / 28: Hjorth Activity, Mobility and
-    Complexity of S and V (eq. 1-3), Pearson and Spearman correlation of S
-    with V (eq. 4-5), channels averaged per axis -- ``A_pac A_E M_pac M_E
-    C_pac C_E L_pac_E N_pac_E`` (8 values per BioTac, 18 per skin cell).
-    This is the robot description's legacy ``channels: averaged``.
-``per_channel``
-    The same quantities per channel (``A_e7``, ``L_pac_e7``, ...; 98 per
-    BioTac, 36 per skin cell); the legacy ``channels: per_channel``.
-``bands``
-    Hjorth Activity, Mobility, Complexity (eq. 1-3) of each vibration
-    channel band-limited to each band of :func:`vibration_bands`
-    (``A_pac_20-50Hz``, ``M_ax_100-200Hz``, ...): how the texture's
-    vibration energy and its frequency spread are distributed over the
-    spectrum (multi-band Hjorth, as in EEG analysis).  From the spectral
-    moments of one FFT per channel (:func:`band_hjorth`).
-``levels``
-    Mean of every slow channel over the window: the deformation channels
-    (minus their tare, when the driver reports one) and the extra channels
-    (``level_e1``, ``level_pdc``, ``level_temperature``, ...): static
-    deformation, contact force, proximity and thermal state.
-    ``levels:<ch>,<ch>`` restricts the group to the named channels (for
-    example ``levels:f1,f2,f3,proximity``); a channel the cell type does not
-    declare is a :class:`~tactile_descriptors_ros.errors.ConfigError` at
-    load time.
-``statistics``
-    The hand-made features of the related work (Fishel & Loeb 2012; Jamali &
-    Sammut 2011): log variance (``log1p``), skewness and excess kurtosis of
-    each vibration and deformation channel, and log band powers (``log1p``
-    of the window's power spectrum summed over a band, :func:`band_powers`)
-    of each vibration channel in :func:`vibration_bands` and of each
-    deformation channel in :func:`deformation_bands` (``logvar_pac``,
-    ``skew_e3``, ``kurt_ax``, ``logbp_pac_20-50Hz``, ``logbp_e1_0-2Hz``).
-
-``paper`` and ``per_channel`` come from the descriptor kernel
-(:mod:`.fast`, :mod:`.aggregation`); the other groups from the functions of
-this module over the cells' stacked signals.
+Each function takes a stack of cells (``(n_cells, n_channels, n_samples)``)
+and returns one row of values per cell in the order of
+:func:`.groups.group_labels`; :mod:`.aggregation` averages the rows over the
+cells of a body part in contact.  ``paper`` and ``per_channel`` come from the
+descriptor kernel (:mod:`.fast`); ``bands`` from :func:`band_hjorth`,
+``statistics`` from :func:`statistics_values` (both over the vibration's
+:func:`power_spectrum`), ``levels`` from :func:`level_values`.
+:func:`piece_summary` summarises a selection over the pieces of a window.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import fft as sfft
 
-from ..errors import ConfigError
 from . import fast
-from .robot import CellType
+from .cell_types import CellType
+from .groups import deformation_bands, level_channels, parse_group, vibration_bands
+from .scaling import activity_mask, log_activity
 
 __all__ = [
-    "GROUPS",
-    "KERNEL_GROUPS",
-    "CHANNEL_MODE_GROUPS",
-    "VIBRATION_BANDS_HZ",
-    "DEFORMATION_BANDS_HZ",
-    "groups_of_channels",
-    "parse_group",
-    "check_groups",
-    "group_channels",
-    "feedable_groups",
-    "check_present",
-    "vibration_bands",
-    "deformation_bands",
-    "group_labels",
-    "selection_labels",
-    "selection_name",
-    "groups_in_labels",
     "power_spectrum",
     "band_hjorth",
     "moments",
@@ -91,234 +33,7 @@ __all__ = [
     "piece_summary",
 ]
 
-#: Every feature group, in the order the evaluation's feature bank stores them.
-GROUPS: tuple[str, ...] = ("paper", "per_channel", "bands", "levels", "statistics")
 
-#: Groups computed by the descriptor kernel, and the kernel's channel mode for each.
-KERNEL_GROUPS: dict[str, str] = {"paper": "averaged", "per_channel": "per_channel"}
-
-#: The legacy ``descriptor.channels`` modes as group selections.
-CHANNEL_MODE_GROUPS: dict[str, tuple[str, ...]] = {"averaged": ("paper",), "per_channel": ("per_channel",)}
-
-#: Vibration bands (Hz) of ``bands`` and ``statistics``, clipped to each
-#: rate's Nyquist frequency by :func:`vibration_bands`.  The BioTac's PAC is
-#: AC-coupled (nothing below 20 Hz) and sampled at 2.2 kHz.
-VIBRATION_BANDS_HZ: tuple[tuple[float, float], ...] = (
-    (20.0, 50.0), (50.0, 100.0), (100.0, 200.0), (200.0, 400.0), (400.0, 800.0), (800.0, 1050.0))
-
-#: Deformation bands (Hz) of ``statistics`` (electrodes at 100 Hz); a faster
-#: deformation signal gets one more band up to its Nyquist frequency.
-DEFORMATION_BANDS_HZ: tuple[tuple[float, float], ...] = ((0.0, 2.0), (2.0, 10.0), (10.0, 50.0))
-
-_NYQUIST_MARGIN = 0.98  # vibration band edges stay below 0.98 x Nyquist
-
-
-def groups_of_channels(channels: str) -> tuple[str, ...]:
-    """The group selection of a legacy channel mode (``averaged`` -> ``(paper,)``).
-
-    Raises
-    ------
-    ConfigError
-        For an unknown channel mode.
-    """
-    try:
-        return CHANNEL_MODE_GROUPS[channels]
-    except KeyError:
-        raise ConfigError(f"channel mode must be one of {tuple(CHANNEL_MODE_GROUPS)}, got {channels!r}",
-                          key="descriptor.channels") from None
-
-
-def parse_group(token: str, *, key: str = "descriptor.groups",
-                source: str | None = None) -> tuple[str, tuple[str, ...] | None]:
-    """Split ``"levels:f1,proximity"`` into ``("levels", ("f1", "proximity"))``; ``"bands"`` -> ``("bands", None)``.
-
-    Raises
-    ------
-    ConfigError
-        For an unknown group, or channels given to a group that takes none.
-    """
-    name, sep, rest = str(token).partition(":")
-    name = name.strip()
-    if name not in GROUPS:
-        raise ConfigError(f"unknown feature group {name!r}; choose from {', '.join(GROUPS)}",
-                          key=key, source=source)
-    if not sep:
-        return name, None
-    if name != "levels":
-        raise ConfigError(f"feature group {name!r} takes no channel list (only levels:<ch>,<ch> does)",
-                          key=key, source=source)
-    chans = tuple(c.strip() for c in rest.split(",") if c.strip())
-    if not chans or len(set(chans)) != len(chans):
-        raise ConfigError(f"{token!r}: needs distinct channel names after 'levels:'", key=key, source=source)
-    return name, chans
-
-
-def vibration_bands(rate_hz: float) -> tuple[tuple[float, float], ...]:
-    """:data:`VIBRATION_BANDS_HZ` below ``0.98 x`` Nyquist of ``rate_hz``, upper edges clipped there."""
-    top = _NYQUIST_MARGIN * rate_hz / 2.0
-    return tuple((lo, min(hi, top)) for lo, hi in VIBRATION_BANDS_HZ if lo < top)
-
-
-def deformation_bands(rate_hz: float) -> tuple[tuple[float, float], ...]:
-    """:data:`DEFORMATION_BANDS_HZ`, plus ``(50, Nyquist)`` when the Nyquist frequency is above 50 Hz."""
-    nyq = rate_hz / 2.0
-    bands = tuple((lo, min(hi, nyq)) for lo, hi in DEFORMATION_BANDS_HZ if lo < nyq)
-    last = DEFORMATION_BANDS_HZ[-1][1]
-    return bands + (((last, nyq),) if nyq > last else ())
-
-
-def _level_channels(cell_type: CellType, chans: tuple[str, ...] | None) -> tuple[str, ...]:
-    slow = cell_type.deformation.channels + cell_type.extra_channels
-    return slow if chans is None else chans
-
-
-@functools.lru_cache(maxsize=256)
-def check_groups(cell_type: CellType, groups: tuple[str, ...], *, key: str = "descriptor.groups",
-                 source: str | None = None) -> tuple[str, ...]:
-    """Check that ``cell_type`` can feed every group of a selection; return the selection.
-
-    Raises
-    ------
-    ConfigError
-        Naming the group and the cell type: an unknown group, a group listed
-        twice, ``bands`` on a vibration rate without any band below Nyquist,
-        ``levels:<ch>`` with a channel the cell type does not declare (or a
-        vibration channel, whose mean is an AC offset or gravity, not a level).
-    """
-    groups = tuple(groups)
-    if not groups:
-        raise ConfigError("needs at least one feature group", key=key, source=source)
-    if len(set(groups)) != len(groups):
-        raise ConfigError(f"feature group listed twice in {list(groups)}", key=key, source=source)
-    for token in groups:
-        name, chans = parse_group(token, key=key, source=source)
-        if name == "bands" and not vibration_bands(cell_type.vibration.rate_hz):
-            raise ConfigError(f"feature group 'bands' cannot be fed by cell type {cell_type.name!r}: its vibration "
-                              f"rate ({cell_type.vibration.rate_hz:g} Hz) has no band of {VIBRATION_BANDS_HZ} "
-                              "below Nyquist", key=key, source=source)
-        if name == "levels" and chans is not None:
-            slow = _level_channels(cell_type, None)
-            missing = [c for c in chans if c not in slow]
-            if missing:
-                raise ConfigError(f"feature group {token!r} cannot be fed by cell type {cell_type.name!r}: it "
-                                  f"declares no slow channel {missing[0]!r} (it has {', '.join(slow)})",
-                                  key=key, source=source)
-    return groups
-
-
-def group_channels(cell_type: CellType, group: str) -> tuple[str, ...]:
-    """The channels a feature group reads: S and V for every group but ``levels``, which reads the slow
-    channels (V and the extra channels, or those ``levels:<ch>,...`` names)."""
-    name, chans = parse_group(group)
-    if name == "levels":
-        return _level_channels(cell_type, chans)
-    return cell_type.vibration.channels + cell_type.deformation.channels
-
-
-def feedable_groups(cell_type: CellType, present: Iterable[str]) -> tuple[str, ...]:
-    """The groups of :data:`GROUPS` a recording holding only the channels ``present`` can feed.
-
-    ``levels`` restricted to the present slow channels (``levels:pdc,tdc,tac``)
-    stands in for ``levels`` when some slow channel is absent.
-    """
-    have = set(present)
-    out = [g for g in GROUPS if all(c in have for c in group_channels(cell_type, g))]
-    if "levels" not in out:
-        slow = [c for c in _level_channels(cell_type, None) if c in have]
-        if slow:
-            out.append("levels:" + ",".join(slow))
-    return tuple(out)
-
-
-def check_present(cell_type: CellType, groups: Iterable[str], present: Iterable[str], *, where: str,
-                  why: Mapping[str, str] | None = None, key: str = "descriptor.groups") -> None:
-    """Refuse a selection with a group that reads a channel the recordings do not hold.
-
-    Parameters
-    ----------
-    cell_type : CellType
-    groups : iterable of str
-        The selection.
-    present : iterable of str
-        Channels the recordings hold (at the cell type's rates).
-    where : str
-        The recordings (a file), named first in the message.
-    why : mapping of str to str, optional
-        Why a channel is absent (``"pac"`` -> ``"PAC at 200 Hz, not 2200 Hz"``).
-
-    Raises
-    ------
-    ConfigError
-        Naming the first group that cannot be fed, its missing channel, and
-        the groups these recordings can feed.
-    """
-    have = set(present)
-    for g in groups:
-        missing = [c for c in group_channels(cell_type, g) if c not in have]
-        if missing:
-            reason = (why or {}).get(missing[0])
-            more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
-            able = feedable_groups(cell_type, have)
-            raise ConfigError(
-                f"{where}: feature group {g!r} needs channel {missing[0]!r}{more}, which these recordings do not "
-                f"hold{f' ({reason})' if reason else ''}; the groups they can feed: "
-                f"{', '.join(able) if able else 'none'}", key=key)
-
-
-def _band_name(lo: float, hi: float) -> str:
-    return f"{int(lo)}-{int(hi)}Hz"
-
-
-@functools.lru_cache(maxsize=256)
-def group_labels(cell_type: CellType, group: str) -> tuple[str, ...]:
-    """Labels of one group's values in a body part, without the ``<group>/`` prefix.
-
-    The kernel groups follow :func:`.aggregation.body_part_layout`; the
-    others are documented in this module's docstring.
-    """
-    from .aggregation import body_part_layout  # the kernel groups' layout lives with the kernel
-
-    name, chans = parse_group(group)
-    if name in KERNEL_GROUPS:
-        return body_part_layout(cell_type, KERNEL_GROUPS[name])
-    vib, dfm = cell_type.vibration.channels, cell_type.deformation.channels
-    vbands = [_band_name(lo, hi) for lo, hi in vibration_bands(cell_type.vibration.rate_hz)]
-    if name == "bands":
-        return tuple(f"{q}_{ch}_{b}" for q in ("A", "M", "C") for ch in vib for b in vbands)
-    if name == "levels":
-        return tuple(f"level_{ch}" for ch in _level_channels(cell_type, chans))
-    dbands = [_band_name(lo, hi) for lo, hi in deformation_bands(cell_type.deformation.rate_hz)]
-    both = vib + dfm
-    return tuple([f"logvar_{c}" for c in both] + [f"skew_{c}" for c in both] + [f"kurt_{c}" for c in both]
-                 + [f"logbp_{c}_{b}" for c in vib for b in vbands]
-                 + [f"logbp_{c}_{b}" for c in dfm for b in dbands])
-
-
-@functools.lru_cache(maxsize=256)
-def selection_labels(cell_type: CellType, groups: tuple[str, ...]) -> tuple[str, ...]:
-    """A body part's labels for a selection: ``<group>/<label>`` group after group."""
-    return tuple(f"{g}/{lab}" for g in groups for lab in group_labels(cell_type, g))
-
-
-def selection_name(groups: Iterable[str]) -> str:
-    """``"per_channel+bands+levels+statistics"``: how a selection is named in messages and errors."""
-    return "+".join(groups)
-
-
-def groups_in_labels(labels: Sequence[str]) -> tuple[str, ...]:
-    """The feature groups a descriptor's labels come from, in order (``<...>/<group>/<label>``).
-
-    Labels without a group component (descriptors of an older release) give ``"?"``.
-    """
-    out: dict[str, None] = {}
-    for lab in labels:
-        parts = lab.split("/")
-        group = parts[-2] if len(parts) >= 2 else ""
-        out[group if group.partition(":")[0] in GROUPS else "?"] = None
-    return tuple(out)
-
-
-# ------------------------------------------------------------------ groups
 def power_spectrum(x: np.ndarray) -> np.ndarray:
     """One-sided power spectrum of each signal (last axis), scaled so that a band's sum is its variance share.
 
@@ -335,7 +50,7 @@ def power_spectrum(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x)
     n = x.shape[-1]
     X = sfft.rfft(x, axis=-1)
-    kernel = fast._kernel() if X.size and X.dtype == np.complex128 else None
+    kernel = fast.kernel_module() if X.size and X.dtype == np.complex128 else None
     if kernel is not None:  # one compiled pass, the same operations as below (the live path's cost)
         out = np.empty(X.shape, dtype=np.float64)
         m = X.shape[-1]
@@ -452,7 +167,7 @@ def moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     and kurtosis 0, never NaN.
     """
     x = np.asarray(x)
-    kernel = fast._kernel() if x.dtype in (np.int32, np.int64) and x.size and x.shape[-1] else None
+    kernel = fast.kernel_module() if x.dtype in (np.int32, np.int64) and x.size and x.shape[-1] else None
     if kernel is not None:  # integer counts (live and recorded data): the compiled two-pass sums
         out = np.empty((x.size // x.shape[-1], 5))
         kernel.central_moments(np.ascontiguousarray(x).reshape(-1, x.shape[-1]), out)
@@ -554,7 +269,7 @@ def level_values(cell_type: CellType, group: str, deformation: np.ndarray, defor
     _, chans = parse_group(group)
     if chans is None:
         return allv
-    slow = _level_channels(cell_type, None)
+    slow = level_channels(cell_type)
     return allv[:, [slow.index(c) for c in chans]]
 
 
@@ -577,8 +292,6 @@ def piece_summary(values: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray
     labels : tuple of str
         ``mean_<label>`` then ``sd_<label>``.
     """
-    from .scaling import activity_mask, log_activity
-
     v = np.asarray(values, dtype=np.float64)
     v = log_activity(v.reshape(-1, v.shape[-1]), activity_mask(labels)).reshape(v.shape)
     return (np.concatenate([v.mean(axis=1), v.std(axis=1)], axis=1),

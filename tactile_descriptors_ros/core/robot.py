@@ -2,20 +2,16 @@
 
 One YAML file per robot in ``config/`` (``shadow_hand.yaml``, ``nao.yaml``)
 is read by the nodes, the launch files and the in-repo launcher alike.  The
-descriptor layout follows from it (paper eq. 11): each *cell type* declares
-a vibration modality S and a deformation modality V, each as a list of axes
-and each axis as a list of channels; the general 24-value form is three axes
-of each, the BioTac's eq. 17 one PAC axis and one axis of 19 electrodes, the
-skin cell's eq. 28 three accelerometer axes and one axis of three force
-sensors.
-
-Besides S and V a cell type may declare *extra channels* (``extra_channels``):
-slow signals sampled with V (one value per V sample) that enter only the
-feature groups that use them -- the BioTac's PDC, TDC and TAC, the skin
-cell's proximity and temperature.  Which feature groups make up the
-descriptor is chosen in the ``descriptor`` section (``groups``;
-:mod:`.features`), and checked at load time against what every cell type
-can feed.
+descriptor layout follows from it (paper eq. 11): each *cell type*
+(:mod:`.cell_types`) declares a vibration modality S and a deformation
+modality V, each as a list of axes and each axis as a list of channels, and
+may declare *extra channels* (``extra_channels``): slow signals sampled with
+V (one value per V sample) that enter only the feature groups that use them
+-- the BioTac's PDC, TDC and TAC, the skin cell's proximity and temperature.
+Which feature groups make up the descriptor is chosen in the ``descriptor``
+section (``groups``; :mod:`.groups`), and checked at load time against what
+every cell type can feed; block averaging (``block_s``, :mod:`.blocks`) is
+checked here too (:func:`check_blocks`).
 
 Validation is strict and names the offending key: an unknown body part or
 cell type, a cell id listed twice, an impossible rate or threshold fails at
@@ -32,15 +28,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from ..errors import ConfigError
+from .cell_types import CellType, parse_cell_type
+from .groups import check_groups, groups_of_channels
 from .yamlreader import YamlReader, resolve_yaml
 
 __all__ = [
-    "Modality",
-    "ForceSpec",
-    "CellType",
     "Cell",
     "BodyPart",
     "ContactSpec",
@@ -55,103 +51,12 @@ __all__ = [
     "WINDOW_MODES",
     "LAYOUT_MODES",
     "CHANNEL_MODES",
+    "check_blocks",
 ]
 
 WINDOW_MODES = ("fixed", "exploration")
 LAYOUT_MODES = ("concat", "pooled")
 CHANNEL_MODES = ("averaged", "per_channel")
-
-
-@dataclass(frozen=True)
-class Modality:
-    """One sensing modality of a cell type (vibration S or deformation V).
-
-    Attributes
-    ----------
-    symbol : str
-        Short name used in descriptor labels (``"pac"``, ``"E"``, ``"a"``, ``"F"``).
-    rate_hz : float
-        Nominal sampling rate.
-    adc_bits : int
-        ADC resolution; values are integer counts in ``[0, 2**bits)``, or
-        ``[-2**(bits-1), 2**(bits-1))`` when ``signed``.
-    signed : bool
-        Whether counts are signed.
-    unit : str
-        SI unit after scaling (``"Pa"``, ``"m/s^2"``, ``"N"``, or ``"count"``).
-    si_per_count : float
-        Scale from counts to ``unit``.
-    axes : tuple of tuple of str
-        Channels grouped by axis; values are averaged over the channels of an
-        axis (paper eq. 6-10) and kept per axis.
-    axis_names : tuple of str
-        One name per axis (``""`` for a single axis, ``"x"``, ``"y"``, ``"z"``).
-    """
-
-    symbol: str
-    rate_hz: float
-    adc_bits: int
-    signed: bool
-    unit: str
-    si_per_count: float
-    axes: tuple[tuple[str, ...], ...]
-    axis_names: tuple[str, ...]
-
-    @property
-    def channels(self) -> tuple[str, ...]:
-        """All channels, axis by axis."""
-        return tuple(ch for axis in self.axes for ch in axis)
-
-    @property
-    def adc_range(self) -> tuple[int, int]:
-        """Smallest and largest count the ADC can report."""
-        if self.signed:
-            half = 1 << (self.adc_bits - 1)
-            return (-half, half - 1)
-        return (0, (1 << self.adc_bits) - 1)
-
-
-@dataclass(frozen=True)
-class ForceSpec:
-    """How a cell's normal force is measured, for the contact gate (eq. 13, 16, 27).
-
-    Attributes
-    ----------
-    channels : tuple of str
-        Channels averaged to give the force (BioTac ``pdc``; skin ``f1 f2 f3``).
-    n_per_count : float
-        Newtons per count after taring.
-    rate_hz : float
-        Sampling rate of the force channels.
-    """
-
-    channels: tuple[str, ...]
-    n_per_count: float
-    rate_hz: float
-
-
-@dataclass(frozen=True)
-class CellType:
-    """A kind of sensing cell: BioTac, skin cell, or anything declared in YAML."""
-
-    name: str
-    vibration: Modality
-    deformation: Modality
-    force: ForceSpec
-    correlate: str  # "each_with_all" (S axis with every V axis) or "pairwise" (axis i with i)
-    extra_channels: tuple[str, ...] = ()  # slow channels sampled with V (levels only)
-
-    @property
-    def channels(self) -> tuple[str, ...]:
-        """Every channel the cell type declares: S, V, then the extra channels."""
-        return self.vibration.channels + self.deformation.channels + self.extra_channels
-
-    def correlation_pairs(self) -> tuple[tuple[int, int], ...]:
-        """(vibration axis, deformation axis) pairs whose correlations are averaged (eq. 9-10)."""
-        n_s, n_v = len(self.vibration.axes), len(self.deformation.axes)
-        if self.correlate == "pairwise":
-            return tuple((i, i) for i in range(n_s))
-        return tuple((i, j) for i in range(n_s) for j in range(n_v))
 
 
 @dataclass(frozen=True)
@@ -204,7 +109,7 @@ class DescriptorSpec:
         ``per_channel`` (= ``[per_channel]``), or ``""`` when the file gives
         ``groups``.
     groups : tuple of str
-        Feature groups in descriptor order (:data:`.features.GROUPS`).
+        Feature groups in descriptor order (:data:`.groups.GROUPS`).
     block_s : float
         Block averaging (:mod:`.blocks`): a window is described by the mean of
         the descriptors of its blocks of this many seconds; 0 (the default,
@@ -329,70 +234,6 @@ def _reader(data: Any, key: str, source: str) -> YamlReader:
     return YamlReader(data, key, source, error=ConfigError)
 
 
-def _parse_modality(r: YamlReader) -> Modality:
-    bits = int(r.number("adc_bits", 12, positive=True))
-    if not 1 <= bits <= 24:
-        raise r.error("adc_bits", f"must be between 1 and 24, got {bits}")
-    raw_axes = r.get("axes", kind=list)
-    if not raw_axes:
-        raise r.error("axes", "needs at least one axis")
-    axes, names = [], []
-    seen: set[str] = set()
-    for i, raw in enumerate(raw_axes):
-        ar = _reader(raw, r.path(f"axes[{i}]"), r.source)
-        channels = ar.get("channels", kind=list)
-        if not channels or not all(isinstance(c, str) and c for c in channels):
-            raise ar.error("channels", "needs a non-empty list of channel names")
-        for ch in channels:
-            if ch in seen:
-                raise ar.error("channels", f"channel {ch!r} is listed twice")
-            seen.add(ch)
-        axes.append(tuple(channels))
-        names.append(str(ar.get("name", "", str)))
-        ar.check_unknown()
-    modality = Modality(
-        symbol=str(r.get("symbol", kind=str)),
-        rate_hz=r.number("rate_hz", positive=True),
-        adc_bits=bits,
-        signed=bool(r.get("signed", False, bool)),
-        unit=str(r.get("unit", "count", str)),
-        si_per_count=r.number("si_per_count", 1.0, positive=True),
-        axes=tuple(axes),
-        axis_names=tuple(names),
-    )
-    r.check_unknown()
-    if modality.rate_hz > 1e6:
-        raise r.error("rate_hz", f"{modality.rate_hz} Hz is not a plausible tactile sampling rate")
-    return modality
-
-
-def _parse_cell_type(name: str, r: YamlReader) -> CellType:
-    vib = _parse_modality(r.child("vibration"))
-    dfm = _parse_modality(r.child("deformation"))
-    fr = r.child("force")
-    force_channels = fr.get("channels", kind=list)
-    if not force_channels:
-        raise fr.error("channels", "needs at least one force channel")
-    force = ForceSpec(tuple(force_channels), fr.number("n_per_count", positive=True), fr.number("rate_hz", positive=True))
-    fr.check_unknown()
-    correlate = r.get("correlate", "each_with_all", str)
-    if correlate not in ("each_with_all", "pairwise"):
-        raise r.error("correlate", f"must be 'each_with_all' or 'pairwise', got {correlate!r}")
-    if correlate == "pairwise" and len(vib.axes) != len(dfm.axes):
-        raise r.error("correlate", "'pairwise' needs as many vibration axes as deformation axes")
-    if vib.rate_hz < dfm.rate_hz:
-        raise r.error("vibration", "the vibration modality must be the faster one (it is the time base for correlations)")
-    extra = r.get("extra_channels", [], list)
-    if not all(isinstance(c, str) and c for c in extra):
-        raise r.error("extra_channels", "needs a list of channel names")
-    known = set(vib.channels) | set(dfm.channels)
-    for i, ch in enumerate(extra):
-        if ch in known or ch in extra[:i]:
-            raise r.error("extra_channels", f"channel {ch!r} is already declared")
-    r.check_unknown()
-    return CellType(name, vib, dfm, force, correlate, tuple(extra))
-
-
 def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
     """Validate a robot description given as parsed YAML; see :func:`load_robot`."""
     root = _reader(data, "", source)
@@ -405,7 +246,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
     cell_types = {}
     for ct_name in ctr.data:
         ctr.used.add(ct_name)
-        cell_types[ct_name] = _parse_cell_type(ct_name, ctr.child(ct_name))
+        cell_types[ct_name] = parse_cell_type(ct_name, ctr.child(ct_name))
     if not cell_types:
         raise root.error("cell_types", "needs at least one cell type")
 
@@ -478,8 +319,6 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
 
 def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts: list[BodyPart]) -> DescriptorSpec:
     """``descriptor``: layout and feature groups (``groups``, or the legacy ``channels`` alias)."""
-    from .features import check_groups, groups_of_channels
-
     layout = dr.get("layout", "concat", str)
     if layout not in LAYOUT_MODES:
         raise dr.error("layout", f"must be one of {LAYOUT_MODES}, got {layout!r}")
@@ -498,15 +337,48 @@ def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts:
         groups = groups_of_channels(channels)
     block_s = dr.number("block_s", 0.0)
     block_hop_s = dr.number("block_hop_s", min(0.5, block_s) if block_s else 0.5)
-    from .blocks import check_blocks
     dr.check_unknown()
     used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
     check_blocks(block_s, block_hop_s, key=dr.path("block_s").rsplit(".", 1)[0], source=dr.source,
                  rates_hz=[ct.deformation.rate_hz for ct in used])
-    used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
     for ct in used:  # every group must be computable from every cell type in use, at load time
         check_groups(ct, groups, key=dr.path("groups"), source=dr.source)
     return DescriptorSpec(layout=layout, channels=channels, groups=groups, block_s=block_s, block_hop_s=block_hop_s)
+
+
+def check_blocks(block_s: float, block_hop_s: float, *, key: str = "descriptor", source: str | None = None,
+                 rates_hz: Sequence[float] = ()) -> tuple[float, float]:
+    """Check a block setting: ``block_s`` >= 0 (0 = off) and ``0 < block_hop_s <= block_s``.
+
+    ``rates_hz`` are the deformation rates of the cell types in use: a block
+    must hold at least 3 frames of each.
+
+    Returns
+    -------
+    (float, float)
+        The setting as floats.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``<key>.block_s`` or ``<key>.block_hop_s``.
+    """
+    try:
+        block, hop = float(block_s), float(block_hop_s)
+    except (TypeError, ValueError):
+        raise ConfigError(f"block_s and block_hop_s must be numbers, got {block_s!r} and {block_hop_s!r}",
+                          key=f"{key}.block_s", source=source) from None
+    if not np.isfinite(block) or block < 0.0:
+        raise ConfigError(f"must be >= 0 seconds (0 = one descriptor of the whole window), got {block_s!r}",
+                          key=f"{key}.block_s", source=source)
+    if block and not (np.isfinite(hop) and 0.0 < hop <= block):
+        raise ConfigError(f"must be > 0 and at most block_s ({block:g} s), got {block_hop_s!r}",
+                          key=f"{key}.block_hop_s", source=source)
+    for rate in rates_hz:
+        if block and round(block * float(rate)) < 3:
+            raise ConfigError(f"a block of {block:g} s holds fewer than 3 frames at {float(rate):g} Hz",
+                              key=f"{key}.block_s", source=source)
+    return block, hop
 
 
 def _validate_nodes(robot: RobotDescription, source: str) -> None:

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 from rclpy.node import Node
 
-from ..core.features import groups_in_labels, selection_name
+from ..core.groups import groups_in_labels, selection_name
 from ..core.labels import (
     DEFAULT_LABEL_WAIT_S,
     DEFAULT_MAX_CLASS_NAME_CHARS,

@@ -50,10 +50,10 @@ from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 from ..codecs.sequence import SequenceEvent, SequenceTracker
-from ..core.blocks import check_blocks, describe_blocks
+from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
-from ..core.features import check_groups, groups_of_channels, selection_name
-from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, load_robot, select_body_parts
+from ..core.groups import check_groups, groups_of_channels, selection_name
+from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, check_blocks, load_robot, select_body_parts
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC

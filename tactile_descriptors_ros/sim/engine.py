@@ -35,9 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from ..core.robot import BodyPart, CellType
+from ..core.cell_types import CellType
+from ..core.robot import BodyPart
 from ..errors import SceneError
-from .scene import Exploration, Scene, _kind_of, sensor_defaults
+from .scene import Exploration, Scene, sensor_defaults, sensor_kind
 from .textures import MaterialModel, get_material, render_ar, rescale_ar
 
 __all__ = [
@@ -390,7 +391,7 @@ def _build_groups(ctx: SimContext) -> None:
     for part in robot.body_parts:
         by_type.setdefault(part.cell_type, []).append(part)
     for ct_name, parts in by_type.items():
-        kind = _kind_of(robot, ct_name)
+        kind = sensor_kind(robot, ct_name)
         if kind == "unsupported":
             raise SceneError(f"cell type {ct_name!r}: the simulator renders BioTac (pac + electrodes) and 3-axis skin "
                              "cells only", key="scene.robot", source=scene.source)

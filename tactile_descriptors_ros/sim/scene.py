@@ -53,6 +53,7 @@ __all__ = [
     "scene_path",
     "large_object_parameters",
     "sensor_defaults",
+    "sensor_kind",
 ]
 
 #: Every effect a scene may declare, with its parameters and their defaults.
@@ -373,7 +374,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
     sr.check_unknown()
 
     effects = _parse_effects(root, robot)
-    if "bad_parity" in effects and not any(_kind_of(robot, p.cell_type) == "biotac" for p in robot.body_parts):
+    if "bad_parity" in effects and not any(sensor_kind(robot, p.cell_type) == "biotac" for p in robot.body_parts):
         raise SceneError("bad_parity applies to BioTac SPI words; this robot has none (use corrupt_frames)",
                          key="effects.bad_parity", source=source)
 
@@ -381,7 +382,7 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
     for ct, params in sensors.items():
         if ct not in robot.cell_types:
             raise SceneError(f"unknown cell type (known: {', '.join(robot.cell_types)})", key=f"sensors.{ct}", source=source)
-        _validate_sensor(params, f"sensors.{ct}", source, _kind_of(robot, ct))
+        _validate_sensor(params, f"sensors.{ct}", source, sensor_kind(robot, ct))
 
     defaults = root.get("defaults", {}, dict)
     dr = _reader(defaults, "defaults", source)
@@ -474,7 +475,8 @@ def _materials_of(entry: Mapping[str, Any], key: str, source: str) -> list[str]:
     return list(ms)
 
 
-def _kind_of(robot: RobotDescription, cell_type: str) -> str:
+def sensor_kind(robot: RobotDescription, cell_type: str) -> str:
+    """Which simulated sensor a cell type is: ``"biotac"``, ``"skin"`` or ``"unsupported"``."""
     ct = robot.cell_types[cell_type]
     if ct.vibration.channels == ("pac",):
         return "biotac"

@@ -8,13 +8,13 @@ from scipy import stats
 
 from tactile_descriptors_ros.core.aggregation import (
     CellSignals,
-    body_part_layout,
     cell_features,
     contact_gate,
     describe_window,
 )
 from tactile_descriptors_ros.core.alignment import hold_indices, zero_order_hold
 from tactile_descriptors_ros.core.descriptors import Quality, hjorth
+from tactile_descriptors_ros.core.groups import body_part_layout
 from tactile_descriptors_ros.core.robot import load_robot, parse_robot
 from tactile_descriptors_ros.errors import SignalError
 

@@ -19,6 +19,7 @@ from tactile_descriptors_ros.errors import SignalError
 
 numba = pytest.importorskip("numba")
 
+FLAT = np.uint32(descriptors.Quality.FLAT)  # the flag the kernel sets on a flat signal
 FIELDS = ("act_s", "mob_s", "com_s", "act_v", "mob_v", "com_v", "lin", "nonlin", "quality")
 
 
@@ -33,18 +34,18 @@ def test_compiled_hands_over_what_it_cannot_do_exactly():
     ts, tv = np.arange(40, dtype=np.int64), np.arange(10, dtype=np.int64) * 4
     previous = fast.set_backend("numba")
     try:
-        kernel = fast._kernel()
+        kernel = fast.kernel_module()
         bounds = np.empty((2, 4), dtype=np.int64)
         big = rng.integers(-(2**40), 2**40, (2, 2, 40), dtype=np.int64)
         v = rng.integers(0, 50, (2, 3, 10)).astype(np.int64)
-        status = kernel.quantities(big, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
+        status = kernel.quantities(big, ts[None], v, tv[None], 1.0, 1.0, FLAT, 1 << 16, bounds)[0]
         assert status == kernel.NOT_EXACT
-        status = kernel.quantities(v[:, :, :2], ts[None, :2], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
+        status = kernel.quantities(v[:, :, :2], ts[None, :2], v, tv[None], 1.0, 1.0, FLAT, 1 << 16, bounds)[0]
         assert status == kernel.DEGENERATE
         wide = rng.integers(0, 2**20, (2, 2, 40), dtype=np.int64)
-        status = kernel.quantities(wide, ts[None], v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
+        status = kernel.quantities(wide, ts[None], v, tv[None], 1.0, 1.0, FLAT, 1 << 16, bounds)[0]
         assert status == kernel.TOO_WIDE
-        status = kernel.quantities(v, tv[None, ::-1].copy(), v, tv[None], 1.0, 1.0, fast._U_FLAT, 1 << 16, bounds)[0]
+        status = kernel.quantities(v, tv[None, ::-1].copy(), v, tv[None], 1.0, 1.0, FLAT, 1 << 16, bounds)[0]
         assert status == kernel.UNSORTED
         # and cell_quantities still answers: the reference's own arrays
         _identical(fast.cell_quantities(big, ts, v, tv, 1.0, 1.0), descriptors.cell_quantities(big, ts, v, tv, 1.0, 1.0))
@@ -56,7 +57,7 @@ def test_backends_are_chosen_by_name():
     assert "numba" in fast.BACKENDS
     previous = fast.set_backend(fast.REFERENCE)
     try:
-        assert fast.backend() == fast.REFERENCE and fast._kernel() is None
+        assert fast.backend() == fast.REFERENCE and fast.kernel_module() is None
         with pytest.raises(SignalError, match="backend must be one of"):
             fast.set_backend("numpy")
         assert fast.set_backend("numba") == fast.REFERENCE and fast.backend() == "numba"

@@ -15,16 +15,13 @@ from scipy import signal, stats
 
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
 from tactile_descriptors_ros.core.descriptors import Quality, hjorth
-from tactile_descriptors_ros.core.features import (
+from tactile_descriptors_ros.core.features import band_hjorth, band_powers, level_values, moments
+from tactile_descriptors_ros.core.groups import (
     GROUPS,
-    band_hjorth,
-    band_powers,
     check_groups,
     deformation_bands,
     group_labels,
     groups_in_labels,
-    level_values,
-    moments,
     parse_group,
     selection_labels,
     vibration_bands,

@@ -23,12 +23,13 @@ import importlib.util, json, sys
 from tactile_descriptors_ros.core import fast
 path = sys.argv[1]
 if path != "-":  # the kernel module from another install path
-    spec = importlib.util.spec_from_file_location("_numba_kernel", path)
+    spec = importlib.util.spec_from_file_location("numba_kernel", path)
     kernel = importlib.util.module_from_spec(spec)
+    sys.modules["numba_kernel"] = kernel
     spec.loader.exec_module(kernel)
-    fast._STATE.update(module=kernel, name="numba", resolved=True)
+    fast.BACKENDS["numba"] = "numba_kernel"  # the backend registry serves the copy
 info = fast.warm_up()
-kernel = fast._kernel()
+kernel = fast.kernel_module()
 stats = {name: (sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()))
          for name, f in vars(kernel).items() if hasattr(f, "stats") and hasattr(f.stats, "cache_hits")}
 print(json.dumps({"accelerator": info["accelerator"], "file": kernel.__file__, "cache_dir": kernel.CACHE_DIR,
@@ -47,11 +48,11 @@ def test_a_copy_at_another_path_loads_the_compiled_kernel(tmp_path):
     here = _run("-")  # the installed kernel: loads what set-up compiled (or compiles it once)
     if here["accelerator"] != "numba":
         pytest.skip("numba is disabled")
-    from tactile_descriptors_ros.core import _numba_kernel
+    from tactile_descriptors_ros.core import numba_kernel
 
-    copy = tmp_path / "install" / "lib" / "tactile_descriptors_ros" / "core" / "_numba_kernel.py"
+    copy = tmp_path / "install" / "lib" / "tactile_descriptors_ros" / "core" / "numba_kernel.py"
     copy.parent.mkdir(parents=True)
-    shutil.copyfile(_numba_kernel.__file__, copy)
+    shutil.copyfile(numba_kernel.__file__, copy)
     there = _run(str(copy))
     assert Path(there["file"]) == copy and there["path_independent"]
     assert there["cache_dir"] == here["cache_dir"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import importlib.util
 import subprocess
 import sys
@@ -49,3 +50,24 @@ def test_a_broken_contract_is_reported(repo_dir, tmp_path):
                          env={"PATH": str(BIN), "PYTHONPATH": str(tmp_path)})
     assert out.returncode != 0
     assert "The robot package never imports the lab BROKEN" in out.stdout
+
+
+def test_no_private_name_crosses_a_module(repo_dir):
+    """A ``_name`` is its module's own: no module of either package imports or reads another's."""
+    crossing = []
+    for root in ("tactile_descriptors_ros", "lab/tactile_descriptors_lab"):
+        for path in sorted((repo_dir / root).rglob("*.py")):
+            tree = ast.parse(path.read_text())
+            ours: set[str] = set()
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith(
+                        ("tactile_descriptors_ros", "tactile_descriptors_lab"))):
+                    for alias in node.names:
+                        if alias.name.startswith("_") and not alias.name.startswith("__"):
+                            crossing.append(f"{path.relative_to(repo_dir)}:{node.lineno} imports {alias.name}")
+                        ours.add(alias.asname or alias.name)
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in ours
+                        and node.attr.startswith("_") and not node.attr.startswith("__")):
+                    crossing.append(f"{path.relative_to(repo_dir)}:{node.lineno} reads {node.value.id}.{node.attr}")
+    assert not crossing, crossing

@@ -52,13 +52,13 @@ from tactile_descriptors_ros.core.aggregation import (
     CellFeatures,
     CellSignals,
     RobotDescriptor,
-    body_part_layout,
     contact_gate,
     describe_window,
     reduce_body_part,
 )
 from tactile_descriptors_ros.core.alignment import zero_order_hold
 from tactile_descriptors_ros.core.blocks import describe_blocks
+from tactile_descriptors_ros.core.groups import body_part_layout
 from tactile_descriptors_ros.core.robot import RobotDescription, load_robot
 from tactile_descriptors_ros.core.windowing import CellChunk, Windower
 from tactile_descriptors_ros.errors import TactileError

@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from tactile_descriptors_ros.core.robot import CellType
+from tactile_descriptors_ros.core.cell_types import CellType
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["Mapping", "NameRule", "Stamps", "FORMATS", "TARE_MODES", "shipped_mappings", "load_mapping",

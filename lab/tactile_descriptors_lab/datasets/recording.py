@@ -134,7 +134,7 @@ class BiotacRecording(_Trial):
 class CellRecording(_Trial):
     """One trial of one cell of any cell type a robot description declares (a skin cell, ...).
 
-    The channels are the cell type's (:class:`~..core.robot.CellType`): the
+    The channels are the cell type's (:class:`~..core.cell_types.CellType`): the
     vibration channels S (``samples_per_frame`` samples a frame), the
     deformation channels V and the extra channels (one value a frame).  A
     frame is one V sample.

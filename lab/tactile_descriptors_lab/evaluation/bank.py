@@ -6,7 +6,7 @@ becomes the core's :class:`~tactile_descriptors_ros.core.aggregation.CellSignals
 (:func:`recording_cells`) and is described by
 :func:`~tactile_descriptors_ros.core.aggregation.describe_window` -- the
 function the window node calls -- once per feature group of
-:data:`~tactile_descriptors_ros.core.features.GROUPS` (``paper``,
+:data:`~tactile_descriptors_ros.core.groups.GROUPS` (``paper``,
 ``per_channel``, ``bands``, ``levels``, ``statistics``; definitions, labels
 and equations in :mod:`tactile_descriptors_ros.core.features`).  The groups
 of every window are kept as a *feature bank* (cached on disk); a named
@@ -59,16 +59,17 @@ from tactile_descriptors_lab.datasets.biotac_slide import PAC_PER_FRAME
 from tactile_descriptors_lab.datasets.recording import BiotacRecording, CellRecording
 from tactile_descriptors_lab.evaluation.sampling import Window
 from tactile_descriptors_ros.core.aggregation import CellSignals, contact_gate, describe_window
-from tactile_descriptors_ros.core.features import (
+from tactile_descriptors_ros.core.cell_types import CellType
+from tactile_descriptors_ros.core.features import piece_summary
+from tactile_descriptors_ros.core.groups import (
     DEFORMATION_BANDS_HZ,
     GROUPS,
     VIBRATION_BANDS_HZ,
     feedable_groups,
     parse_group,
-    piece_summary,
     selection_labels,
 )
-from tactile_descriptors_ros.core.robot import BodyPart, Cell, CellType, RobotDescription, load_robot
+from tactile_descriptors_ros.core.robot import BodyPart, Cell, RobotDescription, load_robot
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = [
@@ -276,7 +277,7 @@ def recording_cells(rec: BiotacRecording | CellRecording,
 
 
 def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
-    """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.features.selection_labels`)."""
+    """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.groups.selection_labels`)."""
     ct = cell_type or biotac_cell_type()
     return {g: selection_labels(ct, (g,)) for g in GROUPS}
 

@@ -101,7 +101,7 @@ def check_recordings(recordings, mode: str) -> None:
         reads it, and the groups the recordings can feed.
     """
     from tactile_descriptors_lab.evaluation.bank import mode_groups, recording_channels, recordings_cell_type
-    from tactile_descriptors_ros.core.features import check_present
+    from tactile_descriptors_ros.core.groups import check_present
 
     ct = recordings_cell_type(recordings)
     groups = [g for g in mode_groups(mode) if g != "subwindows"]

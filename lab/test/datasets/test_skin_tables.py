@@ -20,7 +20,7 @@ from writers import SKIN_SAMPLES_PER_FRAME, simulated_skin_trials, write_skin_cs
 from tactile_descriptors_lab.datasets.mapping import load_mapping
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
 from tactile_descriptors_lab.datasets.recording import CellRecording
-from tactile_descriptors_ros.core.features import selection_labels
+from tactile_descriptors_ros.core.groups import selection_labels
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 from tactile_descriptors_ros.tools.cli import main
 

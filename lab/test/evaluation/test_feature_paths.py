@@ -127,7 +127,7 @@ def test_window_node_publishes_block_averaged_descriptors_of_the_core_function(r
 
 
 def test_model_of_one_selection_refuses_another_naming_both():
-    from tactile_descriptors_ros.core.features import selection_labels
+    from tactile_descriptors_ros.core.groups import selection_labels
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.nodes.classifier_node import layout_mismatch
     from tactile_descriptors_ros.nodes.conversions import DescriptorSample
