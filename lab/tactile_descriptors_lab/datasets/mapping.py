@@ -33,7 +33,7 @@ _FROM = {"class": ("folder", "file", "group", "column", "option", "message"),
 _UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 _TOP_KEYS = ("format", "files", "groups", "class", "trial", "samples_per_frame", "channels", "stamps", "tare",
              "sensor", "topic", "robot", "cell_type", "description")
-_RULE_KEYS = ("from", "pattern", "column", "value", "names")
+_RULE_KEYS = ("from", "pattern", "column", "value", "names", "number")
 _CHANNEL_KEYS = ("pac", "pdc", "tac", "tdc", "electrodes")
 _STAMP_KEYS = ("column", "unit", "rate_hz")
 _MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
@@ -58,6 +58,11 @@ class NameRule:
     value : str or None
     names : dict of str to str
         Value -> class name (a data set whose names are numbers).
+    number : str or None
+        A trial number built from several groups of ``pattern``: a format
+        string over the groups in order, numbers as ``int``
+        (``"{0}{1:02d}"``: session 3, run 7 -> trial 307), so that a run
+        missing from the data leaves a gap instead of renumbering the rest.
     """
 
     source: str
@@ -65,6 +70,7 @@ class NameRule:
     column: str | None = None
     value: str | None = None
     names: dict[str, str] = field(default_factory=dict)
+    number: str | None = None
 
     def extract(self, text: str, what: str, where: str) -> str:
         """The value of this rule in ``text`` (a folder, file or group name)."""
@@ -74,6 +80,17 @@ class NameRule:
         if m is None:
             raise ConfigError(f"{where}: {what}.pattern {self.pattern.pattern!r} does not match {text!r}",
                               key=f"{what}.pattern")
+        if self.number is not None:
+            parts = [int(g) if g is not None and g.isdigit() else g for g in m.groups()]
+            try:
+                value = self.number.format(*parts)
+            except (IndexError, ValueError, TypeError) as exc:
+                raise ConfigError(f"{where}: {what}.number {self.number!r} does not format the groups "
+                                  f"{list(m.groups())} of {text!r} ({exc})", key=f"{what}.number") from None
+            if not value.isdigit():
+                raise ConfigError(f"{where}: {what}.number {self.number!r} gives {value!r} for {text!r}, "
+                                  "not a number", key=f"{what}.number")
+            return value
         if what in m.groupdict() and m.group(what) is not None:
             return m.group(what)
         return m.group(1) if m.groups() else m.group(0)
@@ -155,9 +172,17 @@ def _rule(d: Any, what: str, source: str) -> NameRule:
     names = d.get("names") or {}
     if not isinstance(names, dict):
         raise ConfigError("must map values to class names", key=f"{what}.names", source=source)
+    number = d.get("number")
+    if number is not None:
+        if not isinstance(number, str) or "{" not in number:
+            raise ConfigError(f"must be a format of the pattern's groups such as '{{0}}{{1:02d}}', got {number!r}",
+                              key=f"{what}.number", source=source)
+        if pattern is None or pattern.groups < 1:
+            raise ConfigError("'number' formats the groups of a pattern: give a pattern with groups",
+                              key=f"{what}.pattern", source=source)
     return NameRule(source=src, pattern=pattern, column=d.get("column"),
                     value=None if d.get("value") is None else str(d["value"]),
-                    names={str(k): str(v) for k, v in names.items()})
+                    names={str(k): str(v) for k, v in names.items()}, number=number)
 
 
 def parse_mapping(data: Any, source: str = "<mapping>") -> Mapping:

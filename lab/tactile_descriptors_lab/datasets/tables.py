@@ -9,8 +9,9 @@ mapping says which column is which channel (see :mod:`.mapping`).
 from __future__ import annotations
 
 import csv
-import fnmatch
 import io
+import posixpath
+import re
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -23,7 +24,46 @@ from tactile_descriptors_lab.datasets.recording import N_ELECTRODES
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 
 __all__ = ["Unit", "Table", "find_units", "read_table", "table_channels", "cell_channels", "frame_stamps_ns",
-           "seconds_to_ns"]
+           "seconds_to_ns", "natural_key", "group_glob", "mapped_names"]
+
+
+def natural_key(text: str) -> tuple:
+    """Sort key that orders the numbers inside a name by value: ``run_9`` before ``run_10``, ``9.bag`` before
+    ``10.bag`` (plain string order puts ``10`` first)."""
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in re.split(r"(\d+)", str(text)) if p)
+
+
+def group_glob(pattern: str) -> re.Pattern:
+    """A glob of HDF5 group paths as a regular expression: ``*`` and ``?`` stay inside one level (they do
+    not match ``/``), ``**`` matches any number of levels, ``[...]`` a set of characters.
+
+    :mod:`fnmatch` lets ``*`` match ``/`` too, so ``groups: "*"`` would pick every nested group
+    (``run_1/finger_0``) as a trial of its own; this is the shell's path glob instead.
+    """
+    out, i, n = [], 0, len(pattern)
+    while i < n:
+        c = pattern[i]
+        if pattern.startswith("**/", i):
+            out.append("(?:.*/)?")
+            i += 3
+        elif pattern.startswith("**", i):
+            out.append(".*")
+            i += 2
+        elif c == "*":
+            out.append("[^/]*")
+            i += 1
+        elif c == "?":
+            out.append("[^/]")
+            i += 1
+        elif c == "[" and "]" in pattern[i + 2:]:
+            j = pattern.index("]", i + 2)
+            body = pattern[i + 1:j]
+            out.append("[" + ("^" + body[1:] if body.startswith("!") else body).replace("\\", "\\\\") + "]")
+            i = j + 1
+        else:
+            out.append(re.escape(c))
+            i += 1
+    return re.compile("".join(out) + r"\Z")
 
 
 @dataclass(frozen=True)
@@ -89,7 +129,7 @@ def find_units(root: Path, mapping: Mapping) -> list[Unit]:
     if root.is_file():
         files = [root]
     elif root.is_dir():
-        files = sorted(p for p in root.glob(mapping.files) if p.is_file())
+        files = sorted((p for p in root.glob(mapping.files) if p.is_file()), key=lambda p: natural_key(str(p)))
     else:
         raise DataFormatError(f"{root}: no such file or folder")
     if not files:
@@ -108,7 +148,8 @@ def find_units(root: Path, mapping: Mapping) -> list[Unit]:
         if mapping.groups is None:
             units.append(Unit(f))
             continue
-        chosen = sorted(g for g in groups if fnmatch.fnmatchcase(g, mapping.groups))
+        glob = group_glob(mapping.groups)
+        chosen = sorted((g for g in groups if glob.match(g)), key=natural_key)
         if not chosen:
             raise DataFormatError(f"{f}: no group matches {mapping.groups!r} (mapping key groups); groups: "
                                   f"{_list(groups) or 'none'}")
@@ -163,12 +204,51 @@ def _read_npz(path: Path) -> Table:
     return Table(cols, str(path), False)
 
 
-def _read_hdf5(unit: Unit) -> Table:
+def mapped_names(mapping: Mapping) -> list[str]:
+    """Every column name the mapping refers to (channels with ``{i}`` expanded to their first name), in
+    mapping order: the channels, the stamp column, a class or trial column."""
+    names: list[str] = []
+    for spec in mapping.channels.values():
+        names.extend(expand_channel(spec, 1) if isinstance(spec, str) else spec)
+    if mapping.stamps.column is not None:
+        names.append(mapping.stamps.column)
+    for rule in (mapping.class_rule, mapping.trial_rule):
+        if rule.source == "column" and rule.column:
+            names.append(rule.column)
+    return names
+
+
+def _read_hdf5(unit: Unit, mapping: Mapping | None = None) -> Table:
+    """The datasets at and below a unit's group, by their paths relative to it (``pdc``, ``finger_0/pac``).
+
+    A name of the mapping that starts with ``../`` (or ``/``) is a dataset above the group, relative to it
+    (or to the file's root): a run's ``../timestamps`` shared by the groups of its sensors.  The columns the
+    mapping names come first, so the frame count is that of the mapping's channels, not of another
+    sensor's dataset recorded at its own rate below the same group.
+    """
     h5py = _h5py()
+    wanted = mapped_names(mapping) if mapping is not None else []
     try:
         with h5py.File(unit.file, "r") as h5:
             node = h5[unit.group] if unit.group else h5
-            cols = {k: np.asarray(v[()]) for k, v in node.items() if isinstance(v, h5py.Dataset)}
+            found: dict[str, np.ndarray] = {}
+
+            def visit(name: str, obj) -> None:
+                if isinstance(obj, h5py.Dataset):
+                    found[name] = obj
+
+            node.visititems(visit)
+            above = {}
+            for name in wanted:
+                if name.startswith(("../", "/")) and name not in found:
+                    path = name if name.startswith("/") else posixpath.normpath(
+                        posixpath.join("/" + (unit.group or ""), name))
+                    obj = h5.get(path)
+                    if isinstance(obj, h5py.Dataset):
+                        above[name] = obj
+            order = [n for n in wanted if n in found or n in above]
+            order += [n for n in found if n not in order]
+            cols = {n: np.asarray((found[n] if n in found else above[n])[()]) for n in order}
     except OSError as exc:
         raise DataFormatError(f"{unit.file}: not an HDF5 file ({exc})") from None
     for k, v in cols.items():
@@ -177,14 +257,14 @@ def _read_hdf5(unit: Unit) -> Table:
     return Table(cols, unit.path, False)
 
 
-def read_table(unit: Unit, fmt: str) -> Table:
-    """Read one unit's columns."""
+def read_table(unit: Unit, fmt: str, mapping: Mapping | None = None) -> Table:
+    """Read one unit's columns (HDF5: those below its group, and the ones above it that ``mapping`` names)."""
     if fmt == "csv":
         return _read_csv(unit.file)
     if fmt == "npz":
         return _read_npz(unit.file)
     if fmt == "hdf5":
-        return _read_hdf5(unit)
+        return _read_hdf5(unit, mapping)
     raise ValueError(fmt)
 
 

@@ -231,6 +231,8 @@ def run(args: argparse.Namespace) -> int:
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)
+        for line in rep.note_lines():
+            print(f"{rep.source}: warning: {line}", file=sys.stderr)
     cfg = EvalConfig(window=args.window, test_window=args.test_window, mode=args.channels,
                      classifiers=tuple(classifiers), seed=args.seed, train_per_trial=args.train_windows,
                      test_per_trial=args.test_windows, scaling=args.scaling, gate=args.gate, drop=drop,

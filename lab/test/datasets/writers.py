@@ -258,3 +258,70 @@ def write_old_shadow_bag(path: Path, rec: BiotacRecording, electrodes: bool = Tr
                                           tactiles=[mine if j == sensor else empty for j in range(5)])
             writer.write(conn, t, store.serialize_ros1(msg, SHADOW_ALL))
     return path
+
+
+# --------------------------------------------------------------------------- other labs' layouts
+
+#: Penn BOLT's objects in the built layout: five shared materials (class number -> object name).
+PENN_OBJECTS = {2: "bouncy_foam", 5: "cork_board", 9: "felt_pad", 12: "cork", 17: "steel_plate"}
+
+
+def penn_run_name(obj: str, session: int, run: int) -> str:
+    """A run group's name: object, session and run (``cork_1_03``); a trial is session and run together."""
+    return f"{obj}_{session}_{run:02d}"
+
+
+def write_penn_bolt(path: Path, recs: list[BiotacRecording], names: dict[int, str], runs_per_session: int,
+                    skip: tuple[tuple[str, int, int], ...] = ()) -> list[tuple[str, int, int]]:
+    """One HDF5 file in the Penn BOLT layout, built from recordings of one BioTac.
+
+    A group a run, named by :func:`penn_run_name`; below it a PR2 gripper's two BioTacs ``biotacs/finger_0``
+    and ``biotacs/finger_1``, each with ``pac`` (frames, 22), ``electrodes`` (frames, 19), ``pdc``, ``tac``,
+    ``tdc`` (uint16 counts as the sensor sends them), the frame stamps ``timestamps`` (float seconds) once
+    in ``biotacs``, the parent group of the fingers, and a gripper aperture at its own rate (50 Hz) beside
+    them, as the PR2 logs it.  Run ``r`` of session ``s`` holds trial ``(s - 1) * runs_per_session + r`` of
+    the material on ``finger_0`` and the next trial of the same material on ``finger_1`` (both cut to the
+    shorter); ``skip`` leaves out runs (``(object, session, run)``), as a data set with a missing run.
+
+    Returns the ``(object, session, run)`` of every run written.
+    """
+    import h5py
+
+    by = {(r.material, r.trial): r for r in recs}
+    written = []
+    with h5py.File(path, "w") as h5:
+        for (mat, trial), r0 in sorted(by.items()):
+            if (mat, trial + 1) not in by or (trial - 1) % 2:
+                continue  # odd trials start a run, the next trial is its second finger
+            run_index = (trial + 1) // 2
+            session, run = (run_index - 1) // runs_per_session + 1, (run_index - 1) % runs_per_session + 1
+            if (names[mat], session, run) in skip:
+                continue
+            r1 = by[(mat, trial + 1)]
+            n = min(r0.n_frames, r1.n_frames)
+            g = h5.create_group(penn_run_name(names[mat], session, run))
+            bt = g.create_group("biotacs")
+            bt["timestamps"] = (r0.frame_t_ns[:n] - r0.frame_t_ns[0]) * 1e-9 + 1_300_000_000.0 + 60.0 * run_index
+            for f, r in enumerate((r0, r1)):
+                fg = bt.create_group(f"finger_{f}")
+                fg["pac"] = r.pac[:n * r.pac_per_frame].reshape(n, r.pac_per_frame).astype(np.uint16)
+                fg["electrodes"] = r.electrodes[:, :n].T.astype(np.uint16)
+                for ch in ("pdc", "tac", "tdc"):
+                    fg[ch] = getattr(r, ch)[:n].astype(np.uint16)
+            g.create_group("gripper")["aperture"] = np.linspace(0.08, 0.02, n // 2)
+            written.append((names[mat], session, run))
+    return written
+
+
+def penn_bolt_mapping(finger: int = 0) -> dict:
+    """The mapping of :func:`write_penn_bolt`'s layout: channels below the run group, classes by name, the
+    trial number built from the session and the run."""
+    f = f"biotacs/finger_{finger}"
+    return {
+        "format": "hdf5", "files": "*.h5", "groups": "*",
+        "class": {"from": "group", "pattern": r"^(?P<class>.+)_\d+_\d+$"},
+        "trial": {"from": "group", "pattern": r"_(\d+)_(\d+)$", "number": "{0}{1:02d}"},
+        "channels": {"pac": f"{f}/pac", "pdc": f"{f}/pdc", "tac": f"{f}/tac", "tdc": f"{f}/tdc",
+                     "electrodes": f"{f}/electrodes"},
+        "stamps": {"column": "biotacs/timestamps", "unit": "s"},
+    }
