@@ -112,6 +112,38 @@ def check_recordings(recordings, mode: str) -> None:
         check_present(ct, groups, present, where=f"{r.path} (mode {mode})", why=why, key="channels")
 
 
+def check_classes(train, test, train_source: str, test_source: str, every=None) -> None:
+    """Refuse splits in which a class has training trials but no test trial, or test trials but no training.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the source, the option (``--test-trials`` or ``--train-trials``), the class and the
+        trials that class holds (in the one source read, or in the split that has it).
+    """
+    from ..datasets.sources import format_numbers
+
+    def trials_of(recs) -> dict[str, list[int]]:
+        out: dict[str, list[int]] = {}
+        for r in recs:
+            out.setdefault(r.class_name, []).append(r.trial)
+        return out
+
+    tr, te = trials_of(train), trials_of(test)
+    held = trials_of(every) if every is not None else None
+    for have, lack, source, key, side in ((tr, te, test_source, "--test-trials", "test"),
+                                          (te, tr, train_source, "--train-trials", "training")):
+        absent = [c for c in have if c not in lack]
+        if absent:
+            c = absent[0]
+            holds = held[c] if held is not None else have[c]
+            split = sorted({r.trial for r in (test if side == "test" else train)})
+            more = f" (and {len(absent) - 1} more: {', '.join(absent[1:4])})" if len(absent) > 1 else ""
+            raise ConfigError(f"class {c} has no {side} trial{more}: the {side} trials are "
+                              f"{format_numbers(split)}, class {c} holds trials {format_numbers(sorted(holds))}"
+                              + ("" if held is not None else " in the other split"), key=key, source=source)
+
+
 def check_pac_rate(recordings) -> None:
     """The paper's descriptor reads PAC at the BioTac's rate: :func:`check_recordings` of mode ``paper``."""
     check_recordings(recordings, "paper")
@@ -224,9 +256,11 @@ def run(args: argparse.Namespace) -> int:
         train = check_selection(every, train_trials, None, args.train)
         test = check_selection(every, test_trials, None, args.test)
     else:
+        every = None
         train = load_split(args.train, train_trials, materials, args.mapping, report=reports[0])
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
+    check_classes(train, test, args.train, args.test, every)
     check_recordings(list(train) + list(test), args.channels)
     for rep in reports:
         for line in rep.tare_lines():

@@ -184,3 +184,17 @@ def test_natural_order_numbers_bags_by_their_numbers(recs, tmp_path):
     for r in got:  # each bag's PAC carries its file's number
         assert Path(r.source_file).name == f"{r.trial}.bag"
     assert sorted(["10.bag", "9.bag", "1.bag"], key=natural_key) == ["1.bag", "9.bag", "10.bag"]
+
+
+def test_a_class_without_a_test_trial_is_one_line_naming_the_source_the_key_and_its_trials(recs, tmp_path, capsys):
+    write_penn_bolt(tmp_path / "bolt.h5", recs, PENN_OBJECTS, RUNS_PER_SESSION, skip=(("cork", 1, 2),))
+    mapping = _mapping(tmp_path, penn_bolt_mapping(0))
+    source = str(tmp_path / "bolt.h5")
+    code = main(["evaluate", "--train", source, "--test", source, "--mapping", str(mapping),
+                 "--train-trials", "101,201,202", "--test-trials", "102", "--window", "0.5", "--classifier", "pa",
+                 "--cache", ""])
+    err = capsys.readouterr().err
+    assert code != 0
+    lines = [ln for ln in err.splitlines() if "has no test trial" in ln]
+    assert lines == [f"tactile evaluate: error: {source}: '--test-trials': class cork has no test trial: the test trials are 102, "
+                     "class cork holds trials 101,201-202"], err
