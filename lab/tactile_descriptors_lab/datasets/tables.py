@@ -257,8 +257,56 @@ def _read_hdf5(unit: Unit, mapping: Mapping | None = None) -> Table:
     return Table(cols, unit.path, False)
 
 
+def _read_npy(path: Path, mapping: Mapping) -> Table:
+    """An ``.npy`` array as a table, its axes as the mapping's ``shape`` names them.
+
+    The ``column`` axis gives the columns, named by the mapping's ``columns``; with a ``trial`` axis the
+    rows are the frames of every trial in turn, with the column ``trial`` (1, 2, ... along that axis) and,
+    with ``labels``, the column ``label`` (the labels file's value of each trial), so that
+    ``trial: {from: column, column: trial}`` and ``class: {from: column, column: label}`` cut the trials.
+    """
+    def load(p: Path) -> np.ndarray:
+        try:
+            return np.load(p, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise DataFormatError(f"{p}: not an NPY array ({str(exc).splitlines()[0]})") from None
+
+    arr = load(path)
+    shape = mapping.shape
+    if arr.ndim != len(shape):
+        raise DataFormatError(f"{path}: an array of shape {arr.shape}, but the mapping's shape names "
+                              f"{len(shape)} axes [{', '.join(shape)}] (mapping key shape, {mapping.source})")
+    order = [a for a in ("trial", "frame", "column") if a in shape]
+    arr = np.transpose(arr, [shape.index(a) for a in order])
+    n_cols = arr.shape[-1]
+    if n_cols != len(mapping.columns):
+        raise DataFormatError(f"{path}: {n_cols} columns along axis {shape.index('column')} (shape {arr.shape}), "
+                              f"the mapping names {len(mapping.columns)} (mapping key columns, {mapping.source})")
+    n_trials = arr.shape[0] if "trial" in shape else 1
+    n_frames = arr.shape[-2]
+    flat = arr.reshape(n_trials * n_frames, n_cols)
+    cols = {name: flat[:, i] for i, name in enumerate(mapping.columns)}
+    if "trial" in shape:
+        cols.setdefault("trial", np.repeat(np.arange(1, n_trials + 1), n_frames))
+    if mapping.labels is not None:
+        old, new = mapping.labels
+        lpath = path.with_name(path.name.replace(old, new, 1))
+        if lpath == path or not lpath.is_file():
+            raise DataFormatError(f"{path}: no labels file {lpath.name} beside it (mapping key labels: replace "
+                                  f"{old!r} by {new!r} in the file name)")
+        lab = load(lpath)
+        if lab.ndim != 1 or lab.shape[0] != n_trials:
+            raise DataFormatError(f"{lpath}: labels of shape {lab.shape}, expected one a trial ({n_trials},) "
+                                  f"for {path.name}")
+        cols.setdefault("label", np.repeat(lab.astype(str), n_frames))
+    return Table(cols, str(path), False)
+
+
 def read_table(unit: Unit, fmt: str, mapping: Mapping | None = None) -> Table:
     """Read one unit's columns (HDF5: those below its group, and the ones above it that ``mapping`` names)."""
+    if fmt == "npy":
+        assert mapping is not None
+        return _read_npy(unit.file, mapping)
     if fmt == "csv":
         return _read_csv(unit.file)
     if fmt == "npz":
@@ -268,13 +316,21 @@ def read_table(unit: Unit, fmt: str, mapping: Mapping | None = None) -> Table:
     raise ValueError(fmt)
 
 
-def _as_counts(values: np.ndarray, table: Table, name: str) -> np.ndarray:
+def _as_counts(values: np.ndarray, table: Table, name: str, counts_per_unit: float | None = None) -> np.ndarray:
+    """A column as int64 counts: integers as they are; with ``counts_per_unit``, stored values (floats in
+    a unit: volts, normalised pressure) times that factor, rounded to the nearest count, as an ADC would."""
     try:
+        if counts_per_unit is not None:
+            v = np.asarray(values).astype(np.float64)
+            if not np.all(np.isfinite(v)):
+                raise ValueError("values that are not finite")
+            return np.round(v * counts_per_unit).astype(np.int64)
         if table.text:
             return values.astype(np.int64)
         if values.dtype.kind == "f":
             if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
-                raise ValueError("non-integer counts")
+                raise ValueError("non-integer values; give counts_per_unit (mapping key) to scale stored values "
+                                 "to counts")
             return values.astype(np.int64)
         return values.astype(np.int64)
     except ValueError as exc:
@@ -285,7 +341,7 @@ def _channel(table: Table, mapping: Mapping, key: str, count: int) -> np.ndarray
     """Counts of one channel, shape (n_frames, count)."""
     names = expand_channel(mapping.channels[key], count)
     if len(names) == 1 and count > 1:
-        arr = _as_counts(table.column(names[0], f"channels.{key}"), table, names[0])
+        arr = _as_counts(table.column(names[0], f"channels.{key}"), table, names[0], mapping.counts_per_unit)
         if arr.ndim == 1 and arr.shape[0] == table.n_rows * count and not table.text:
             arr = arr.reshape(-1, count)
         if arr.ndim != 2 or arr.shape[1] != count:
@@ -300,7 +356,7 @@ def _channel(table: Table, mapping: Mapping, key: str, count: int) -> np.ndarray
         raise DataFormatError(f"{table.where}: missing column{'s' if len(missing) > 1 else ''} "
                               f"{', '.join(missing)} (mapping key channels.{key}); the file has "
                               f"{_list(table.columns)}")
-    cols = [_as_counts(table.columns[n], table, n) for n in names]
+    cols = [_as_counts(table.columns[n], table, n, mapping.counts_per_unit) for n in names]
     for n, c in zip(names, cols):
         if c.ndim != 1:
             raise DataFormatError(f"{table.where}: {n!r} has shape {c.shape}, expected one value a frame")

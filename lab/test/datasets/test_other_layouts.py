@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from writers import PENN_OBJECTS, penn_bolt_mapping, penn_run_name, write_penn_bolt, write_ros1_bag
+from writers import (
+    PENN_OBJECTS, npy_split_mapping, penn_bolt_mapping, penn_run_name, write_npy_split, write_penn_bolt, write_ros1_bag,
+)
 
 from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
 from tactile_descriptors_lab.datasets.mapping import parse_mapping
@@ -198,3 +200,58 @@ def test_a_class_without_a_test_trial_is_one_line_naming_the_source_the_key_and_
     lines = [ln for ln in err.splitlines() if "has no test trial" in ln]
     assert lines == [f"tactile evaluate: error: {source}: '--test-trials': class cork has no test trial: the test trials are 102, "
                      "class cork holds trials 101,201-202"], err
+
+
+# --------------------------------------------------------------------------- .npy arrays with a shape description
+
+#: Stored units per count of the float arrays (a pad's normalised pressure): 1/64 keeps every count exact.
+UNITS_PER_COUNT = 1 / 64
+
+
+def _npy_splits(recs, tmp_path):
+    train = [r for r in recs if r.trial <= 4]
+    test = [r for r in recs if r.trial > 4]
+    paths = [write_npy_split(tmp_path, "train", train, PENN_OBJECTS, FRAMES, UNITS_PER_COUNT),
+             write_npy_split(tmp_path, "test", test, PENN_OBJECTS, FRAMES, UNITS_PER_COUNT)]
+    return paths, train, test, _mapping(tmp_path, npy_split_mapping(1 / UNITS_PER_COUNT), "npy")
+
+
+def test_npy_arrays_with_a_shape_description_and_float_values_read_back_the_counts(recs, tmp_path):
+    (x_train, x_test), train, test, mapping = _npy_splits(recs, tmp_path)
+    for path, want in ((x_train, train), (x_test, test)):
+        got = read_source(path, mapping)
+        assert len(got) == len(want)
+        # trials in file order along the trial axis, classes by the labels file's names
+        order = sorted(want, key=lambda r: (PENN_OBJECTS[r.material], r.trial))
+        assert [r.class_name for r in got] == [PENN_OBJECTS[r.material] for r in order]
+        for g, w in zip(got, order):
+            _same_samples(g, w)
+            assert np.all(np.diff(g.frame_t_ns) == 10_000_000)
+
+
+def test_float_values_without_a_scale_and_a_wrong_shape_are_one_line_errors(recs, tmp_path):
+    (x_train, _), _, _, mapping = _npy_splits(recs, tmp_path)
+    d = yaml.safe_load(mapping.read_text())
+    unscaled = _mapping(tmp_path, {k: v for k, v in d.items() if k != "counts_per_unit"}, "unscaled")
+    with pytest.raises(DataFormatError) as exc:
+        read_source(x_train, unscaled)
+    assert "\n" not in str(exc.value)
+    assert f"{x_train}: column 'pac1': not integer counts (non-integer values; give counts_per_unit" in str(exc.value)
+    flat = {k: v for k, v in d.items() if k != "labels"}
+    flat = _mapping(tmp_path, dict(flat, shape=["frame", "column"], trial="order",
+                                   **{"class": {"from": "option", "value": "cork"}}), "flat")
+    with pytest.raises(DataFormatError, match=re.escape(
+            f"{x_train}: an array of shape ({len(recs) // 2}, 44, {FRAMES}), but the mapping's shape names 2 axes "
+            "[frame, column] (mapping key shape")):
+        read_source(x_train, flat)
+    with pytest.raises(ConfigError, match="'shape': the axes of each array in order"):
+        parse_mapping(dict(d, shape=["trial", "time", "column"]))
+
+
+def test_evaluate_reads_npy_train_and_test_files(recs, tmp_path, capsys):
+    (x_train, x_test), _, _, mapping = _npy_splits(recs, tmp_path)
+    code = main(["evaluate", "--train", str(x_train), "--test", str(x_test), "--mapping", str(mapping),
+                 "--window", "0.5", "--classifier", "pa", "--channels", "per_channel", "--cache", ""])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "pa: accuracy" in out.out and "bouncy_foam" in out.out

@@ -325,3 +325,32 @@ def penn_bolt_mapping(finger: int = 0) -> dict:
                      "electrodes": f"{f}/electrodes"},
         "stamps": {"column": "biotacs/timestamps", "unit": "s"},
     }
+
+
+#: Columns of :func:`write_npy_split`'s arrays: PDC, TAC, TDC, the 19 electrodes, the 22 PAC samples a frame.
+NPY_COLUMNS = ["pdc", "tac", "tdc", {"name": "e{i}", "count": 19}, {"name": "pac{i}", "count": 22}]
+
+
+def write_npy_split(folder: Path, split: str, recs: list[BiotacRecording], names: dict[int, str], frames: int,
+                    units_per_count: float) -> Path:
+    """One split as the iCub pads' files are laid out: ``X_<split>.npy``, a float array (trials, columns,
+    frames) of every trial's first ``frames`` frames in units (counts x ``units_per_count``), and
+    ``y_<split>.npy``, the class name of each trial."""
+    rows = []
+    for r in recs:
+        pac = r.pac[:frames * r.pac_per_frame].reshape(frames, r.pac_per_frame)
+        cols = np.column_stack([r.pdc[:frames], r.tac[:frames], r.tdc[:frames], r.electrodes[:, :frames].T, pac])
+        rows.append(cols.T.astype(np.float64) * units_per_count)
+    folder.mkdir(parents=True, exist_ok=True)
+    np.save(folder / f"X_{split}.npy", np.stack(rows))
+    np.save(folder / f"y_{split}.npy", np.array([names[r.material] for r in recs]))
+    return folder / f"X_{split}.npy"
+
+
+def npy_split_mapping(counts_per_unit: float) -> dict:
+    """The mapping of :func:`write_npy_split`'s files."""
+    return {"format": "npy", "files": "X_*.npy", "shape": ["trial", "column", "frame"], "columns": NPY_COLUMNS,
+            "labels": {"replace": ["X_", "y_"]}, "class": {"from": "column", "column": "label"},
+            "trial": {"from": "column", "column": "trial"}, "counts_per_unit": counts_per_unit,
+            "channels": {"pac": "pac{i}", "pdc": "pdc", "tac": "tac", "tdc": "tdc", "electrodes": "e{i}"},
+            "stamps": {"rate_hz": 100.0}, "tare": "none"}
