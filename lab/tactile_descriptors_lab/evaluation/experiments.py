@@ -204,6 +204,7 @@ def describe_windows(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
         in_contact=stacked(b.in_contact for b in banks),
         mean_force_n=stacked(b.mean_force_n for b in banks),
         seconds={k: stacked(b.seconds[k] for b in banks) for k in first.seconds},
+        unfed=first.unfed,
     )
 
 
@@ -245,7 +246,8 @@ def _block_mean_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
         np.add.at(total, owner_a, v[take])
         seconds[k] = total
     return FeatureBank(windows=list(windows), groups=groups, labels=bank.labels,
-                       in_contact=force >= float(threshold), mean_force_n=force, seconds=seconds)
+                       in_contact=force >= float(threshold), mean_force_n=force, seconds=seconds,
+                       unfed=bank.unfed)
 
 
 def _check_classifiers(names: Iterable[str]) -> tuple[str, ...]:

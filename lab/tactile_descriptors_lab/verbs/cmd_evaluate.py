@@ -112,6 +112,33 @@ def check_recordings(recordings, mode: str) -> None:
         check_present(ct, groups, present, where=f"{r.path} (mode {mode})", why=why, key="channels")
 
 
+def resolve_mode(recordings, mode: str | None) -> str:
+    """The descriptor mode: ``mode`` if given (refused by name when the recordings' cell type cannot feed
+    one of its groups), else the default mode less the groups the cell type cannot feed, with a note.
+
+    Raises
+    ------
+    ConfigError
+        For a mode asked for with a group the cell type cannot feed (a vibration rate without a band below
+        Nyquist for ``bands``), naming the group, why, and the groups it can feed.
+    """
+    from ..evaluation.features import DEFAULT_MODE, cell_type_groups, mode_groups, recordings_cell_type
+
+    ct = recordings_cell_type(recordings)
+    able, why = cell_type_groups(ct)
+    groups = mode_groups(mode if mode is not None else DEFAULT_MODE)
+    left = [g for g in groups if g.partition(":")[0] in why]
+    if not left:
+        return mode if mode is not None else DEFAULT_MODE
+    if mode is not None:
+        raise ConfigError(f"mode {mode!r}: {why[left[0].partition(':')[0]]}; the groups it can feed: "
+                          f"{', '.join(able)}", key="channels")
+    kept = [g for g in groups if g not in left]
+    print(f"note: descriptor mode {DEFAULT_MODE} without {', '.join(left)} ({why[left[0].partition(':')[0]]}): "
+          f"{'+'.join(kept)}; --mode {DEFAULT_MODE} asks for every group", file=sys.stderr)
+    return "+".join(kept)
+
+
 def check_classes(train, test, train_source: str, test_source: str, every=None) -> None:
     """Refuse splits in which a class has training trials but no test trial, or test trials but no training.
 
@@ -193,7 +220,7 @@ def register(subparsers) -> None:
                    "averages the same blocks (descriptor.block_s), --live on both sides")
     p.add_argument("--block-hop", type=float, default=DEFAULT_BLOCK_HOP_S,
                    help=f"largest step between blocks in seconds (default {DEFAULT_BLOCK_HOP_S:g})")
-    p.add_argument("--channels", "--mode", dest="channels", default=DEFAULT_MODE,
+    p.add_argument("--channels", "--mode", dest="channels", default=None,
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
                    "multiband (per_channel + Hjorth of 6 PAC bands), multiband_levels, baseline, "
                    "combined (all of them, 261 values), combined_subwindows (+ mean and sd over 4 successive "
@@ -228,6 +255,10 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation and print accuracy and confusion matrices (or JSON)."""
     if args.live:
+        if args.channels is None:
+            from ..evaluation.features import DEFAULT_MODE
+
+            args.channels = DEFAULT_MODE
         return run_live(args)
     from tactile_descriptors_lab.datasets.readers import LoadReport, align_classes, check_selection
     from tactile_descriptors_lab.evaluation.bank import mode_groups
@@ -235,7 +266,9 @@ def run(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.evaluation.sampling import load_split
     from tactile_descriptors_lab.verbs.cmd_import import parse_classes
 
-    mode_groups(args.channels)  # an unknown mode is refused before any data is read
+    asked = args.channels is not None
+    if asked:
+        mode_groups(args.channels)  # an unknown mode is refused before any data is read
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     if (args.train_windows is not None and args.train_windows < 1) or args.test_windows < 1 or args.cv_repeats < 1:
@@ -261,6 +294,7 @@ def run(args: argparse.Namespace) -> int:
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
     check_classes(train, test, args.train, args.test, every)
+    args.channels = resolve_mode(list(train) + list(test), args.channels)
     check_recordings(list(train) + list(test), args.channels)
     for rep in reports:
         for line in rep.tare_lines():

@@ -255,3 +255,64 @@ def test_evaluate_reads_npy_train_and_test_files(recs, tmp_path, capsys):
     out = capsys.readouterr()
     assert code == 0, out.err
     assert "pa: accuracy" in out.out and "bouncy_foam" in out.out
+
+
+# --------------------------------------------------------------------------- groups a cell type cannot feed
+
+PAD_ROBOT = """\
+robot: {name: pad, description: a pressure pad read at 40 Hz}
+cell_types:
+  pad_cell:
+    vibration: {symbol: p, rate_hz: 40.0, adc_bits: 12, axes: [{name: z, channels: [pz]}]}
+    deformation: {symbol: F, rate_hz: 40.0, adc_bits: 12, axes: [{name: "", channels: [t1, t2, t3]}]}
+    force: {channels: [t1, t2, t3], n_per_count: 0.01, rate_hz: 40.0}
+body_parts:
+  - {name: pad, cell_type: pad_cell, cells: [{id: 1}]}
+"""
+
+
+@pytest.fixture
+def pad_source(recs, tmp_path):
+    """A 40 Hz pad's tables from the shared recordings: its pressure is a trial's PDC, its three taxels
+    the first three electrodes, frame after frame at the pad's rate."""
+    (tmp_path / "pad.yaml").write_text(PAD_ROBOT)
+    for r in recs:
+        if r.trial > 6:
+            continue
+        d = tmp_path / "pad" / PENN_OBJECTS[r.material]
+        d.mkdir(parents=True, exist_ok=True)
+        lines = ["t_ns,pz,t1,t2,t3"] + [f"{i * 25_000_000},{r.pdc[i]},{r.electrodes[0, i]},{r.electrodes[1, i]},"
+                                        f"{r.electrodes[2, i]}" for i in range(r.n_frames)]
+        (d / f"trial_{r.trial}.csv").write_text("\n".join(lines) + "\n")
+    mapping = _mapping(tmp_path, {"format": "csv", "files": "*/*.csv", "robot": "pad.yaml",
+                                  "class": {"from": "folder"}, "trial": {"from": "file", "pattern": r"trial_(\d+)$"},
+                                  "channels": {"pz": "pz", "t1": "t1", "t2": "t2", "t3": "t3"},
+                                  "stamps": {"column": "t_ns", "unit": "ns"}, "tare": "none"}, "pad_map")
+    return tmp_path / "pad", mapping
+
+
+def _evaluate_pad(source, mapping, *mode):
+    return main(["evaluate", "--train", str(source), "--test", str(source), "--mapping", str(mapping),
+                 "--train-trials", "1-4", "--test-trials", "5-6", "--window", "1", "--classifier", "pa",
+                 "--cache", "", *mode])
+
+
+def test_a_group_the_cell_type_cannot_feed_is_left_out_of_the_default_with_a_note(pad_source, capsys):
+    """At 40 Hz no vibration band lies below Nyquist: the default mode goes without ``bands`` and says so;
+    a mode without bands evaluates (the bank no longer computes bands for every mode)."""
+    assert _evaluate_pad(*pad_source) == 0
+    out = capsys.readouterr()
+    assert ("note: descriptor mode combined without bands (feature group 'bands' cannot be fed by cell type "
+            "'pad_cell': its vibration rate (40 Hz) has no band") in out.err
+    assert "descriptor mode per_channel+levels+statistics (" in out.out
+    assert _evaluate_pad(*pad_source, "--mode", "per_channel") == 0
+    assert "descriptor mode per_channel (" in capsys.readouterr().out
+
+
+def test_a_group_asked_for_that_the_cell_type_cannot_feed_is_named_with_the_groups_that_work(pad_source, capsys):
+    assert _evaluate_pad(*pad_source, "--mode", "combined") == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "error" in ln]
+    assert len(err) == 1
+    assert err[0].startswith("tactile evaluate: error: 'channels': mode 'combined': feature group 'bands' cannot "
+                             "be fed by cell type 'pad_cell'")
+    assert err[0].endswith("; the groups it can feed: paper, per_channel, levels, statistics")
