@@ -150,13 +150,14 @@ def _fit_score(pipe: Pipeline, c: float, X: np.ndarray, y: np.ndarray, train: np
 
 
 def estimate_selection_s(pipe: Pipeline, X: np.ndarray, y: np.ndarray,
-                         splits: Sequence[tuple[np.ndarray, np.ndarray]], c_grid: Sequence[float],
-                         n_jobs: int = 1) -> float:
+                         splits: Sequence[tuple[np.ndarray, np.ndarray]], c_grid: Sequence[float]) -> float:
     """Seconds that choosing C will take, from timing one CV fit at the grid's middle C and one at its
-    largest (libsvm's time grows with C), times the number of fits, divided by the jobs.
+    largest (libsvm's time grows with C), times the number of fits.
 
     A rough figure (the fits at other C differ, the machine's load changes), printed so that a selection
-    of hours is known before it starts.
+    of hours is known before it starts.  It counts no speed-up from parallel jobs: on the 2-core machine
+    shared with other work the parallel fits of 3,200 windows ran 3.5 times slower each than the timed
+    fit (an estimate divided by 2 jobs said 2 min, the selection took 7.7 min; undivided it says 4.4).
     """
     train, test = splits[0]
     probes = sorted({float(np.median(c_grid)), float(max(c_grid))})
@@ -164,7 +165,7 @@ def estimate_selection_s(pipe: Pipeline, X: np.ndarray, y: np.ndarray,
     for c in probes:
         _fit_score(pipe, c, X, y, train, test)
     per_fit = (time.perf_counter() - t0) / len(probes)
-    return per_fit * len(c_grid) * len(splits) / max(1, n_jobs)
+    return per_fit * len(c_grid) * len(splits)
 
 
 def _duration_text(seconds: float) -> str:
@@ -208,10 +209,9 @@ def fit_svm(X: np.ndarray, y: np.ndarray, groups: np.ndarray, labels: Sequence[s
 
         from tqdm import tqdm
 
-        estimate = estimate_selection_s(pipe, X, y, splits, c_grid, n_jobs)
+        estimate = estimate_selection_s(pipe, X, y, splits, c_grid)
         print(f"choosing C: {len(c_grid)} values x {len(splits)} CV fits ({folds}-fold x {repeats} repeats) of "
-              f"{len(y)} training windows, about {_duration_text(estimate)}"
-              + (f" on {n_jobs} jobs" if n_jobs > 1 else "")
+              f"{len(y)} training windows, about {_duration_text(estimate)} (from 2 timed fits)"
               + ("; fewer repeats (--cv-repeats) or windows make it shorter" if estimate > 1800 else ""),
               file=sys.stderr, flush=True)
         bar = tqdm(total=len(c_grid) * len(splits), desc="choosing C", unit="fit")
