@@ -414,9 +414,10 @@ def cell_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
     ct = mapping.cell
     assert ct is not None
     k = mapping.samples_per_frame
-    vib = np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
     dfm = np.stack([_channel(table, mapping, c, 1)[:, 0] for c in ct.deformation.channels])
     n = dfm.shape[1]
+    vib = (np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
+           if ct.has_vibration else np.zeros((0, n * k), dtype=np.int64))  # pressure only
     absent = tuple(c for c in ct.extra_channels if c not in mapping.channels)
     extra = np.full((len(ct.extra_channels), n), np.nan)
     for i, c in enumerate(ct.extra_channels):

@@ -70,7 +70,7 @@ from tactile_descriptors_ros.core.groups import (
     parse_group,
     selection_labels,
 )
-from tactile_descriptors_ros.core.robot import BodyPart, Cell, RobotDescription, load_robot
+from tactile_descriptors_ros.core.robot import VIBRATION_GROUPS, BodyPart, Cell, RobotDescription, load_robot
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = [
@@ -281,12 +281,17 @@ def recording_cells(rec: BiotacRecording | CellRecording,
 def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, str]]:
     """The groups of :data:`GROUPS` a cell type can feed at its rates, and why it cannot feed the others.
 
-    ``bands`` needs a vibration band below Nyquist (:func:`~..core.features.check_groups`): a cell type
-    whose vibration is sampled at 40 Hz has none.  Such a group is left out of the feature bank, so that
+    ``bands`` needs a vibration band below Nyquist (:func:`tactile_descriptors_ros.core.groups.check_groups`): a cell type
+    whose vibration is sampled at 40 Hz has none; ``per_channel`` and ``bands`` need vibration channels,
+    which a pressure-only cell type does not have.  Such a group is left out of the feature bank, so that
     a mode without it evaluates, and a mode with it is refused by name (:func:`select_features`).
     """
     able, why = [], {}
     for g in GROUPS:
+        if g in VIBRATION_GROUPS and not cell_type.has_vibration:
+            why[g] = (f"feature group {g!r} reads the vibration channels, which cell type {cell_type.name!r} does "
+                      "not have (pressure only)")
+            continue
         try:
             check_groups(cell_type, (g,))
         except ConfigError as exc:

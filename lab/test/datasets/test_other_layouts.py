@@ -14,11 +14,13 @@ import numpy as np
 import pytest
 import yaml
 from writers import (
-    PENN_OBJECTS, npy_split_mapping, penn_bolt_mapping, penn_run_name, write_npy_split, write_penn_bolt, write_ros1_bag,
+    PENN_OBJECTS, icub_mapping, icub_robot_yaml, icub_taxel_counts, npy_split_mapping, penn_bolt_mapping,
+    penn_run_name, write_icub_split, write_npy_split, write_penn_bolt, write_ros1_bag,
 )
 
 from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
 from tactile_descriptors_lab.datasets.mapping import parse_mapping
+from tactile_descriptors_lab.datasets.recording import CellRecording
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
 from tactile_descriptors_lab.datasets.tables import group_glob, natural_key
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
@@ -316,3 +318,51 @@ def test_a_group_asked_for_that_the_cell_type_cannot_feed_is_named_with_the_grou
     assert err[0].startswith("tactile evaluate: error: 'channels': mode 'combined': feature group 'bands' cannot "
                              "be fed by cell type 'pad_cell'")
     assert err[0].endswith("; the groups it can feed: paper, per_channel, levels, statistics")
+
+
+# --------------------------------------------------------------------------- a pressure-only cell type (iCub pads)
+
+def _icub(recs, tmp_path):
+    (tmp_path / "icub_pad.yaml").write_text(icub_robot_yaml())
+    frames = FRAMES // 2
+    x_train = write_icub_split(tmp_path, "train", [r for r in recs if r.trial <= 4], PENN_OBJECTS, frames)
+    x_test = write_icub_split(tmp_path, "test", [r for r in recs if r.trial > 4], PENN_OBJECTS, frames)
+    return x_train, x_test, _mapping(tmp_path, icub_mapping(), "icub")
+
+
+def test_icub_pads_float_arrays_read_back_the_taxel_counts_of_a_pressure_only_cell(recs, tmp_path):
+    x_train, _, mapping = _icub(recs, tmp_path)
+    got = read_source(x_train, mapping)
+    want = sorted([r for r in recs if r.trial <= 4], key=lambda r: (PENN_OBJECTS[r.material], r.trial))
+    assert [g.class_name for g in got] == [PENN_OBJECTS[w.material] for w in want]
+    for g, w in zip(got, want):
+        assert isinstance(g, CellRecording) and g.cell_type == "taxel_pad"
+        assert g.vibration.shape == (0, g.n_frames)  # pressure only: no vibration channel invented
+        assert np.array_equal(g.deformation, icub_taxel_counts(w, FRAMES // 2).T)
+        assert np.all(np.diff(g.frame_t_ns) == 20_000_000)
+
+
+def test_icub_pads_evaluate_with_the_groups_pressure_can_feed(recs, tmp_path, capsys):
+    x_train, x_test, mapping = _icub(recs, tmp_path)
+    args = ["evaluate", "--train", str(x_train), "--test", str(x_test), "--mapping", str(mapping), "--window", "1",
+            "--classifier", "pa", "--cache", ""]
+    assert main(args) == 0
+    out = capsys.readouterr()
+    assert ("note: descriptor mode combined without per_channel, bands (feature group 'per_channel' reads the "
+            "vibration channels, which cell type 'taxel_pad' does not have (pressure only))") in out.err
+    assert "descriptor mode levels+statistics (" in out.out
+    assert main(args + ["--mode", "per_channel"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().endswith("does not have (pressure only); the groups it can feed: paper, levels, statistics")
+
+
+def test_a_robot_selecting_a_vibration_group_for_a_pressure_only_cell_is_refused_at_load(tmp_path):
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    (tmp_path / "pad.yaml").write_text(icub_robot_yaml() + "descriptor: {groups: [paper, per_channel]}\n")
+    with pytest.raises(ConfigError, match="feature group 'per_channel' reads the vibration channels, which cell "
+                                          "type 'taxel_pad' does not have"):
+        load_robot(tmp_path / "pad.yaml")
+    (tmp_path / "ok.yaml").write_text(icub_robot_yaml() + "descriptor: {groups: [paper, levels, statistics]}\n")
+    robot = load_robot(tmp_path / "ok.yaml")
+    assert not robot.cell_types["taxel_pad"].has_vibration

@@ -354,3 +354,61 @@ def npy_split_mapping(counts_per_unit: float) -> dict:
             "trial": {"from": "column", "column": "trial"}, "counts_per_unit": counts_per_unit,
             "channels": {"pac": "pac{i}", "pdc": "pdc", "tac": "tac", "tdc": "tdc", "electrodes": "e{i}"},
             "stamps": {"rate_hz": 100.0}, "tare": "none"}
+
+
+# --------------------------------------------------------------------------- iCub taxel pads
+
+#: Taxels of the built iCub pad: six triangular modules of ten.
+ICUB_TAXELS = 60
+#: Stored units per count of the pad's float values (1/1024: every count exact in a float).
+ICUB_UNITS_PER_COUNT = 1 / 1024
+
+
+def icub_robot_yaml(rate_hz: float = 50.0) -> str:
+    """A robot description of one iCub taxel pad: a pressure-only cell type (no vibration section), its
+    60 taxels the deformation channels, one axis per ten-taxel module, the force their mean."""
+    modules = ", ".join("{name: m%d, channels: [%s]}" % (m + 1, ", ".join(f"t{10 * m + i + 1}" for i in range(10)))
+                        for m in range(ICUB_TAXELS // 10))
+    taxels = ", ".join(f"t{i}" for i in range(1, ICUB_TAXELS + 1))
+    return (f"robot: {{name: icub_pad, description: 'an iCub capacitive taxel pad, pressure only'}}\n"
+            f"cell_types:\n  taxel_pad:\n"
+            f"    deformation: {{symbol: P, rate_hz: {rate_hz}, adc_bits: 12, axes: [{modules}]}}\n"
+            f"    force: {{channels: [{taxels}], n_per_count: 0.001, rate_hz: {rate_hz}}}\n"
+            f"body_parts:\n  - {{name: palm, cell_type: taxel_pad, cells: [{{id: 1}}]}}\n")
+
+
+def icub_taxel_counts(rec: BiotacRecording, frames: int, seed: int = 7) -> np.ndarray:
+    """The pad's counts (frames at 50 Hz, 60) from a BioTac trial at 100 Hz: every other frame; taxel k a
+    fixed mix of electrodes k and k + 1 (mod 19), as neighbouring taxels share a pressure; the last three
+    taxels mixes of PDC and an electrode.  Integer counts (the pad's ADC)."""
+    rng = np.random.default_rng(seed)
+    w = rng.uniform(0.3, 0.9, ICUB_TAXELS)
+    e = rec.electrodes[:, :2 * frames:2].astype(np.float64)
+    pdc = rec.pdc[:2 * frames:2].astype(np.float64)
+    out = np.empty((e.shape[1], ICUB_TAXELS))
+    for k in range(ICUB_TAXELS - 3):
+        out[:, k] = w[k] * e[k % 19] + (1 - w[k]) * e[(k + 1) % 19]
+    for k in range(ICUB_TAXELS - 3, ICUB_TAXELS):
+        out[:, k] = w[k] * pdc + (1 - w[k]) * e[k % 19]
+    return np.round(out).astype(np.int64)
+
+
+def write_icub_split(folder: Path, split: str, recs: list[BiotacRecording], names: dict[int, str],
+                     frames: int) -> Path:
+    """``X_<split>.npy``: float array (trials, frames, 60) of the pad's values in units
+    (:data:`ICUB_UNITS_PER_COUNT` each), ``y_<split>.npy`` the class names, as the iCub data ship."""
+    folder.mkdir(parents=True, exist_ok=True)
+    x = np.stack([icub_taxel_counts(r, frames) for r in recs]).astype(np.float64) * ICUB_UNITS_PER_COUNT
+    np.save(folder / f"X_{split}.npy", x)
+    np.save(folder / f"y_{split}.npy", np.array([names[r.material] for r in recs]))
+    return folder / f"X_{split}.npy"
+
+
+def icub_mapping(robot_file: str = "icub_pad.yaml", rate_hz: float = 50.0) -> dict:
+    """The mapping of :func:`write_icub_split`'s files and :func:`icub_robot_yaml`'s pad."""
+    return {"format": "npy", "files": "X_*.npy", "shape": ["trial", "frame", "column"],
+            "columns": [{"name": "t{i}", "count": ICUB_TAXELS}], "labels": {"replace": ["X_", "y_"]},
+            "class": {"from": "column", "column": "label"}, "trial": {"from": "column", "column": "trial"},
+            "robot": robot_file, "counts_per_unit": 1 / ICUB_UNITS_PER_COUNT,
+            "channels": {f"t{i}": f"t{i}" for i in range(1, ICUB_TAXELS + 1)}, "stamps": {"rate_hz": rate_hz},
+            "tare": "none"}
