@@ -133,7 +133,9 @@ def find_units(root: Path, mapping: Mapping) -> list[Unit]:
     else:
         raise DataFormatError(f"{root}: no such file or folder")
     if not files:
-        raise DataFormatError(f"{root}: no files match {mapping.files!r} (mapping key files, {mapping.source})")
+        there = sorted((str(p.relative_to(root)) for p in root.rglob("*") if p.is_file()), key=natural_key)
+        raise DataFormatError(f"{root}: no files match {mapping.files!r} (mapping key files, {mapping.source}); "
+                              f"the folder holds {_list(there) or 'no file'}")
     if mapping.format != "hdf5":
         return [Unit(f) for f in files]
     h5py = _h5py()

@@ -366,3 +366,15 @@ def test_a_robot_selecting_a_vibration_group_for_a_pressure_only_cell_is_refused
     (tmp_path / "ok.yaml").write_text(icub_robot_yaml() + "descriptor: {groups: [paper, levels, statistics]}\n")
     robot = load_robot(tmp_path / "ok.yaml")
     assert not robot.cell_types["taxel_pad"].has_vibration
+
+
+def test_a_files_glob_that_matches_nothing_names_the_folder_the_key_and_what_it_holds(recs, tmp_path):
+    (x_train, x_test), _, _, mapping = _npy_splits(recs, tmp_path)
+    d = yaml.safe_load(mapping.read_text())
+    wrong = _mapping(tmp_path, dict(d, files="data_*.npy"), "wrong")
+    with pytest.raises(DataFormatError) as exc:
+        read_source(tmp_path, wrong)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{tmp_path}: no files match 'data_*.npy' (mapping key files, {wrong}); the folder holds ")
+    assert "X_test.npy, X_train.npy" in msg and "y_train.npy" in msg
