@@ -356,18 +356,6 @@ def test_icub_pads_evaluate_with_the_groups_pressure_can_feed(recs, tmp_path, ca
     assert err.strip().endswith("does not have (pressure only); the groups it can feed: paper, levels, statistics")
 
 
-def test_a_robot_selecting_a_vibration_group_for_a_pressure_only_cell_is_refused_at_load(tmp_path):
-    from tactile_descriptors_ros.core.robot import load_robot
-
-    (tmp_path / "pad.yaml").write_text(icub_robot_yaml() + "descriptor: {groups: [paper, per_channel]}\n")
-    with pytest.raises(ConfigError, match="feature group 'per_channel' reads the vibration channels, which cell "
-                                          "type 'taxel_pad' does not have"):
-        load_robot(tmp_path / "pad.yaml")
-    (tmp_path / "ok.yaml").write_text(icub_robot_yaml() + "descriptor: {groups: [paper, levels, statistics]}\n")
-    robot = load_robot(tmp_path / "ok.yaml")
-    assert not robot.cell_types["taxel_pad"].has_vibration
-
-
 def test_a_files_glob_that_matches_nothing_names_the_folder_the_key_and_what_it_holds(recs, tmp_path):
     (x_train, x_test), _, _, mapping = _npy_splits(recs, tmp_path)
     d = yaml.safe_load(mapping.read_text())
