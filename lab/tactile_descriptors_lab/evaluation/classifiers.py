@@ -1,7 +1,7 @@
 """The paper's three learners on descriptor matrices (Kaboli et al. 2018, section VI).
 
 * Batch: linear SVM (scikit-learn ``SVC(kernel="linear")``, libsvm one-vs-one), C chosen by 5-fold
-  cross-validation repeated 10 times over :data:`C_GRID`, then refit on all
+  cross-validation repeated :data:`CV_REPEATS` times over :data:`C_GRID`, then refit on all
   training data; features scaled by a pipeline fitted on the training data.
   When a training trial contributes several windows, the folds keep a
   trial's windows together (``StratifiedGroupKFold`` reshuffled per repeat)
@@ -34,7 +34,7 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import FunctionTransformer, StandardScaler
 from sklearn.svm import SVC
 
-from tactile_descriptors_lab.evaluation.modes import SCALINGS
+from tactile_descriptors_lab.evaluation.modes import CV_REPEATS, SCALINGS
 from tactile_descriptors_ros.core.learning import OnlineClassifier
 from tactile_descriptors_ros.core.scaling import activity_mask, log_activity
 from tactile_descriptors_ros.errors import ConfigError
@@ -61,8 +61,6 @@ C_GRID: tuple[float, ...] = tuple(
     [1e-4, 5.0 ** -4, 3.0 ** -4] + [2.0 ** k for k in range(-4, 5)] + [3.0 ** 4, 5.0 ** 4, 1e4])
 C_GRID_TEXT = "{1e-4, 5^-4, 3^-4, 2^-4, 2^-3, 2^-2, 2^-1, 1, 2, 4, 8, 16, 3^4, 5^4, 1e4}"
 
-#: Repeats of the 5-fold CV that chooses C (``tactile evaluate --cv-repeats``).
-CV_REPEATS: int = 10
 
 #: Iteration cap of libsvm per binary problem (reached only without feature scaling at large C).
 SVC_MAX_ITER: int = 10_000

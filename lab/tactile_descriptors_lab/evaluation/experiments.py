@@ -25,7 +25,7 @@ from tactile_descriptors_lab.evaluation.bank import (
     recordings_robot,
     select_features,
 )
-from tactile_descriptors_lab.evaluation.classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
+from tactile_descriptors_lab.evaluation.classifiers import C_GRID, C_GRID_TEXT, CV_REPEATS, fit_svm, gmm_nmi, pa_curve
 from tactile_descriptors_lab.evaluation.sampling import (
     DEFAULT_BLOCK_HOP_S,
     DEFAULT_BLOCK_S,
@@ -86,7 +86,7 @@ class EvalConfig:
     drop : tuple of str
         Quantities left out (ablation).
     cv_folds, cv_repeats : int
-        SVM C selection (5 x 10 in the paper).
+        SVM C selection (5 x 10 in the paper; 5 x :data:`~.classifiers.CV_REPEATS` by default).
     pa_max, pa_orders : int
         PA curve length (training trials per class) and presentation orders.
     pa_update, pa_average
@@ -116,7 +116,7 @@ class EvalConfig:
     gate: bool = False
     drop: tuple[str, ...] = ()
     cv_folds: int = 5
-    cv_repeats: int = 10
+    cv_repeats: int = CV_REPEATS
     pa_max: int = 30
     pa_orders: int = 5
     pa_update: str = RECOMMENDED_PA_UPDATE

@@ -179,7 +179,7 @@ def check_pac_rate(recordings) -> None:
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE
-    from tactile_descriptors_lab.evaluation.modes import SCALINGS
+    from tactile_descriptors_lab.evaluation.modes import CV_REPEATS, SCALINGS
     from tactile_descriptors_lab.evaluation.sampling import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
     from tactile_descriptors_ros.core.learning import (
         PA_UPDATES,
@@ -239,7 +239,9 @@ def register(subparsers) -> None:
                    help="random windows per training trial (default: at least 8, and 16 s of windows per trial: "
                    "8 at 2 s and longer, 16 at 1 s, 32 at 0.5 s)")
     p.add_argument("--test-windows", type=int, default=2, help="random windows per test trial")
-    p.add_argument("--cv-repeats", type=int, default=10, help="repeats of the 5-fold CV choosing C")
+    p.add_argument("--cv-repeats", type=int, default=CV_REPEATS,
+                   help=f"repeats of the 5-fold CV choosing C (default {CV_REPEATS}; the paper's 10 chose the same C "
+                        "on the shared recordings, docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cache", default="build/cache", help="descriptor cache folder ('' = off)")
