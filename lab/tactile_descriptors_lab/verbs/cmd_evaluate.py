@@ -122,7 +122,7 @@ def resolve_mode(recordings, mode: str | None) -> str:
         For a mode asked for with a group the cell type cannot feed (a vibration rate without a band below
         Nyquist for ``bands``), naming the group, why, and the groups it can feed.
     """
-    from ..evaluation.features import DEFAULT_MODE, cell_type_groups, mode_groups, recordings_cell_type
+    from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE, cell_type_groups, mode_groups, recordings_cell_type
 
     ct = recordings_cell_type(recordings)
     able, why = cell_type_groups(ct)
@@ -148,7 +148,7 @@ def check_classes(train, test, train_source: str, test_source: str, every=None) 
         One line naming the source, the option (``--test-trials`` or ``--train-trials``), the class and the
         trials that class holds (in the one source read, or in the split that has it).
     """
-    from ..datasets.sources import format_numbers
+    from tactile_descriptors_lab.datasets.readers import format_numbers
 
     def trials_of(recs) -> dict[str, list[int]]:
         out: dict[str, list[int]] = {}
@@ -258,7 +258,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the evaluation and print accuracy and confusion matrices (or JSON)."""
     if args.live:
         if args.channels is None:
-            from ..evaluation.features import DEFAULT_MODE
+            from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE
 
             args.channels = DEFAULT_MODE
         return run_live(args)

@@ -58,7 +58,7 @@ def test_c_selection_prints_an_estimate_first_and_scores_every_fit_as_cross_val_
     mean is scikit-learn's cross_val_score on the same splits; the first r repeats are those of r repeats."""
     from sklearn.model_selection import cross_val_score
 
-    from tactile_descriptors_ros.evaluation.classifiers import _svm_pipeline
+    from tactile_descriptors_lab.evaluation.classifiers import _svm_pipeline
 
     X, y, trial = _blobs()
     labels = [f"M_x{i}" for i in range(X.shape[1])]
