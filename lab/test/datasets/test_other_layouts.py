@@ -1,7 +1,9 @@
-"""Other labs' layouts: the Penn BOLT HDF5 layout, numbered files, nested groups, composed trial numbers.
+"""Other labs' layouts: the Penn BOLT HDF5 layout, numbered files, nested groups, composed trial numbers,
+``.npy`` arrays of float values, the iCub's pressure-only taxel pads, a cell type's rates.
 
-The layouts are built inside the tests from a few shared recordings (test/datasets/writers.py), read back
-through mapping files, and must give the recordings they were built from, sample for sample.
+The layouts are built inside the tests from a few shared recordings (lab/test/datasets/writers.py), read
+back through mapping files, and must give the recordings they were built from, sample for sample; bad
+input must be one line naming the file, the key and what exists.
 """
 
 from __future__ import annotations
