@@ -5,7 +5,10 @@ under ``cell_types``) has a vibration modality S and a deformation modality
 V, each a list of axes and each axis a list of channels; the general 24-value
 descriptor is three axes of each, the BioTac's eq. 17 one PAC axis and one
 axis of 19 electrodes, the skin cell's eq. 28 three accelerometer axes and
-one axis of three force sensors.  Besides S and V a cell type may declare
+one axis of three force sensors.  A cell type without a ``vibration``
+section senses pressure only (a capacitive taxel pad): S is empty, and only
+the groups that describe V alone (``paper``, ``levels``, ``statistics``) can
+be selected for it.  Besides S and V a cell type may declare
 *extra channels* (``extra_channels``): slow signals sampled with V that enter
 only the feature groups that use them (:mod:`.groups`).
 
@@ -104,6 +107,11 @@ class CellType:
     extra_channels: tuple[str, ...] = ()  # slow channels sampled with V (levels only)
 
     @property
+    def has_vibration(self) -> bool:
+        """False for a cell type declared without a vibration modality (pressure only)."""
+        return bool(self.vibration.axes)
+
+    @property
     def channels(self) -> tuple[str, ...]:
         """Every channel the cell type declares: S, V, then the extra channels."""
         return self.vibration.channels + self.deformation.channels + self.extra_channels
@@ -180,9 +188,14 @@ def parse_cell_type(name: str, r: YamlReader) -> CellType:
     ConfigError
         Naming the offending key: bad axes or channels, an impossible rate,
         an unknown ``correlate`` mode, a vibration slower than the deformation.
+        Without a ``vibration`` section the cell type senses pressure only (S empty).
     """
-    vib = _parse_modality(r.child("vibration"))
     dfm = _parse_modality(r.child("deformation"))
+    if "vibration" in r.data:
+        vib = _parse_modality(r.child("vibration"))
+    else:  # pressure only (a capacitive taxel pad): no vibration channel, S is empty
+        vib = Modality(symbol="", rate_hz=dfm.rate_hz, adc_bits=dfm.adc_bits, signed=False, unit="count",
+                       si_per_count=1.0, axes=(), axis_names=())
     fr = r.child("force")
     force_channels = fr.get("channels", kind=list)
     if not force_channels:
@@ -192,7 +205,7 @@ def parse_cell_type(name: str, r: YamlReader) -> CellType:
     correlate = r.get("correlate", "each_with_all", str)
     if correlate not in ("each_with_all", "pairwise"):
         raise r.error("correlate", f"must be 'each_with_all' or 'pairwise', got {correlate!r}")
-    if correlate == "pairwise" and len(vib.axes) != len(dfm.axes):
+    if correlate == "pairwise" and vib.axes and len(vib.axes) != len(dfm.axes):
         raise r.error("correlate", "'pairwise' needs as many vibration axes as deformation axes")
     if vib.rate_hz < dfm.rate_hz:
         raise r.error("vibration", "the vibration modality must be the faster one (it is the time base for correlations)")

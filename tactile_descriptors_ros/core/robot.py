@@ -37,6 +37,7 @@ from .groups import check_groups, groups_of_channels
 from .yamlreader import YamlReader, resolve_yaml
 
 __all__ = [
+    "VIBRATION_GROUPS",
     "Cell",
     "BodyPart",
     "ContactSpec",
@@ -57,6 +58,9 @@ __all__ = [
 WINDOW_MODES = ("fixed", "exploration")
 LAYOUT_MODES = ("concat", "pooled")
 CHANNEL_MODES = ("averaged", "per_channel")
+#: Feature groups that need vibration channels of their own (a pressure-only cell type cannot feed them;
+#: ``paper`` and ``statistics`` describe its deformation channels alone).
+VIBRATION_GROUPS = ("per_channel", "bands")
 
 
 @dataclass(frozen=True)
@@ -342,6 +346,12 @@ def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts:
     check_blocks(block_s, block_hop_s, key=dr.path("block_s").rsplit(".", 1)[0], source=dr.source,
                  rates_hz=[ct.deformation.rate_hz for ct in used])
     for ct in used:  # every group must be computable from every cell type in use, at load time
+        if not ct.has_vibration:
+            vib = [g for g in groups if g.partition(":")[0] in VIBRATION_GROUPS]
+            if vib:
+                raise dr.error("groups", f"feature group {vib[0]!r} reads the vibration channels, which cell type "
+                                         f"{ct.name!r} does not have (pressure only); the groups it can feed: "
+                                         "paper, levels, statistics")
         check_groups(ct, groups, key=dr.path("groups"), source=dr.source)
     return DescriptorSpec(layout=layout, channels=channels, groups=groups, block_s=block_s, block_hop_s=block_hop_s)
 

@@ -62,3 +62,38 @@ def test_unknown_robot_and_body_part_are_clear_errors():
         load_robot("pepper")
     with pytest.raises(ConfigError, match="unknown body part 'tail'"):
         load_robot("nao").body_part("tail")
+
+
+PRESSURE_ONLY = """\
+robot: {name: pad, description: a capacitive taxel pad}
+cell_types:
+  taxel_pad:
+    deformation: {symbol: P, rate_hz: 50.0, adc_bits: 12, axes: [{name: m1, channels: [t1, t2, t3]},
+                                                                  {name: m2, channels: [t4, t5, t6]}]}
+    force: {channels: [t1, t2, t3, t4, t5, t6], n_per_count: 0.001, rate_hz: 50.0}
+body_parts:
+  - {name: palm, cell_type: taxel_pad, cells: [{id: 1}]}
+"""
+
+
+def test_a_cell_type_without_vibration_senses_pressure_only_and_feeds_the_groups_of_v_alone(tmp_path):
+    import numpy as np
+
+    from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
+
+    (tmp_path / "ok.yaml").write_text(PRESSURE_ONLY + "descriptor: {groups: [paper, levels, statistics]}\n")
+    robot = load_robot(tmp_path / "ok.yaml")
+    ct = robot.cell_types["taxel_pad"]
+    assert not ct.has_vibration and ct.vibration.channels == () and ct.channels == tuple(f"t{i}" for i in range(1, 7))
+    n = 100
+    t = np.arange(n, dtype=np.int64) * 20_000_000
+    rng = np.random.default_rng(1)
+    sig = CellSignals(np.zeros((0, n)), t, rng.integers(100, 200, (6, n)), t, np.full(n, 0.5))
+    d = describe_window(robot, {1: sig}, layout="concat", groups=robot.descriptor.groups)
+    assert d.values.size and np.all(np.isfinite(d.values))
+    for group in ("per_channel", "bands"):
+        (tmp_path / "bad.yaml").write_text(PRESSURE_ONLY + f"descriptor: {{groups: [paper, {group}]}}\n")
+        with pytest.raises(ConfigError, match=f"feature group '{group}' reads the vibration channels, which cell "
+                                              "type 'taxel_pad' does not have .pressure only.; the groups it can "
+                                              "feed: paper, levels, statistics"):
+            load_robot(tmp_path / "bad.yaml")

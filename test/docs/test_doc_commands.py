@@ -23,6 +23,9 @@ SKIP: dict[tuple[str, str], str] = {
                           "# fit the texture models (default ./texture_models)"):
         "a lab verb that fits all 20 materials of the real recordings (minutes) and rewrites the shipped models; "
         "lab/test/textures/test_fitting.py fits and checks them",
+    ("docs/simulator.md", "tactile demo nao"):
+        "two live NAO graphs of minutes each; lab/test/test_protocols.py scores the same two scenes with the "
+        "classifier node's learner offline, test/launching/test_ros2_launch.py launches the demo's graph",
 }
 
 

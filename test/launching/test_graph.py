@@ -118,3 +118,18 @@ def test_demo_matches_windows_to_scene_explorations_by_overlap():
     assert match_exploration(900, 3_100, timings) == 0
     assert match_exploration(2_900, 7_000, timings) == 1
     assert match_exploration(3_500, 4_500, timings) is None
+
+
+def test_demo_chance_is_a_guess_among_the_classes_taught_before_each_scored_prediction():
+    from tactile_descriptors_ros.tools.cmd_demo import chance_level
+
+    rows = [{"truth": "a", "first_of_class": True, "classes_known": 0},
+            {"truth": "b", "first_of_class": True, "classes_known": 1},
+            {"truth": "a", "first_of_class": False, "classes_known": 2},  # a guess between a and b: 1/2
+            {"truth": "c", "first_of_class": True, "classes_known": 2},
+            {"truth": "b", "first_of_class": False, "classes_known": 3},  # 1/3
+            {"truth": "c", "first_of_class": False, "classes_known": 3},  # 1/3
+            {"truth": None, "correct": False},  # matched no exploration: not scored
+            {"truth": "box", "first_of_class": True, "classes_known": 3}]  # taught, never scored
+    assert chance_level(rows) == pytest.approx((1 / 2 + 1 / 3 + 1 / 3) / 3)
+    assert chance_level(rows[:2]) is None

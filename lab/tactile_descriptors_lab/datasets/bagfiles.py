@@ -28,6 +28,7 @@ import numpy as np
 from tactile_descriptors_lab.datasets.msgdefs import SHADOW_ALL, UPENN_HAND, foreign_typestore
 from tactile_descriptors_lab.datasets.recording import N_ELECTRODES
 from tactile_descriptors_ros.errors import DataFormatError
+from tactile_descriptors_lab.datasets.tables import natural_key
 
 __all__ = ["is_bag", "find_bags", "read_bag_frames", "BATCH_TYPE", "LABEL_TYPE", "TRIALS_KEY"]
 
@@ -50,7 +51,7 @@ def find_bags(root: Path, pattern: str | None) -> list[Path]:
         if root.is_file():
             raise DataFormatError(f"{root}: not a bag (a ROS 1 .bag file or a rosbag2 folder with metadata.yaml)")
         raise DataFormatError(f"{root}: no such file or folder")
-    found = sorted({p for p in root.glob(pattern or "**/*") if is_bag(p)})
+    found = sorted({p for p in root.glob(pattern or "**/*") if is_bag(p)}, key=lambda p: natural_key(str(p)))
     if not found:
         raise DataFormatError(f"{root}: no bags found (ROS 1 .bag files or rosbag2 folders)")
     return found

@@ -187,6 +187,7 @@ class ImportReport:
     source: str = ""
     mapping: str = ""
     tare_notes: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     @property
     def frames(self) -> int:
@@ -213,6 +214,7 @@ class ImportReport:
             "source": self.source,
             "mapping": self.mapping,
             "tare": self.tare_notes,
+            "notes": self.notes,
             "trials": len(self.trials),
             "batches": self.batches,
             "labels": self.labels,
@@ -426,6 +428,7 @@ def import_source(
     report.source = str(source)
     report.mapping = load.mapping
     report.tare_notes = load.tare_lines()
+    report.notes = load.note_lines()
     return report
 
 

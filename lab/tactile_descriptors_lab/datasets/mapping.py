@@ -21,19 +21,21 @@ import yaml
 from tactile_descriptors_ros.core.cell_types import CellType
 from tactile_descriptors_ros.errors import ConfigError
 
-__all__ = ["Mapping", "NameRule", "Stamps", "FORMATS", "TARE_MODES", "shipped_mappings", "load_mapping",
+__all__ = ["Mapping", "NameRule", "Stamps", "FORMATS", "NPY_AXES", "TARE_MODES", "shipped_mappings", "load_mapping",
            "parse_mapping", "expand_channel"]
 
 #: Table and bag formats a mapping can describe.
-FORMATS = ("csv", "npz", "hdf5", "bag")
+FORMATS = ("csv", "npz", "hdf5", "npy", "bag")
+#: Axes an ``.npy`` array's ``shape`` description may name (``frame`` and ``column`` required).
+NPY_AXES = ("trial", "frame", "column")
 #: ``tare``: ``auto`` tares a trial whose resting PDC is far from zero, ``per_trial`` always, ``none`` never.
 TARE_MODES = ("auto", "per_trial", "none")
 _FROM = {"class": ("folder", "file", "group", "column", "option", "message"),
          "trial": ("folder", "file", "group", "column", "order")}
 _UNITS_NS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
 _TOP_KEYS = ("format", "files", "groups", "class", "trial", "samples_per_frame", "channels", "stamps", "tare",
-             "sensor", "topic", "robot", "cell_type", "description")
-_RULE_KEYS = ("from", "pattern", "column", "value", "names")
+             "sensor", "topic", "robot", "cell_type", "description", "shape", "columns", "labels", "counts_per_unit")
+_RULE_KEYS = ("from", "pattern", "column", "value", "names", "number")
 _CHANNEL_KEYS = ("pac", "pdc", "tac", "tdc", "electrodes")
 _STAMP_KEYS = ("column", "unit", "rate_hz")
 _MAPPINGS_DIR = Path(__file__).resolve().parent / "mappings"
@@ -58,6 +60,11 @@ class NameRule:
     value : str or None
     names : dict of str to str
         Value -> class name (a data set whose names are numbers).
+    number : str or None
+        A trial number built from several groups of ``pattern``: a format
+        string over the groups in order, numbers as ``int``
+        (``"{0}{1:02d}"``: session 3, run 7 -> trial 307), so that a run
+        missing from the data leaves a gap instead of renumbering the rest.
     """
 
     source: str
@@ -65,6 +72,7 @@ class NameRule:
     column: str | None = None
     value: str | None = None
     names: dict[str, str] = field(default_factory=dict)
+    number: str | None = None
 
     def extract(self, text: str, what: str, where: str) -> str:
         """The value of this rule in ``text`` (a folder, file or group name)."""
@@ -74,6 +82,17 @@ class NameRule:
         if m is None:
             raise ConfigError(f"{where}: {what}.pattern {self.pattern.pattern!r} does not match {text!r}",
                               key=f"{what}.pattern")
+        if self.number is not None:
+            parts = [int(g) if g is not None and g.isdigit() else g for g in m.groups()]
+            try:
+                value = self.number.format(*parts)
+            except (IndexError, ValueError, TypeError) as exc:
+                raise ConfigError(f"{where}: {what}.number {self.number!r} does not format the groups "
+                                  f"{list(m.groups())} of {text!r} ({exc})", key=f"{what}.number") from None
+            if not value.isdigit():
+                raise ConfigError(f"{where}: {what}.number {self.number!r} gives {value!r} for {text!r}, "
+                                  "not a number", key=f"{what}.number")
+            return value
         if what in m.groupdict() and m.group(what) is not None:
             return m.group(what)
         return m.group(1) if m.groups() else m.group(0)
@@ -111,6 +130,10 @@ class Mapping:
     description: str = ""
     robot: str = "shadow_hand"
     cell: CellType | None = None
+    shape: tuple[str, ...] = ()
+    columns: tuple[str, ...] = ()
+    labels: tuple[str, str] | None = None
+    counts_per_unit: float | None = None
 
     @property
     def cell_type(self) -> str:
@@ -155,9 +178,17 @@ def _rule(d: Any, what: str, source: str) -> NameRule:
     names = d.get("names") or {}
     if not isinstance(names, dict):
         raise ConfigError("must map values to class names", key=f"{what}.names", source=source)
+    number = d.get("number")
+    if number is not None:
+        if not isinstance(number, str) or "{" not in number:
+            raise ConfigError(f"must be a format of the pattern's groups such as '{{0}}{{1:02d}}', got {number!r}",
+                              key=f"{what}.number", source=source)
+        if pattern is None or pattern.groups < 1:
+            raise ConfigError("'number' formats the groups of a pattern: give a pattern with groups",
+                              key=f"{what}.pattern", source=source)
     return NameRule(source=src, pattern=pattern, column=d.get("column"),
                     value=None if d.get("value") is None else str(d["value"]),
-                    names={str(k): str(v) for k, v in names.items()})
+                    names={str(k): str(v) for k, v in names.items()}, number=number)
 
 
 def parse_mapping(data: Any, source: str = "<mapping>") -> Mapping:
@@ -215,12 +246,61 @@ def parse_mapping(data: Any, source: str = "<mapping>") -> Mapping:
     sensor = d.get("sensor", 0)
     if not isinstance(sensor, int) or isinstance(sensor, bool) or sensor < 0:
         raise ConfigError(f"must be a sensor index >= 0, got {sensor!r}", key="sensor", source=source)
+    shape, columns, labels = _npy_keys(d, fmt, source)
+    cpu = d.get("counts_per_unit")
+    if cpu is not None and (not isinstance(cpu, (int, float)) or isinstance(cpu, bool) or not cpu > 0):
+        raise ConfigError(f"must be a positive number (counts per unit of the stored values), got {cpu!r}",
+                          key="counts_per_unit", source=source)
     return Mapping(format=fmt, files=files or "**/*", class_rule=class_rule, trial_rule=trial_rule,
                    samples_per_frame=spf, channels=dict(channels),
                    stamps=Stamps(column=stamps_d.get("column"), unit=unit,
                                  rate_hz=None if rate is None else float(rate)),
                    tare=tare, groups=d.get("groups"), sensor=sensor, topic=d.get("topic"), source=source,
-                   description=str(d.get("description", "")), robot=robot, cell=cell)
+                   description=str(d.get("description", "")), robot=robot, cell=cell, shape=shape, columns=columns,
+                   labels=labels, counts_per_unit=None if cpu is None else float(cpu))
+
+
+def _npy_keys(d: dict, fmt: str, source: str) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, str] | None]:
+    """``shape``, ``columns`` and ``labels``: the description of ``.npy`` arrays (format npy only)."""
+    if fmt != "npy":
+        for k in ("shape", "columns", "labels"):
+            if k in d:
+                raise ConfigError(f"describes .npy arrays: only with format npy (this mapping reads {fmt})",
+                                  key=k, source=source)
+        return (), (), None
+    shape = d.get("shape")
+    if (not isinstance(shape, list) or any(a not in NPY_AXES for a in shape) or len(set(shape)) != len(shape)
+            or not {"frame", "column"} <= set(shape)):
+        raise ConfigError(f"the axes of each array in order, from {', '.join(NPY_AXES)} (frame and column "
+                          f"required), e.g. [trial, frame, column]; got {shape!r}", key="shape", source=source)
+    cols = d.get("columns")
+    names: list[str] = []
+    if not isinstance(cols, list) or not cols:
+        raise ConfigError("the name of each column of the arrays, in order: a name, or {name: 'e{i}', count: 19} "
+                          "for numbered ones", key="columns", source=source)
+    for i, c in enumerate(cols):
+        if isinstance(c, str):
+            names.append(c)
+        elif isinstance(c, dict) and set(c) == {"name", "count"} and isinstance(c["name"], str) \
+                and "{i}" in c["name"] and isinstance(c["count"], int) and c["count"] > 0:
+            names.extend(expand_channel(c["name"], c["count"]))
+        else:
+            raise ConfigError(f"a column name, or {{name: 'e{{i}}', count: 19}}; got {c!r}", key=f"columns[{i}]",
+                              source=source)
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ConfigError(f"column {dup[0]!r} named twice", key="columns", source=source)
+    labels = d.get("labels")
+    if labels is not None:
+        rep = labels.get("replace") if isinstance(labels, dict) and set(labels) == {"replace"} else None
+        if not (isinstance(rep, list) and len(rep) == 2 and all(isinstance(x, str) and x for x in rep)):
+            raise ConfigError("the file of each array's class labels (one a trial), as {replace: [from, to]} on "
+                              "the array's file name, e.g. {replace: [X_, y_]}", key="labels", source=source)
+        if "trial" not in shape:
+            raise ConfigError("labels name one class a trial: the arrays need a trial axis", key="labels",
+                              source=source)
+        labels = (rep[0], rep[1])
+    return tuple(shape), tuple(names), labels
 
 
 def _cell(d: dict, fmt: str, source: str) -> tuple[str, CellType | None]:

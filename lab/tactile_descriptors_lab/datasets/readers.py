@@ -39,6 +39,7 @@ from tactile_descriptors_lab.datasets.tables import (
     cell_channels,
     find_units,
     frame_stamps_ns,
+    natural_key,
     read_table,
     split_runs,
     table_channels,
@@ -64,6 +65,11 @@ class LoadReport:
     tared: list[tuple[str, int, float]] = field(default_factory=list)
     untared_detected: bool = False
     cell_type: str = "biotac"
+    notes: list[str] = field(default_factory=list)
+
+    def note_lines(self) -> list[str]:
+        """Warnings about what was read (classes holding different trials, ...), one line each."""
+        return list(self.notes)
 
     def tare_lines(self) -> list[str]:
         if not self.tared:
@@ -166,7 +172,7 @@ class _Trial:
 
 
 def _table_trials(unit: Unit, mapping: Mapping, class_value: str | None, trial_value: str | None) -> list[_Trial]:
-    table = read_table(unit, mapping.format)
+    table = read_table(unit, mapping.format, mapping)
     if table.n_rows == 0:
         raise DataFormatError(f"{unit.path}: no frames")
     cr, tr = mapping.class_rule, mapping.trial_rule
@@ -287,7 +293,7 @@ def read_source(source: str | Path, mapping: str | Path | Mapping | None = None,
 
 
 def _number_map(values: Sequence[str]) -> dict[str, int]:
-    uniq = sorted(set(values))
+    uniq = sorted(set(values), key=natural_key)
     if all(_DIGITS.match(v) for v in uniq):
         return {v: int(v) for v in uniq}
     return {v: i + 1 for i, v in enumerate(uniq)}
@@ -300,7 +306,7 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
         by_class.setdefault(t.class_value, []).append(t)
     recs = []
     for cv, ts in by_class.items():
-        ts.sort(key=lambda t: t.order_key)
+        ts.sort(key=lambda t: natural_key(t.order_key))
         if all(t.trial_value is not None for t in ts):
             tnum = _number_map([t.trial_value for t in ts])
             numbers = [tnum[t.trial_value] for t in ts]
@@ -308,15 +314,18 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
             numbers = list(range(1, len(ts) + 1))
         if len(set(numbers)) != len(numbers):
             dup = sorted({n for n in numbers if numbers.count(n) > 1})
-            raise DataFormatError(f"class {cv}: trial {dup[0]} appears twice "
-                                  f"({[t.where for t, n in zip(ts, numbers) if n == dup[0]]}); "
-                                  "the trial rule must tell trials apart", )
+            both = [t.where for t, n in zip(ts, numbers) if n == dup[0]]
+            raise DataFormatError(f"{m.source}: class {cv}: trial {dup[0]} twice ({' and '.join(both)}; mapping key "
+                                  f"trial, {_rule_text(m.trial_rule)}): the trial rule must tell trials apart, "
+                                  "e.g. trial.number over several groups of trial.pattern")
         name = m.class_rule.names.get(cv, cv)
         if _DIGITS.match(name):
             name = f"mat{name}"
         for t, num in zip(ts, numbers):
             recs.append(_recording(t, cnum[cv], num, name, m))
     recs.sort(key=lambda r: (r.material, r.trial))
+    if report is not None:
+        report.notes.extend(trial_set_notes(recs))
     if m.cell is not None:
         return [_tare_cell(r, m, tare_mode, report) for r in recs]
     out = []
@@ -329,6 +338,44 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
                 report.untared_detected |= tare_mode == "auto"
         out.append(r)
     return out
+
+
+def _rule_text(rule: NameRule) -> str:
+    parts = [f"from {rule.source}"]
+    if rule.pattern is not None:
+        parts.append(f"pattern {rule.pattern.pattern!r}")
+    if rule.number is not None:
+        parts.append(f"number {rule.number!r}")
+    return ", ".join(parts)
+
+
+def trial_set_notes(recs: Sequence[BiotacRecording]) -> list[str]:
+    """One warning line when the classes do not hold the same trial numbers (a missing run, or runs
+    numbered differently per class): a split by trial then tests the classes on different runs.
+
+    The line names each class whose trials differ from those most classes hold, and how.
+    """
+    sets: dict[str, set[int]] = {}
+    for r in recs:
+        sets.setdefault(r.class_name, set()).add(r.trial)
+    kinds = [frozenset(v) for v in sets.values()]
+    if len(set(kinds)) <= 1:
+        return []
+    usual = max(set(kinds), key=lambda k: (kinds.count(k), len(k)))
+    odd = []
+    for c, v in sets.items():
+        if v == usual:
+            continue
+        how = []
+        if usual - v:
+            how.append(f"lacks {format_numbers(sorted(usual - v))}")
+        if v - usual:
+            how.append(f"also holds {format_numbers(sorted(v - usual))}")
+        odd.append(f"{c} {' and '.join(how)}")
+    return [f"classes hold different trials: {'; '.join(odd[:6])}"
+            + (f"; ... {len(odd)} classes in all" if len(odd) > 6 else "")
+            + f" (the other classes hold {format_numbers(sorted(usual))}): a split by trial number tests "
+              "them on different runs"]
 
 
 def _recording(t: _Trial, material: int, trial: int, name: str, m: Mapping) -> BiotacRecording | CellRecording:

@@ -9,8 +9,9 @@ mapping says which column is which channel (see :mod:`.mapping`).
 from __future__ import annotations
 
 import csv
-import fnmatch
 import io
+import posixpath
+import re
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -23,7 +24,46 @@ from tactile_descriptors_lab.datasets.recording import N_ELECTRODES
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 
 __all__ = ["Unit", "Table", "find_units", "read_table", "table_channels", "cell_channels", "frame_stamps_ns",
-           "seconds_to_ns"]
+           "seconds_to_ns", "natural_key", "group_glob", "mapped_names"]
+
+
+def natural_key(text: str) -> tuple:
+    """Sort key that orders the numbers inside a name by value: ``run_9`` before ``run_10``, ``9.bag`` before
+    ``10.bag`` (plain string order puts ``10`` first)."""
+    return tuple((0, int(p), "") if p.isdigit() else (1, 0, p) for p in re.split(r"(\d+)", str(text)) if p)
+
+
+def group_glob(pattern: str) -> re.Pattern:
+    """A glob of HDF5 group paths as a regular expression: ``*`` and ``?`` stay inside one level (they do
+    not match ``/``), ``**`` matches any number of levels, ``[...]`` a set of characters.
+
+    :mod:`fnmatch` lets ``*`` match ``/`` too, so ``groups: "*"`` would pick every nested group
+    (``run_1/finger_0``) as a trial of its own; this is the shell's path glob instead.
+    """
+    out, i, n = [], 0, len(pattern)
+    while i < n:
+        c = pattern[i]
+        if pattern.startswith("**/", i):
+            out.append("(?:.*/)?")
+            i += 3
+        elif pattern.startswith("**", i):
+            out.append(".*")
+            i += 2
+        elif c == "*":
+            out.append("[^/]*")
+            i += 1
+        elif c == "?":
+            out.append("[^/]")
+            i += 1
+        elif c == "[" and "]" in pattern[i + 2:]:
+            j = pattern.index("]", i + 2)
+            body = pattern[i + 1:j]
+            out.append("[" + ("^" + body[1:] if body.startswith("!") else body).replace("\\", "\\\\") + "]")
+            i = j + 1
+        else:
+            out.append(re.escape(c))
+            i += 1
+    return re.compile("".join(out) + r"\Z")
 
 
 @dataclass(frozen=True)
@@ -89,11 +129,13 @@ def find_units(root: Path, mapping: Mapping) -> list[Unit]:
     if root.is_file():
         files = [root]
     elif root.is_dir():
-        files = sorted(p for p in root.glob(mapping.files) if p.is_file())
+        files = sorted((p for p in root.glob(mapping.files) if p.is_file()), key=lambda p: natural_key(str(p)))
     else:
         raise DataFormatError(f"{root}: no such file or folder")
     if not files:
-        raise DataFormatError(f"{root}: no files match {mapping.files!r} (mapping key files, {mapping.source})")
+        there = sorted((str(p.relative_to(root)) for p in root.rglob("*") if p.is_file()), key=natural_key)
+        raise DataFormatError(f"{root}: no files match {mapping.files!r} (mapping key files, {mapping.source}); "
+                              f"the folder holds {_list(there) or 'no file'}")
     if mapping.format != "hdf5":
         return [Unit(f) for f in files]
     h5py = _h5py()
@@ -108,7 +150,8 @@ def find_units(root: Path, mapping: Mapping) -> list[Unit]:
         if mapping.groups is None:
             units.append(Unit(f))
             continue
-        chosen = sorted(g for g in groups if fnmatch.fnmatchcase(g, mapping.groups))
+        glob = group_glob(mapping.groups)
+        chosen = sorted((g for g in groups if glob.match(g)), key=natural_key)
         if not chosen:
             raise DataFormatError(f"{f}: no group matches {mapping.groups!r} (mapping key groups); groups: "
                                   f"{_list(groups) or 'none'}")
@@ -163,12 +206,51 @@ def _read_npz(path: Path) -> Table:
     return Table(cols, str(path), False)
 
 
-def _read_hdf5(unit: Unit) -> Table:
+def mapped_names(mapping: Mapping) -> list[str]:
+    """Every column name the mapping refers to (channels with ``{i}`` expanded to their first name), in
+    mapping order: the channels, the stamp column, a class or trial column."""
+    names: list[str] = []
+    for spec in mapping.channels.values():
+        names.extend(expand_channel(spec, 1) if isinstance(spec, str) else spec)
+    if mapping.stamps.column is not None:
+        names.append(mapping.stamps.column)
+    for rule in (mapping.class_rule, mapping.trial_rule):
+        if rule.source == "column" and rule.column:
+            names.append(rule.column)
+    return names
+
+
+def _read_hdf5(unit: Unit, mapping: Mapping | None = None) -> Table:
+    """The datasets at and below a unit's group, by their paths relative to it (``pdc``, ``finger_0/pac``).
+
+    A name of the mapping that starts with ``../`` (or ``/``) is a dataset above the group, relative to it
+    (or to the file's root): a run's ``../timestamps`` shared by the groups of its sensors.  The columns the
+    mapping names come first, so the frame count is that of the mapping's channels, not of another
+    sensor's dataset recorded at its own rate below the same group.
+    """
     h5py = _h5py()
+    wanted = mapped_names(mapping) if mapping is not None else []
     try:
         with h5py.File(unit.file, "r") as h5:
             node = h5[unit.group] if unit.group else h5
-            cols = {k: np.asarray(v[()]) for k, v in node.items() if isinstance(v, h5py.Dataset)}
+            found: dict[str, np.ndarray] = {}
+
+            def visit(name: str, obj) -> None:
+                if isinstance(obj, h5py.Dataset):
+                    found[name] = obj
+
+            node.visititems(visit)
+            above = {}
+            for name in wanted:
+                if name.startswith(("../", "/")) and name not in found:
+                    path = name if name.startswith("/") else posixpath.normpath(
+                        posixpath.join("/" + (unit.group or ""), name))
+                    obj = h5.get(path)
+                    if isinstance(obj, h5py.Dataset):
+                        above[name] = obj
+            order = [n for n in wanted if n in found or n in above]
+            order += [n for n in found if n not in order]
+            cols = {n: np.asarray((found[n] if n in found else above[n])[()]) for n in order}
     except OSError as exc:
         raise DataFormatError(f"{unit.file}: not an HDF5 file ({exc})") from None
     for k, v in cols.items():
@@ -177,24 +259,80 @@ def _read_hdf5(unit: Unit) -> Table:
     return Table(cols, unit.path, False)
 
 
-def read_table(unit: Unit, fmt: str) -> Table:
-    """Read one unit's columns."""
+def _read_npy(path: Path, mapping: Mapping) -> Table:
+    """An ``.npy`` array as a table, its axes as the mapping's ``shape`` names them.
+
+    The ``column`` axis gives the columns, named by the mapping's ``columns``; with a ``trial`` axis the
+    rows are the frames of every trial in turn, with the column ``trial`` (1, 2, ... along that axis) and,
+    with ``labels``, the column ``label`` (the labels file's value of each trial), so that
+    ``trial: {from: column, column: trial}`` and ``class: {from: column, column: label}`` cut the trials.
+    """
+    def load(p: Path) -> np.ndarray:
+        try:
+            return np.load(p, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
+            raise DataFormatError(f"{p}: not an NPY array ({str(exc).splitlines()[0]})") from None
+
+    arr = load(path)
+    shape = mapping.shape
+    if arr.ndim != len(shape):
+        raise DataFormatError(f"{path}: an array of shape {arr.shape}, but the mapping's shape names "
+                              f"{len(shape)} axes [{', '.join(shape)}] (mapping key shape, {mapping.source})")
+    order = [a for a in ("trial", "frame", "column") if a in shape]
+    arr = np.transpose(arr, [shape.index(a) for a in order])
+    n_cols = arr.shape[-1]
+    if n_cols != len(mapping.columns):
+        raise DataFormatError(f"{path}: {n_cols} columns along axis {shape.index('column')} (shape {arr.shape}), "
+                              f"the mapping names {len(mapping.columns)} (mapping key columns, {mapping.source})")
+    n_trials = arr.shape[0] if "trial" in shape else 1
+    n_frames = arr.shape[-2]
+    flat = arr.reshape(n_trials * n_frames, n_cols)
+    cols = {name: flat[:, i] for i, name in enumerate(mapping.columns)}
+    if "trial" in shape:
+        cols.setdefault("trial", np.repeat(np.arange(1, n_trials + 1), n_frames))
+    if mapping.labels is not None:
+        old, new = mapping.labels
+        lpath = path.with_name(path.name.replace(old, new, 1))
+        if lpath == path or not lpath.is_file():
+            raise DataFormatError(f"{path}: no labels file {lpath.name} beside it (mapping key labels: replace "
+                                  f"{old!r} by {new!r} in the file name)")
+        lab = load(lpath)
+        if lab.ndim != 1 or lab.shape[0] != n_trials:
+            raise DataFormatError(f"{lpath}: labels of shape {lab.shape}, expected one a trial ({n_trials},) "
+                                  f"for {path.name}")
+        cols.setdefault("label", np.repeat(lab.astype(str), n_frames))
+    return Table(cols, str(path), False)
+
+
+def read_table(unit: Unit, fmt: str, mapping: Mapping | None = None) -> Table:
+    """Read one unit's columns (HDF5: those below its group, and the ones above it that ``mapping`` names)."""
+    if fmt == "npy":
+        assert mapping is not None
+        return _read_npy(unit.file, mapping)
     if fmt == "csv":
         return _read_csv(unit.file)
     if fmt == "npz":
         return _read_npz(unit.file)
     if fmt == "hdf5":
-        return _read_hdf5(unit)
+        return _read_hdf5(unit, mapping)
     raise ValueError(fmt)
 
 
-def _as_counts(values: np.ndarray, table: Table, name: str) -> np.ndarray:
+def _as_counts(values: np.ndarray, table: Table, name: str, counts_per_unit: float | None = None) -> np.ndarray:
+    """A column as int64 counts: integers as they are; with ``counts_per_unit``, stored values (floats in
+    a unit: volts, normalised pressure) times that factor, rounded to the nearest count, as an ADC would."""
     try:
+        if counts_per_unit is not None:
+            v = np.asarray(values).astype(np.float64)
+            if not np.all(np.isfinite(v)):
+                raise ValueError("values that are not finite")
+            return np.round(v * counts_per_unit).astype(np.int64)
         if table.text:
             return values.astype(np.int64)
         if values.dtype.kind == "f":
             if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
-                raise ValueError("non-integer counts")
+                raise ValueError("non-integer values; give counts_per_unit (mapping key) to scale stored values "
+                                 "to counts")
             return values.astype(np.int64)
         return values.astype(np.int64)
     except ValueError as exc:
@@ -205,7 +343,7 @@ def _channel(table: Table, mapping: Mapping, key: str, count: int) -> np.ndarray
     """Counts of one channel, shape (n_frames, count)."""
     names = expand_channel(mapping.channels[key], count)
     if len(names) == 1 and count > 1:
-        arr = _as_counts(table.column(names[0], f"channels.{key}"), table, names[0])
+        arr = _as_counts(table.column(names[0], f"channels.{key}"), table, names[0], mapping.counts_per_unit)
         if arr.ndim == 1 and arr.shape[0] == table.n_rows * count and not table.text:
             arr = arr.reshape(-1, count)
         if arr.ndim != 2 or arr.shape[1] != count:
@@ -220,7 +358,7 @@ def _channel(table: Table, mapping: Mapping, key: str, count: int) -> np.ndarray
         raise DataFormatError(f"{table.where}: missing column{'s' if len(missing) > 1 else ''} "
                               f"{', '.join(missing)} (mapping key channels.{key}); the file has "
                               f"{_list(table.columns)}")
-    cols = [_as_counts(table.columns[n], table, n) for n in names]
+    cols = [_as_counts(table.columns[n], table, n, mapping.counts_per_unit) for n in names]
     for n, c in zip(names, cols):
         if c.ndim != 1:
             raise DataFormatError(f"{table.where}: {n!r} has shape {c.shape}, expected one value a frame")
@@ -278,9 +416,10 @@ def cell_channels(table: Table, mapping: Mapping) -> dict[str, np.ndarray]:
     ct = mapping.cell
     assert ct is not None
     k = mapping.samples_per_frame
-    vib = np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
     dfm = np.stack([_channel(table, mapping, c, 1)[:, 0] for c in ct.deformation.channels])
     n = dfm.shape[1]
+    vib = (np.stack([_channel(table, mapping, c, k).reshape(-1) for c in ct.vibration.channels])
+           if ct.has_vibration else np.zeros((0, n * k), dtype=np.int64))  # pressure only
     absent = tuple(c for c in ct.extra_channels if c not in mapping.channels)
     extra = np.full((len(ct.extra_channels), n), np.nan)
     for i, c in enumerate(ct.extra_channels):

@@ -65,14 +65,16 @@ from tactile_descriptors_ros.core.groups import (
     DEFORMATION_BANDS_HZ,
     GROUPS,
     VIBRATION_BANDS_HZ,
+    check_groups,
     feedable_groups,
     parse_group,
     selection_labels,
 )
-from tactile_descriptors_ros.core.robot import BodyPart, Cell, RobotDescription, load_robot
+from tactile_descriptors_ros.core.robot import VIBRATION_GROUPS, BodyPart, Cell, RobotDescription, load_robot
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = [
+    "cell_type_groups",
     "PAC_BANDS_HZ",
     "ELECTRODE_BANDS_HZ",
     "GROUPS",
@@ -276,6 +278,29 @@ def recording_cells(rec: BiotacRecording | CellRecording,
     return {0: CellSignals(rec.pac[None, :], rec.pac_t_ns, rec.electrodes, rec.frame_t_ns, force_n, extra=extra)}
 
 
+def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, str]]:
+    """The groups of :data:`GROUPS` a cell type can feed at its rates, and why it cannot feed the others.
+
+    ``bands`` needs a vibration band below Nyquist (:func:`tactile_descriptors_ros.core.groups.check_groups`): a cell type
+    whose vibration is sampled at 40 Hz has none; ``per_channel`` and ``bands`` need vibration channels,
+    which a pressure-only cell type does not have.  Such a group is left out of the feature bank, so that
+    a mode without it evaluates, and a mode with it is refused by name (:func:`select_features`).
+    """
+    able, why = [], {}
+    for g in GROUPS:
+        if g in VIBRATION_GROUPS and not cell_type.has_vibration:
+            why[g] = (f"feature group {g!r} reads the vibration channels, which cell type {cell_type.name!r} does "
+                      "not have (pressure only)")
+            continue
+        try:
+            check_groups(cell_type, (g,))
+        except ConfigError as exc:
+            why[g] = str(exc).split("': ", 1)[-1]
+            continue
+        able.append(g)
+    return tuple(able), why
+
+
 def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
     """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.groups.selection_labels`)."""
     ct = cell_type or biotac_cell_type()
@@ -305,6 +330,7 @@ class FeatureBank:
     in_contact: np.ndarray
     mean_force_n: np.ndarray
     seconds: dict[str, np.ndarray] = field(default_factory=dict)
+    unfed: dict[str, str] = field(default_factory=dict)
 
     @property
     def y(self) -> np.ndarray:
@@ -348,8 +374,9 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
     seconds: dict[str, float] = {}
     present, _ = recording_channels(rec, cell_type)
     feedable = {parse_group(g)[0] for g in feedable_groups(cell_type, present)}
+    feedable &= set(cell_type_groups(cell_type)[0])
     for g in GROUPS:
-        if g not in feedable:  # a group reading a channel the recording lacks is not computed
+        if g not in feedable:  # a group reading a channel the recording lacks (or its cell type cannot feed)
             groups[g] = np.full(len(selection_labels(cell_type, (g,))), np.nan)
             seconds[g] = 0.0
             continue
@@ -544,6 +571,7 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
         in_contact=np.array([r[2] for r in rows], dtype=bool),
         mean_force_n=np.array([r[3] for r in rows]),
         seconds={g: np.array([r[4][g] for r in rows]) for g in GROUPS},
+        unfed=cell_type_groups(cell_type)[1],
     )
     if subwindows:
         _add_subwindows(bank, recordings, cell_type=cell_type, force_threshold_n=threshold, cache_dir=cache_dir,
@@ -603,6 +631,11 @@ def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
     labels : tuple of str
     """
     groups = mode_groups(mode)
+    unfed = [g for g in groups if g.partition(":")[0] in bank.unfed]
+    if unfed:
+        able = [g for g in GROUPS if g not in bank.unfed]
+        raise ConfigError(f"mode {mode!r}: {bank.unfed[unfed[0]]}; the groups it can feed: {', '.join(able)}",
+                          key="channels")
     missing = [g for g in groups if g.partition(":")[0] not in bank.groups]
     if missing:
         raise ConfigError(f"mode {mode!r} needs the {missing} group(s): compute the bank with subwindows=True")

@@ -1,7 +1,7 @@
 """The paper's three learners on descriptor matrices (Kaboli et al. 2018, section VI).
 
 * Batch: linear SVM (scikit-learn ``SVC(kernel="linear")``, libsvm one-vs-one), C chosen by 5-fold
-  cross-validation repeated 10 times over :data:`C_GRID`, then refit on all
+  cross-validation repeated :data:`CV_REPEATS` times over :data:`C_GRID`, then refit on all
   training data; features scaled by a pipeline fitted on the training data.
   When a training trial contributes several windows, the folds keep a
   trial's windows together (``StratifiedGroupKFold`` reshuffled per repeat)
@@ -34,7 +34,7 @@ from sklearn.pipeline import Pipeline, make_pipeline
 from sklearn.preprocessing import FunctionTransformer, StandardScaler
 from sklearn.svm import SVC
 
-from tactile_descriptors_lab.evaluation.modes import SCALINGS
+from tactile_descriptors_lab.evaluation.modes import CV_REPEATS, SCALINGS
 from tactile_descriptors_ros.core.learning import OnlineClassifier
 from tactile_descriptors_ros.core.scaling import activity_mask, log_activity
 from tactile_descriptors_ros.errors import ConfigError
@@ -46,6 +46,8 @@ __all__ = [
     "SCALINGS",
     "make_scaler",
     "cv_splits",
+    "CV_REPEATS",
+    "estimate_selection_s",
     "SvmResult",
     "fit_svm",
     "PaCurve",
@@ -58,6 +60,7 @@ __all__ = [
 C_GRID: tuple[float, ...] = tuple(
     [1e-4, 5.0 ** -4, 3.0 ** -4] + [2.0 ** k for k in range(-4, 5)] + [3.0 ** 4, 5.0 ** 4, 1e4])
 C_GRID_TEXT = "{1e-4, 5^-4, 3^-4, 2^-4, 2^-3, 2^-2, 2^-1, 1, 2, 4, 8, 16, 3^4, 5^4, 1e4}"
+
 
 #: Iteration cap of libsvm per binary problem (reached only without feature scaling at large C).
 SVC_MAX_ITER: int = 10_000
@@ -128,47 +131,109 @@ class SvmResult:
     cv_scores: dict[float, float]
     fit_s: float
     select_s: float
+    estimate_s: float | None = None
+    cv_split_scores: dict[float, list[float]] | None = None
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         return self.model.predict(X)
 
 
+def _fit_score(pipe: Pipeline, c: float, X: np.ndarray, y: np.ndarray, train: np.ndarray,
+               test: np.ndarray) -> float:
+    """Accuracy on ``test`` of ``pipe`` at ``C = c`` fitted on ``train`` (one CV fit, as cross_val_score)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model = clone(pipe).set_params(svc__C=c).fit(X[train], y[train])
+    return float(model.score(X[test], y[test]))
+
+
+def estimate_selection_s(pipe: Pipeline, X: np.ndarray, y: np.ndarray,
+                         splits: Sequence[tuple[np.ndarray, np.ndarray]], c_grid: Sequence[float]) -> float:
+    """Seconds that choosing C will take, from timing one CV fit at the grid's middle C and one at its
+    largest (libsvm's time grows with C), times the number of fits.
+
+    A rough figure (the fits at other C differ, the machine's load changes), printed so that a selection
+    of hours is known before it starts.  It counts no speed-up from parallel jobs: on the 2-core machine
+    shared with other work the parallel fits of 3,200 windows ran 3.5 times slower each than the timed
+    fit (an estimate divided by 2 jobs said 2 min, the selection took 7.7 min; undivided it says 4.4).
+    """
+    train, test = splits[0]
+    probes = sorted({float(np.median(c_grid)), float(max(c_grid))})
+    t0 = time.perf_counter()
+    for c in probes:
+        _fit_score(pipe, c, X, y, train, test)
+    per_fit = (time.perf_counter() - t0) / len(probes)
+    return per_fit * len(c_grid) * len(splits)
+
+
+def _duration_text(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
 def fit_svm(X: np.ndarray, y: np.ndarray, groups: np.ndarray, labels: Sequence[str], *,
-            scaling: str = "log_standardize", folds: int = 5, repeats: int = 10, seed: int = 0,
+            scaling: str = "log_standardize", folds: int = 5, repeats: int = CV_REPEATS, seed: int = 0,
             c_grid: Sequence[float] = C_GRID, jobs: int = 1, progress: bool = False) -> SvmResult:
     """Linear SVM with C chosen by repeated stratified CV, refit on all training data.
 
-    The CV runs one candidate C at a time (scikit-learn's ``cross_val_score``
-    over the same splits ``GridSearchCV`` would use), so ``progress`` can show
-    a bar on stderr per candidate: choosing C is minutes of work on the full
-    recordings.
+    The CV runs one fit at a time (the splits and scores of scikit-learn's
+    ``cross_val_score``, which ``GridSearchCV`` would use), so ``progress``
+    can print an estimate of the whole selection before it starts
+    (:func:`estimate_selection_s`) and show a bar on stderr that moves with
+    every fit: choosing C is minutes of work on the full recordings.  With
+    ``jobs`` > 1 the fits of one C run in parallel and the bar moves a C at
+    a time.
 
     Returns
     -------
     SvmResult
         ``best_c`` (the smallest C among those with the best mean CV
         accuracy), its CV accuracy, the CV accuracy of every C, the refit
-        time and the selection time.
+        time, the selection time, (with ``progress``) the estimate, and the
+        accuracy of every C on every split (repeat r's folds are
+        ``splits[r * folds:(r + 1) * folds]``; the first r repeats are those
+        of a selection with r repeats).
     """
     pipe = _svm_pipeline(scaling, labels)
     splits = cv_splits(y, groups, folds, repeats, seed)
-    t0 = time.perf_counter()
     n_jobs = jobs if len(y) >= 400 else 1  # process start-up costs more than small fits
     bar = None
+    estimate = None
     if progress:
+        import sys
+
         from tqdm import tqdm
 
-        bar = tqdm(total=len(c_grid), desc=f"choosing C ({len(splits)} CV fits each)", unit="C")
+        estimate = estimate_selection_s(pipe, X, y, splits, c_grid)
+        print(f"choosing C: {len(c_grid)} values x {len(splits)} CV fits ({folds}-fold x {repeats} repeats) of "
+              f"{len(y)} training windows, about {_duration_text(estimate)} (from 2 timed fits)"
+              + ("; fewer repeats (--cv-repeats) or windows make it shorter" if estimate > 1800 else ""),
+              file=sys.stderr, flush=True)
+        bar = tqdm(total=len(c_grid) * len(splits), desc="choosing C", unit="fit")
+    t0 = time.perf_counter()
     means_list = []
+    per_split: dict[float, list[float]] = {}
     try:
         for c in c_grid:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ConvergenceWarning)
-                scores = cross_val_score(clone(pipe).set_params(svc__C=c), X, y, cv=splits, n_jobs=n_jobs,
-                                         error_score="raise")
+            if n_jobs > 1:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", ConvergenceWarning)
+                    scores = list(cross_val_score(clone(pipe).set_params(svc__C=c), X, y, cv=splits,
+                                                  n_jobs=n_jobs, error_score="raise"))
+                if bar is not None:
+                    bar.update(len(splits))
+            else:
+                scores = []
+                for train, test in splits:
+                    scores.append(_fit_score(pipe, c, X, y, train, test))
+                    if bar is not None:
+                        bar.update(1)
             means_list.append(float(np.mean(scores)))
+            per_split[float(c)] = [float(v) for v in scores]
             if bar is not None:
-                bar.update(1)
                 bar.set_postfix(C=f"{c:g}", cv_accuracy=f"{means_list[-1]:.3f}")
     finally:
         if bar is not None:
@@ -183,7 +248,8 @@ def fit_svm(X: np.ndarray, y: np.ndarray, groups: np.ndarray, labels: Sequence[s
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(X, y)
     fit_s = time.perf_counter() - t0
-    return SvmResult(model, best_c, best, {float(c): float(m) for c, m in zip(c_grid, means)}, fit_s, select_s)
+    return SvmResult(model, best_c, best, {float(c): float(m) for c, m in zip(c_grid, means)}, fit_s, select_s,
+                     estimate, per_split)
 
 
 @dataclass

@@ -25,7 +25,7 @@ from tactile_descriptors_lab.evaluation.bank import (
     recordings_robot,
     select_features,
 )
-from tactile_descriptors_lab.evaluation.classifiers import C_GRID, C_GRID_TEXT, fit_svm, gmm_nmi, pa_curve
+from tactile_descriptors_lab.evaluation.classifiers import C_GRID, C_GRID_TEXT, CV_REPEATS, fit_svm, gmm_nmi, pa_curve
 from tactile_descriptors_lab.evaluation.sampling import (
     DEFAULT_BLOCK_HOP_S,
     DEFAULT_BLOCK_S,
@@ -86,7 +86,7 @@ class EvalConfig:
     drop : tuple of str
         Quantities left out (ablation).
     cv_folds, cv_repeats : int
-        SVM C selection (5 x 10 in the paper).
+        SVM C selection (5 x 10 in the paper; 5 x :data:`~.classifiers.CV_REPEATS` by default).
     pa_max, pa_orders : int
         PA curve length (training trials per class) and presentation orders.
     pa_update, pa_average
@@ -116,7 +116,7 @@ class EvalConfig:
     gate: bool = False
     drop: tuple[str, ...] = ()
     cv_folds: int = 5
-    cv_repeats: int = 10
+    cv_repeats: int = CV_REPEATS
     pa_max: int = 30
     pa_orders: int = 5
     pa_update: str = RECOMMENDED_PA_UPDATE
@@ -204,6 +204,7 @@ def describe_windows(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
         in_contact=stacked(b.in_contact for b in banks),
         mean_force_n=stacked(b.mean_force_n for b in banks),
         seconds={k: stacked(b.seconds[k] for b in banks) for k in first.seconds},
+        unfed=first.unfed,
     )
 
 
@@ -245,7 +246,8 @@ def _block_mean_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Wi
         np.add.at(total, owner_a, v[take])
         seconds[k] = total
     return FeatureBank(windows=list(windows), groups=groups, labels=bank.labels,
-                       in_contact=force >= float(threshold), mean_force_n=force, seconds=seconds)
+                       in_contact=force >= float(threshold), mean_force_n=force, seconds=seconds,
+                       unfed=bank.unfed)
 
 
 def _check_classifiers(names: Iterable[str]) -> tuple[str, ...]:

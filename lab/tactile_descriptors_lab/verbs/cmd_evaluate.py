@@ -112,6 +112,65 @@ def check_recordings(recordings, mode: str) -> None:
         check_present(ct, groups, present, where=f"{r.path} (mode {mode})", why=why, key="channels")
 
 
+def resolve_mode(recordings, mode: str | None) -> str:
+    """The descriptor mode: ``mode`` if given (refused by name when the recordings' cell type cannot feed
+    one of its groups), else the default mode less the groups the cell type cannot feed, with a note.
+
+    Raises
+    ------
+    ConfigError
+        For a mode asked for with a group the cell type cannot feed (a vibration rate without a band below
+        Nyquist for ``bands``), naming the group, why, and the groups it can feed.
+    """
+    from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE, cell_type_groups, mode_groups, recordings_cell_type
+
+    ct = recordings_cell_type(recordings)
+    able, why = cell_type_groups(ct)
+    groups = mode_groups(mode if mode is not None else DEFAULT_MODE)
+    left = [g for g in groups if g.partition(":")[0] in why]
+    if not left:
+        return mode if mode is not None else DEFAULT_MODE
+    if mode is not None:
+        raise ConfigError(f"mode {mode!r}: {why[left[0].partition(':')[0]]}; the groups it can feed: "
+                          f"{', '.join(able)}", key="channels")
+    kept = [g for g in groups if g not in left]
+    print(f"note: descriptor mode {DEFAULT_MODE} without {', '.join(left)} ({why[left[0].partition(':')[0]]}): "
+          f"{'+'.join(kept)}; --mode {DEFAULT_MODE} asks for every group", file=sys.stderr)
+    return "+".join(kept)
+
+
+def check_classes(train, test, train_source: str, test_source: str, every=None) -> None:
+    """Refuse splits in which a class has training trials but no test trial, or test trials but no training.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the source, the option (``--test-trials`` or ``--train-trials``), the class and the
+        trials that class holds (in the one source read, or in the split that has it).
+    """
+    from tactile_descriptors_lab.datasets.readers import format_numbers
+
+    def trials_of(recs) -> dict[str, list[int]]:
+        out: dict[str, list[int]] = {}
+        for r in recs:
+            out.setdefault(r.class_name, []).append(r.trial)
+        return out
+
+    tr, te = trials_of(train), trials_of(test)
+    held = trials_of(every) if every is not None else None
+    for have, lack, source, key, side in ((tr, te, test_source, "--test-trials", "test"),
+                                          (te, tr, train_source, "--train-trials", "training")):
+        absent = [c for c in have if c not in lack]
+        if absent:
+            c = absent[0]
+            holds = held[c] if held is not None else have[c]
+            split = sorted({r.trial for r in (test if side == "test" else train)})
+            more = f" (and {len(absent) - 1} more: {', '.join(absent[1:4])})" if len(absent) > 1 else ""
+            raise ConfigError(f"class {c} has no {side} trial{more}: the {side} trials are "
+                              f"{format_numbers(split)}, class {c} holds trials {format_numbers(sorted(holds))}"
+                              + ("" if held is not None else " in the other split"), key=key, source=source)
+
+
 def check_pac_rate(recordings) -> None:
     """The paper's descriptor reads PAC at the BioTac's rate: :func:`check_recordings` of mode ``paper``."""
     check_recordings(recordings, "paper")
@@ -120,7 +179,7 @@ def check_pac_rate(recordings) -> None:
 def register(subparsers) -> None:
     """Add the ``evaluate`` subcommand."""
     from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE
-    from tactile_descriptors_lab.evaluation.modes import SCALINGS
+    from tactile_descriptors_lab.evaluation.modes import CV_REPEATS, SCALINGS
     from tactile_descriptors_lab.evaluation.sampling import DEFAULT_BLOCK_HOP_S, DEFAULT_BLOCK_S
     from tactile_descriptors_ros.core.learning import (
         PA_UPDATES,
@@ -161,7 +220,7 @@ def register(subparsers) -> None:
                    "averages the same blocks (descriptor.block_s), --live on both sides")
     p.add_argument("--block-hop", type=float, default=DEFAULT_BLOCK_HOP_S,
                    help=f"largest step between blocks in seconds (default {DEFAULT_BLOCK_HOP_S:g})")
-    p.add_argument("--channels", "--mode", dest="channels", default=DEFAULT_MODE,
+    p.add_argument("--channels", "--mode", dest="channels", default=None,
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
                    "multiband (per_channel + Hjorth of 6 PAC bands), multiband_levels, baseline, "
                    "combined (all of them, 261 values), combined_subwindows (+ mean and sd over 4 successive "
@@ -180,7 +239,9 @@ def register(subparsers) -> None:
                    help="random windows per training trial (default: at least 8, and 16 s of windows per trial: "
                    "8 at 2 s and longer, 16 at 1 s, 32 at 0.5 s)")
     p.add_argument("--test-windows", type=int, default=2, help="random windows per test trial")
-    p.add_argument("--cv-repeats", type=int, default=10, help="repeats of the 5-fold CV choosing C")
+    p.add_argument("--cv-repeats", type=int, default=CV_REPEATS,
+                   help=f"repeats of the 5-fold CV choosing C (default {CV_REPEATS}; the paper's 10 chose the same C "
+                        "on the shared recordings, docs/evaluation.md)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--cache", default="build/cache", help="descriptor cache folder ('' = off)")
@@ -196,6 +257,10 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the evaluation and print accuracy and confusion matrices (or JSON)."""
     if args.live:
+        if args.channels is None:
+            from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE
+
+            args.channels = DEFAULT_MODE
         return run_live(args)
     from tactile_descriptors_lab.datasets.readers import LoadReport, align_classes, check_selection
     from tactile_descriptors_lab.evaluation.bank import mode_groups
@@ -203,7 +268,9 @@ def run(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.evaluation.sampling import load_split
     from tactile_descriptors_lab.verbs.cmd_import import parse_classes
 
-    mode_groups(args.channels)  # an unknown mode is refused before any data is read
+    asked = args.channels is not None
+    if asked:
+        mode_groups(args.channels)  # an unknown mode is refused before any data is read
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     if (args.train_windows is not None and args.train_windows < 1) or args.test_windows < 1 or args.cv_repeats < 1:
@@ -224,13 +291,18 @@ def run(args: argparse.Namespace) -> int:
         train = check_selection(every, train_trials, None, args.train)
         test = check_selection(every, test_trials, None, args.test)
     else:
+        every = None
         train = load_split(args.train, train_trials, materials, args.mapping, report=reports[0])
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
+    check_classes(train, test, args.train, args.test, every)
+    args.channels = resolve_mode(list(train) + list(test), args.channels)
     check_recordings(list(train) + list(test), args.channels)
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)
+        for line in rep.note_lines():
+            print(f"{rep.source}: warning: {line}", file=sys.stderr)
     cfg = EvalConfig(window=args.window, test_window=args.test_window, mode=args.channels,
                      classifiers=tuple(classifiers), seed=args.seed, train_per_trial=args.train_windows,
                      test_per_trial=args.test_windows, scaling=args.scaling, gate=args.gate, drop=drop,

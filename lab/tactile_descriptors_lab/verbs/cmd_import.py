@@ -110,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
           + ", ".join(f"{m} {n}" for m, n in names))
     for line in report.tare_notes:
         print(line)
+    for line in report.notes:
+        print(f"warning: {line}", file=sys.stderr)
     print(f"contact gate (force = PDC x {report.force_n_per_count:g} N/count >= {report.force_threshold_n:g} N): "
           f"{report.frames_in_contact}/{report.frames} frames ({100 * report.contact_fraction:.1f} %), "
           f"{report.trials_passing_gate}/{len(report.trials)} trials by mean force")

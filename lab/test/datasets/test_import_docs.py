@@ -11,8 +11,10 @@ import pytest
 from writers import (
     simulated_skin_trials,
     write_hdf5,
+    write_npy_split,
     write_npz,
     write_old_shadow_bag,
+    write_penn_bolt,
     write_ros1_bag,
     write_ros2_shadow_bag,
     write_skin_hdf5,
@@ -52,7 +54,7 @@ def recs(biotac_data_dir):
 @pytest.mark.realdata
 def test_every_command_of_the_page_runs(repo_dir, biotac_data_dir, recs, tmp_path, monkeypatch, capsys):
     files, commands = _page(repo_dir)
-    assert {"shadow.yaml", "hdf5.yaml", "npz.yaml", "labels.yaml", "skin.yaml"} <= set(files)
+    assert {"shadow.yaml", "hdf5.yaml", "npz.yaml", "labels.yaml", "skin.yaml", "penn.yaml", "arrays.yaml"} <= set(files)
     assert len(commands) >= 10
     work = tmp_path / "work"
     work.mkdir()
@@ -69,6 +71,9 @@ def test_every_command_of_the_page_runs(repo_dir, biotac_data_dir, recs, tmp_pat
     write_hdf5(work / "recordings.h5", recs, NAMES)
     write_npz(work / "npz", recs, NAMES)
     write_skin_hdf5(work / "skin.h5", simulated_skin_trials())
+    write_penn_bolt(work / "penn.h5", recs, NAMES, runs_per_session=1)
+    for split, trial in (("train", 1), ("test", 2)):
+        write_npy_split(work, split, [r for r in recs if r.trial == trial], NAMES, FRAMES, 1 / 64)
     monkeypatch.chdir(work)
     for line in commands:
         rc = main(shlex.split(line)[1:])

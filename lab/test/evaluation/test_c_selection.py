@@ -20,7 +20,7 @@ def test_choosing_c_shows_progress_and_scores_as_a_grid_search(capsys):
     grid = (0.01, 1.0, 100.0)
     res = fit_svm(X, y, groups, labels, scaling="standardize", folds=3, repeats=2, c_grid=grid, progress=True)
     err = capsys.readouterr().err
-    assert "choosing C" in err and "3/3" in err
+    assert "choosing C" in err and "18/18" in err  # the bar counts fits: 3 C x 3 folds x 2 repeats
     search = GridSearchCV(_svm_pipeline("standardize", labels), {"svc__C": list(grid)},
                           cv=cv_splits(y, groups, 3, 2, 0), refit=False).fit(X, y)
     assert res.cv_scores == {c: float(m) for c, m in zip(grid, search.cv_results_["mean_test_score"])}

@@ -53,6 +53,32 @@ def test_svm_selects_from_grid_with_repeated_cv():
     assert np.mean(res.predict(X) == y) == 1.0
 
 
+def test_c_selection_prints_an_estimate_first_and_scores_every_fit_as_cross_val_score(capsys):
+    """The selection's estimate is printed before the first fit; a bar counts fits (not C values); each C's
+    mean is scikit-learn's cross_val_score on the same splits; the first r repeats are those of r repeats."""
+    from sklearn.model_selection import cross_val_score
+
+    from tactile_descriptors_lab.evaluation.classifiers import _svm_pipeline
+
+    X, y, trial = _blobs()
+    labels = [f"M_x{i}" for i in range(X.shape[1])]
+    grid = (0.01, 1.0, 100.0)
+    res = fit_svm(X, y, y * 100 + trial, labels, repeats=3, scaling="standardize", c_grid=grid, progress=True)
+    err = capsys.readouterr().err
+    first = err.index(f"choosing C: 3 values x 15 CV fits (5-fold x 3 repeats) of {len(y)} training windows, "
+                      "about ")
+    assert first < err.index("0/45 [")  # the estimate, then the bar: 3 C x 15 fits, moving a fit at a time
+    assert "1/45 [" in err or "fit/s]" in err
+    assert res.estimate_s is not None and res.estimate_s > 0
+    splits = cv_splits(y, y * 100 + trial, 5, 3, 0)
+    for c in grid:
+        ref = cross_val_score(_svm_pipeline("standardize", labels, C=c), X, y, cv=splits)
+        assert res.cv_split_scores[c] == pytest.approx(list(ref), abs=0)
+        assert res.cv_scores[c] == pytest.approx(float(np.mean(ref)), abs=1e-15)
+    one = fit_svm(X, y, y * 100 + trial, labels, repeats=1, scaling="standardize", c_grid=grid)
+    assert all(one.cv_split_scores[c] == res.cv_split_scores[c][:5] for c in grid)
+
+
 def test_cv_splits_keep_trials_together_and_repeat():
     X, y, trial = _blobs(per_class=10)
     groups = np.repeat(np.arange(20), 2)  # two windows per trial
