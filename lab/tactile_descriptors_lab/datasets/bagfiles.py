@@ -27,8 +27,8 @@ import numpy as np
 
 from tactile_descriptors_lab.datasets.msgdefs import SHADOW_ALL, UPENN_HAND, foreign_typestore
 from tactile_descriptors_lab.datasets.recording import N_ELECTRODES
-from tactile_descriptors_ros.errors import DataFormatError
 from tactile_descriptors_lab.datasets.tables import natural_key
+from tactile_descriptors_ros.errors import DataFormatError
 
 __all__ = ["is_bag", "find_bags", "read_bag_frames", "BATCH_TYPE", "LABEL_TYPE", "TRIALS_KEY"]
 

@@ -122,7 +122,12 @@ def resolve_mode(recordings, mode: str | None) -> str:
         For a mode asked for with a group the cell type cannot feed (a vibration rate without a band below
         Nyquist for ``bands``), naming the group, why, and the groups it can feed.
     """
-    from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE, cell_type_groups, mode_groups, recordings_cell_type
+    from tactile_descriptors_lab.evaluation.bank import (
+        DEFAULT_MODE,
+        cell_type_groups,
+        mode_groups,
+        recordings_cell_type,
+    )
 
     ct = recordings_cell_type(recordings)
     able, why = cell_type_groups(ct)

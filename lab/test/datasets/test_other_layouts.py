@@ -16,14 +16,23 @@ import numpy as np
 import pytest
 import yaml
 from writers import (
-    PENN_OBJECTS, icub_mapping, icub_robot_yaml, icub_taxel_counts, npy_split_mapping, penn_bolt_mapping,
-    penn_run_name, write_icub_split, write_npy_split, write_penn_bolt, write_ros1_bag,
+    PENN_OBJECTS,
+    icub_mapping,
+    icub_robot_yaml,
+    icub_taxel_counts,
+    npy_split_mapping,
+    penn_bolt_mapping,
+    penn_run_name,
+    write_icub_split,
+    write_npy_split,
+    write_penn_bolt,
+    write_ros1_bag,
 )
 
 from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
 from tactile_descriptors_lab.datasets.mapping import parse_mapping
-from tactile_descriptors_lab.datasets.recording import CellRecording
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
+from tactile_descriptors_lab.datasets.recording import CellRecording
 from tactile_descriptors_lab.datasets.tables import group_glob, natural_key
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 from tactile_descriptors_ros.tools.cli import main
@@ -202,8 +211,8 @@ def test_a_class_without_a_test_trial_is_one_line_naming_the_source_the_key_and_
     err = capsys.readouterr().err
     assert code != 0
     lines = [ln for ln in err.splitlines() if "has no test trial" in ln]
-    assert lines == [f"tactile evaluate: error: {source}: '--test-trials': class cork has no test trial: the test trials are 102, "
-                     "class cork holds trials 101,201-202"], err
+    assert lines == [f"tactile evaluate: error: {source}: '--test-trials': class cork has no test trial: "
+                     "the test trials are 102, class cork holds trials 101,201-202"], err
 
 
 # --------------------------------------------------------------------------- .npy arrays with a shape description

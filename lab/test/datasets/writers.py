@@ -367,8 +367,8 @@ ICUB_UNITS_PER_COUNT = 1 / 1024
 def icub_robot_yaml(rate_hz: float = 50.0) -> str:
     """A robot description of one iCub taxel pad: a pressure-only cell type (no vibration section), its
     60 taxels the deformation channels, one axis per ten-taxel module, the force their mean."""
-    modules = ", ".join("{name: m%d, channels: [%s]}" % (m + 1, ", ".join(f"t{10 * m + i + 1}" for i in range(10)))
-                        for m in range(ICUB_TAXELS // 10))
+    modules = ", ".join("{name: m" + str(m + 1) + ", channels: [" + ", ".join(f"t{10 * m + i + 1}" for i in range(10))
+                        + "]}" for m in range(ICUB_TAXELS // 10))
     taxels = ", ".join(f"t{i}" for i in range(1, ICUB_TAXELS + 1))
     return (f"robot: {{name: icub_pad, description: 'an iCub capacitive taxel pad, pressure only'}}\n"
             f"cell_types:\n  taxel_pad:\n"
