@@ -24,7 +24,7 @@
   label and a descriptor that are ready together.
 * Every update is made durable before it is reported ("learned exploration
   N"): one entry appended and synced to ``<model_path>.journal``
-  (:class:`~tactile_descriptors_ros.core.learning.ModelStore`), compacted into
+  (:class:`~tactile_descriptors_ros.core.model_store.ModelStore`), compacted into
   ``model_path`` as it grows and at shutdown.  ``model_path`` defaults to
   ``$ROS_HOME/tactile_descriptors_ros/<robot>/<node name>.json`` with the
   ``robot`` parameter, ``$ROS_HOME/tactile_descriptors_ros/<node name>.json``
@@ -53,16 +53,10 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.groups import groups_in_labels, selection_name
-from ..core.labels import (
-    DEFAULT_LABEL_WAIT_S,
-    DEFAULT_MAX_CLASS_NAME_CHARS,
-    EXPIRED,
-    LEARN,
-    REFUSED,
-    LabelProtocol,
-    StampOrder,
-)
-from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
+from ..core.labels import (DEFAULT_LABEL_WAIT_S, DEFAULT_MAX_CLASS_NAME_CHARS, EXPIRED, LEARN, REFUSED,
+                           LabelProtocol, StampOrder)
+from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
+from ..core.model_store import ModelStore
 from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
 from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
@@ -106,7 +100,6 @@ class ClassifierNode(Node):
     def __init__(self, node_name: str = "classifier_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         from std_srvs.srv import Trigger
-
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
 
         robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model file is per robot "
@@ -145,10 +138,11 @@ class ClassifierNode(Node):
                                 on_set=lambda v: lambda: setattr(self, "frame_id", v))
 
         self.model: OnlineClassifier | None = None
-        self.store = ModelStore(self.model_path)
+        self.store = ModelStore(self.model_path, holder=self.get_fully_qualified_name())
         self.layout_error: str | None = None
-        if self.load_on_start and self.model_path.is_file():
-            self.model = self.store.load()  # ModelError: corrupt file -> refuse to start
+        # ModelError: another node holds the file, or it is corrupt -> refuse to start
+        self.model = self.store.open(load=self.load_on_start)
+        if self.model is not None:
             self.get_logger().info(f"loaded model {self.model_path}: {len(self.model.classes)} classes "
                                    f"({', '.join(self.model.classes)}), {self.model.pa.updates} updates")
         self.latest: DescriptorSample | None = None
@@ -322,11 +316,8 @@ class ClassifierNode(Node):
                 self.model = self._new_model(labels)
                 self.store.save(self.model)
             else:
-                self.store.close()
-                for path in (self.model_path, self.store.journal):
-                    if path.exists():
-                        path.unlink()
-        except (ModelError, OSError) as exc:
+                self.store.reset()
+        except ModelError as exc:
             response.success, response.message = False, f"model reset in memory, but {exc}"
             return response
         self.counts["resets"] += 1
@@ -339,6 +330,11 @@ class ClassifierNode(Node):
         if self.model is not None and self.save_after_update and self.store.journal.exists():
             self._save()
         self.store.close()
+
+    def destroy_node(self) -> None:
+        """Release the model's lock (without compacting: :meth:`close` does that) and destroy the node."""
+        self.store.close()
+        super().destroy_node()
 
     # ------------------------------------------------------------ diagnostics
     @property

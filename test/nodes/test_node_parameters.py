@@ -204,14 +204,13 @@ def test_reset_of_one_robot_keeps_the_other_robots_model(ros_context, tmp_path, 
     hand_file = tmp_path / "tactile_descriptors_ros" / "shadow_hand" / "classifier_node.json"
     hand_file.parent.mkdir(parents=True)
     hand = _classifier(ros_context, robot="shadow_hand")
-    try:
-        from tactile_descriptors_ros.core.learning import OnlineClassifier
+    hand.destroy_node()  # releases the model file's lock
+    from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.model_store import save_model
 
-        model = OnlineClassifier(["index/A_pac", "index/A_e"])
-        model.learn([1.0, 2.0], "cork")
-        model.save(hand_file)
-    finally:
-        hand.destroy_node()
+    model = OnlineClassifier(["index/A_pac", "index/A_e"])
+    model.learn([1.0, 2.0], "cork")
+    save_model(model, hand_file)
     before = hand_file.read_bytes()
     nao = _classifier(ros_context, robot="nao")
     try:
