@@ -114,7 +114,8 @@ def _stamp_order_run(ros_context, tmp_path, run: str, descriptor_first: bool, wa
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
 
     c = ClassifierNode(context=ros_context, namespace=f"/{run}", parameter_overrides=[
-        Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s)])
+        Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s),
+        Parameter("prediction_order", value="stamp")])
     io, ex, desc, labels, preds = _wired(ros_context, c, namespace=f"/{run}")
     try:
         assert spin_until(ex, lambda: desc.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1

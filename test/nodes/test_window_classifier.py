@@ -28,7 +28,8 @@ def graph(ros_context, tmp_path):
     w = WindowNode(context=ros_context, parameter_overrides=[
         Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
         Parameter("qos.frames.reliability", value="reliable")])
-    c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model))])
+    c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model)),
+                                                                 Parameter("enable_reset", value=True)])
     io = rclpy.create_node("io", context=ros_context)
     out = {"pred": [], "desc": []}
     io.create_subscription(Prediction, "tactile/prediction", out["pred"].append, 50)
