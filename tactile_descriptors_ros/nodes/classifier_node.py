@@ -58,10 +58,26 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.groups import groups_in_labels, selection_name
-from ..core.labels import (DEFAULT_CLOCK_JUMP_S, DEFAULT_LABEL_HOLD_S, DEFAULT_LABEL_WAIT_S,
-                           DEFAULT_MAX_CLASS_NAME_CHARS, DEFAULT_MAX_CLASSES, DEFAULT_MAX_ID_STEP, EXPIRED, HELD,
-                           LEARN, MAX_CLASS_NAME_CHARS, MAX_CLASSES, MAX_HORIZON, MAX_ID_STEP, MAX_WAIT_S, REFUSED,
-                           LabelDecision, LabelProtocol, StampOrder)
+from ..core.labels import (
+    DEFAULT_CLOCK_JUMP_S,
+    DEFAULT_LABEL_HOLD_S,
+    DEFAULT_LABEL_WAIT_S,
+    DEFAULT_MAX_CLASS_NAME_CHARS,
+    DEFAULT_MAX_CLASSES,
+    DEFAULT_MAX_ID_STEP,
+    EXPIRED,
+    HELD,
+    LEARN,
+    MAX_CLASS_NAME_CHARS,
+    MAX_CLASSES,
+    MAX_HORIZON,
+    MAX_ID_STEP,
+    MAX_WAIT_S,
+    REFUSED,
+    LabelDecision,
+    LabelProtocol,
+    StampOrder,
+)
 from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
 from ..core.model_store import ModelLock, ModelStore, layout_file_name
 from ..core.robot import load_robot
@@ -132,6 +148,7 @@ class ClassifierNode(Node):
         from rclpy.callback_groups import ReentrantCallbackGroup
         from rclpy.event_handler import SubscriptionEventCallbacks
         from std_srvs.srv import Trigger
+
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
         from tactile_descriptors_msgs.srv import LearnLabel
 

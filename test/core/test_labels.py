@@ -307,23 +307,26 @@ def test_every_stamp_order_setting_is_checked_completely(bad):
 
 
 # ----------------------------------------------------------- predictions at once
+def _race(hold: bool) -> tuple[list, list, list]:
+    """Exploration 2's label overtaken by exploration 3's descriptor; (predicted on arrival, predicted, learned)."""
+    predictions, learned = [], []
+    p = LabelProtocol()
+    order = StampOrder(p, lambda eid: predictions.append(eid) or eid,
+                       lambda d: learned.append((d.item, d.class_name)) if d.action == LEARN else None,
+                       wait_s=30.0, hold_descriptors=hold)
+    order.add_descriptor(1, 2 * _S, 1, 0.0)
+    order.add_label(0, "cork", 0, 0.1)            # exploration 1 labelled: labels are being given
+    order.add_descriptor(2, 12 * _S, 2, 1.0)
+    order.add_descriptor(3, 22 * _S, 3, 2.0)     # exploration 2's label is due, and not here yet
+    at_arrival = list(predictions)
+    order.add_label(0, "felt", 13 * _S, 3.0)      # stamped after 2 ended, before 3 ended
+    return at_arrival, predictions, learned
+
+
 def test_immediate_prediction_never_waits_and_the_late_label_still_teaches_its_exploration():
     """Exploration 1's label (id 0, stamped after 1 ended) reaches the node after exploration 2's descriptor:
     predicted on arrival, exploration 2 does not wait for it, and the label still teaches exploration 1."""
-    runs = {}
-    for hold in (False, True):
-        predictions, learned = [], []
-        p = LabelProtocol()
-        order = StampOrder(p, lambda eid: predictions.append(eid) or eid,
-                           lambda d: learned.append((d.item, d.class_name)) if d.action == LEARN else None,
-                           wait_s=30.0, hold_descriptors=hold)
-        order.add_descriptor(1, 2 * _S, 1, 0.0)
-        order.add_label(0, "cork", 0, 0.1)            # exploration 1 labelled: labels are being given
-        order.add_descriptor(2, 12 * _S, 2, 1.0)
-        order.add_descriptor(3, 22 * _S, 3, 2.0)     # exploration 2's label is due, and not here yet
-        at_arrival = list(predictions)
-        order.add_label(0, "felt", 13 * _S, 3.0)      # stamped after 2 ended, before 3 ended
-        runs[hold] = (at_arrival, predictions, learned)
+    runs = {hold: _race(hold) for hold in (False, True)}
     at_arrival, predictions, learned = runs[False]
     assert at_arrival == [1, 2, 3] and learned == [(1, "cork"), (2, "felt")]
     at_arrival, predictions, learned = runs[True]  # stamp order: 3 waits for the label due before it

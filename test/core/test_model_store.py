@@ -13,7 +13,6 @@ from tactile_descriptors_ros.core.learning import OnlineClassifier
 from tactile_descriptors_ros.core.model_store import ModelStore, journal_path, load_model, save_model
 from tactile_descriptors_ros.errors import ModelError
 
-
 # ------------------------------------------------------------ journal
 
 

@@ -21,12 +21,12 @@ def wired(ros_context, tmp_path):
     """A classifier (model file in tmp_path) and a node ``io`` beside it: descriptor and label publishers, the
     predictions and /rosout lines it receives, clients of ~/label and ~/reset; matched before the test starts."""
     import rclpy
+    from rcl_interfaces.msg import Log
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-    from rcl_interfaces.msg import Log
     from std_srvs.srv import Trigger
+
     from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
     from tactile_descriptors_msgs.srv import LearnLabel
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
@@ -250,17 +250,47 @@ def test_the_values_that_stopped_the_classifier_are_refused_through_the_ros2_cli
     assert node.returncode == 0, (tmp_path / "node.log").read_text()
 
 
-def test_each_descriptor_layout_has_its_own_default_model_and_a_mismatch_never_advises_reset(ros_context, tmp_path,
-                                                                                            monkeypatch):
-    """The default model path holds one file per layout: the concatenated descriptor of one window node and the
-    pooled one of a window node per body part (split_window_nodes) are learned into two files; a given
-    model_path of another layout is refused with advice that keeps the model."""
+def _learn_one(ros_context, msg):
+    """A classifier with the default model path learns one label on ``msg``; the model file it used."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_msgs.msg import Descriptor, Prediction
     from tactile_descriptors_msgs.srv import LearnLabel
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
+    node = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand")])
+    io = rclpy.create_node("layout_io", context=ros_context)
+    preds = []
+    io.create_subscription(Prediction, "tactile/prediction", preds.append, 10)
+    pub = io.create_publisher(Descriptor, "tactile/descriptor", 10)
+    client = io.create_client(LearnLabel, "/classifier_node/label")
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    ex.add_node(io)
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and client.service_is_ready()
+                          and node.pub.get_subscription_count() >= 1, 60)
+        pub.publish(msg)
+        assert spin_until(ex, lambda: len(preds) == 1, 60)
+        future = client.call_async(LearnLabel.Request(exploration_id=1, class_name="cork"))
+        assert spin_until(ex, future.done, 60) and future.result().saved
+        return node.model_path
+    finally:
+        node.close()
+        ex.shutdown(timeout_sec=0.5)
+        node.destroy_node()
+        io.destroy_node()
+
+
+def test_each_descriptor_layout_has_its_own_default_model_and_a_mismatch_never_advises_reset(ros_context, tmp_path,
+                                                                                            monkeypatch):
+    """The default model path holds one file per layout: the concatenated descriptor of one window node and the
+    pooled one of a window node per body part (split_window_nodes) are learned into two files; a given
+    model_path of another layout is refused with advice that keeps the model."""
+    from rclpy.parameter import Parameter
+
     from tactile_descriptors_ros.core.model_store import layout_file_name, load_model
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode, default_model_folder
     from tactile_descriptors_ros.nodes.conversions import descriptor_from_msg
@@ -270,30 +300,7 @@ def test_each_descriptor_layout_has_its_own_default_model_and_a_mismatch_never_a
     concat = descriptor_msg(1, rng)
     pooled = descriptor_msg(1, rng)
     pooled.labels = [lab.replace("index/", "pooled/") for lab in pooled.labels]
-    files = []
-    for msg in (concat, pooled):
-        node = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand")])
-        io = rclpy.create_node("layout_io", context=ros_context)
-        preds = []
-        io.create_subscription(Prediction, "tactile/prediction", preds.append, 10)
-        pub = io.create_publisher(Descriptor, "tactile/descriptor", 10)
-        client = io.create_client(LearnLabel, "/classifier_node/label")
-        ex = SingleThreadedExecutor(context=ros_context)
-        ex.add_node(node)
-        ex.add_node(io)
-        try:
-            assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and client.service_is_ready()
-                              and node.pub.get_subscription_count() >= 1, 60)
-            pub.publish(msg)
-            assert spin_until(ex, lambda: len(preds) == 1, 60)
-            future = client.call_async(LearnLabel.Request(exploration_id=1, class_name="cork"))
-            assert spin_until(ex, future.done, 60) and future.result().saved
-            files.append(node.model_path)
-        finally:
-            node.close()
-            ex.shutdown(timeout_sec=0.5)
-            node.destroy_node()
-            io.destroy_node()
+    files = [_learn_one(ros_context, msg) for msg in (concat, pooled)]
     folder = default_model_folder("classifier_node", "/", "shadow_hand")
     assert files == [folder / layout_file_name(tuple(concat.labels)), folder / layout_file_name(tuple(pooled.labels))]
     assert files[0] != files[1] and all(load_model(f).version == 1 for f in files)

@@ -211,7 +211,7 @@ def test_a_full_disk_at_compaction_more_labels_a_kill_and_a_restart_keep_every_s
         second.wait_for(f"loaded model {model}")
         assert "not compacted" in second.text()
         assert spin_until(lambda: client.service_is_ready(), second)
-        for k in range(3):
+        for _ in range(3):
             eid += 1
             answer = label(eid, second)
             assert (answer.saved, answer.model_version) == (True, len(saved) + 1), second.text()[-3000:]

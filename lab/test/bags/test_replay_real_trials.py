@@ -112,7 +112,7 @@ def test_a_bag_looped_through_the_same_nodes_teaches_each_pass_its_own_explorati
     """The same bag played twice into one window node and one classifier: the stamps jump back, the window node's
     exploration ids go on.  Each pass's labels (id 0, stamped after their trial) are learned on that pass's
     explorations, in the bag's material order, and none is refused as a duplicate."""
-    from tactile_descriptors_ros.bags.importer import ImportOptions, import_biotac_slide
+    from tactile_descriptors_lab.datasets.importer import ImportOptions, import_biotac_slide
 
     bag = tmp_path / "real"
     report = import_biotac_slide(biotac_data_dir, bag, trials=[1, 2], materials=[2, 12, 20],
