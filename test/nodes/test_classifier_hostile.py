@@ -11,7 +11,7 @@ import textwrap
 import numpy as np
 import pytest
 from descriptor_msgs import descriptor_msg
-from helpers import spin_until
+from node_helpers import spin_until
 
 pytestmark = pytest.mark.ros
 
