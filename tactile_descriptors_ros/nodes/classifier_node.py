@@ -116,6 +116,14 @@ def default_model_folder(node_name: str, namespace: str = "/", robot: str = "") 
     return folder / node_name
 
 
+def _model_path(value: str, default_folder: Path) -> str:
+    """``model_path`` as used: a file, or a folder ending in the path separator ('' = ``default_folder``)."""
+    if not value:
+        return f"{default_folder}{os.sep}"
+    path = str(Path(os.path.expanduser(value)))
+    return f"{path}{os.sep}" if value.endswith(("/", os.sep)) else path
+
+
 def check_frame_id(value: str) -> str:
     """``frame_id``: at most 256 printable characters ('' = the descriptor's frame)."""
     if len(value) > MAX_FRAME_ID_CHARS or not value.isprintable():
@@ -158,12 +166,12 @@ class ClassifierNode(Node):
         self.robot_name = load_robot(robot_arg).name if robot_arg else ""
         folder = default_model_folder(self.get_name(), self.get_namespace(), self.robot_name)
         path = declare(self, "model_path", "",
-                       "model file (JSON); '' = one model per descriptor layout in "
-                       "$ROS_HOME/tactile_descriptors_ros/<robot>/<namespace>/<node>/ (the parameter reads the "
-                       "folder)", resolve=lambda p: str(Path(os.path.expanduser(p))) if p else f"{folder}{os.sep}")
+                       "model file (JSON), or a folder (ending in /) of one model per descriptor layout; '' = the "
+                       "folder $ROS_HOME/tactile_descriptors_ros/<robot>/<namespace>/<node>/ (the parameter reads "
+                       "it)", resolve=lambda p: _model_path(p, folder))
         #: the model file given, or None: one per layout in :attr:`model_folder`
         self.given_path: Path | None = Path(path) if not path.endswith(os.sep) else None
-        self.model_folder: Path | None = None if self.given_path else folder
+        self.model_folder: Path | None = None if self.given_path else Path(path)
         self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1); from the next update on",
                            minimum=ETA_RANGE[0], maximum=ETA_RANGE[1], on_set=self._set_eta)
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
@@ -220,7 +228,7 @@ class ClassifierNode(Node):
             self.store = ModelStore(self.given_path, holder=self.holder)
             self._adopt_store()
         else:
-            self.folder_lock = ModelLock(folder, self.holder)
+            self.folder_lock = ModelLock(self.model_folder, self.holder)
             self.folder_lock.acquire()
         self.latest: DescriptorSample | None = None
         self.counts: Counter[str] = Counter()
@@ -252,7 +260,7 @@ class ClassifierNode(Node):
         # what waits in stamp order is released when its wait runs out, even if nothing else arrives
         self.order_timer = self.create_timer(0.05, lambda: self.order.poll(time.monotonic()))
         report_unknown_overrides(self)
-        where = self.given_path or f"{folder}{os.sep}<layout>.json"
+        where = self.given_path or self.model_folder / "<layout>.json"
         self.get_logger().info(f"model file {where}; predictions on {self.pub.topic_name} "
                                f"({order} prediction order); ~/reset {'enabled' if self.enable_reset else 'disabled'}")
 

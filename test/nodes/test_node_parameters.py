@@ -202,6 +202,13 @@ def test_each_robot_and_namespace_has_its_own_model_folder_and_the_parameter_rea
     finally:
         for node in (hand, nao, left, right):
             node.destroy_node()
+    # a folder of one's own: a model_path ending in /
+    mine = _classifier(ros_context, model_path=f"{tmp_path}/mine/")
+    try:
+        assert mine.model_path == tmp_path / "mine" and mine.given_path is None
+        assert mine.get_parameter("model_path").value == f"{tmp_path}/mine/"
+    finally:
+        mine.destroy_node()
 
 
 def test_reset_of_one_robot_keeps_the_other_robots_model(ros_context, tmp_path, monkeypatch):
