@@ -63,7 +63,7 @@ $(VENV)/.deps: $(VENV)/.venv-created $(ROS_REQUIREMENTS) requirements/base.txt r
 	  2>&1 | sed -u -n -E 's/^(Collecting|Installing|Successfully|ERROR|error)/    \1/p'
 	touch $@
 
-$(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) msg/CMakeLists.txt msg/package.xml
+$(VENV)/.msgs: $(VENV)/.deps $(wildcard msg/msg/*.msg) $(wildcard msg/srv/*.srv) msg/CMakeLists.txt msg/package.xml
 	$(STEP) "setup 3/7: building the messages (tactile_descriptors_msgs, about 1 minute)"
 	mkdir -p $(BUILD)
 	cmake -S msg -B $(BUILD)/tactile_descriptors_msgs -DCMAKE_INSTALL_PREFIX="$(VIRTUAL_ENV)" \

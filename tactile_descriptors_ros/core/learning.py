@@ -40,16 +40,15 @@ these two lift one-pass online accuracy from about 85 % to about 94 %
 Scikit-learn's PassiveAggressiveClassifier is being deprecated and costs
 about 25 ms per single-sample update for 120 classes; this numpy version
 costs microseconds.
+
+This module reads and writes no file: a model is plain data
+(:meth:`OnlineClassifier.state`, :meth:`OnlineClassifier.delta`), and
+:mod:`.model_store` keeps it on disk (model file, journal, lock).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-import tempfile
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -57,7 +56,7 @@ from ..errors import ModelError, SignalError
 from .scaling import FeatureScaler
 
 __all__ = ["PA_UPDATES", "RECOMMENDED_PA_UPDATE", "RECOMMENDED_PA_AVERAGE", "PassiveAggressive",
-           "OnlineClassifier", "ModelStore", "journal_path", "save_json_atomic"]
+           "OnlineClassifier"]
 
 #: Update rules of :class:`PassiveAggressive`: the paper's prediction-based
 #: update (eq. 30-32) and Crammer et al.'s max-loss update.
@@ -357,376 +356,70 @@ class OnlineClassifier:
                              f"{len(obj.scaler.labels)} descriptor labels")
         return obj
 
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the whole model atomically (a crash or full disk leaves the previous file intact).
+    def delta(self, classes_before: int) -> dict:
+        """What the last :meth:`learn` changed, exactly, as plain JSON-ready data.
 
-        A journal beside the file (:class:`ModelStore`) is removed: the file
-        now holds everything.
+        The two weight rows of eq. 31 and their averaging sums, the classes
+        added since the model had ``classes_before`` of them, the counters and
+        the feature statistics: :meth:`apply_delta` on the model as it was
+        before that :meth:`learn` gives this model bit for bit.  The model
+        store journals one delta per label instead of rewriting the model.
         """
-        path = Path(path)
-        save_json_atomic(path, self.state())
-        journal = journal_path(path)
-        if journal.exists():
-            try:
-                journal.unlink()
-            except OSError as exc:  # harmless: its header names another snapshot, so it is never replayed
-                raise ModelError(f"saved {path}, but cannot remove the old journal {journal}: {exc}") from None
+        pa = self.pa
+        rows = sorted(set(pa.changed_rows) | set(range(classes_before, len(pa.classes))))
+        std = self.scaler.standardizer
+        return {"version": self.version, "new_classes": pa.classes[classes_before:], "rows": rows,
+                "weights": pa.weights[rows].tolist(), "weighted_sum": pa._u[rows].tolist(),
+                "updates": pa.updates, "mistakes": pa.mistakes,
+                "scaler": {"n": std.n, "mean": std.mean.tolist(), "m2": std.m2.tolist()}}
 
-    @classmethod
-    def load(cls, path: str | os.PathLike[str], labels: Sequence[str] | None = None) -> OnlineClassifier:
-        """Load a model file and replay its journal (:class:`ModelStore`), if any.
-
-        With ``labels``, refuse a model of another descriptor layout.
-
-        Raises
-        ------
-        FileNotFoundError
-            If ``path`` does not exist.
-        ModelError
-            Naming ``path`` (or the journal) and what is wrong with it.
-        """
-        return _load(Path(path), labels)[0]
-
-
-def journal_path(path: str | os.PathLike[str]) -> Path:
-    """The journal beside a model file: ``<model file>.journal``."""
-    path = Path(path)
-    return path.with_name(path.name + ".journal")
-
-
-def _load(path: Path, labels: Sequence[str] | None) -> tuple[OnlineClassifier, int, int, int]:
-    """The model with its journal replayed, the snapshot's size, the journal's entries and valid bytes."""
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise
-    except OSError as exc:
-        raise ModelError(f"{path}: cannot read model: {exc}") from None
-    try:
-        state = json.loads(raw)
-    except ValueError as exc:
-        raise ModelError(f"{path}: not JSON: {exc}") from None
-    try:
-        obj = OnlineClassifier.from_state(state)
-    except ModelError as exc:
-        raise ModelError(f"{path}: {exc}") from None
-    entries, valid = _replay_journal(obj, journal_path(path), hashlib.sha256(raw).hexdigest())
-    if labels is not None and tuple(labels) != obj.labels:
-        raise ModelError(f"{path}: model was trained on another descriptor layout "
-                         f"({len(obj.labels)} values, first {obj.labels[:2]}), not {len(labels)} values")
-    return obj, len(raw), entries, valid
-
-
-# ------------------------------------------------------------------- journal
-_JOURNAL_FORMAT = "tactile_descriptors_ros/online_classifier_journal"
-
-
-def _replay_journal(model: OnlineClassifier, journal: Path, snapshot_sha256: str) -> tuple[int, int]:
-    """Apply a journal's entries to ``model``; return (entries applied, bytes of whole lines used).
-
-    A journal whose header names another snapshot is stale (the snapshot was
-    rewritten after it) and is skipped.  The entries end at the first zero
-    byte (the zeros :class:`ModelStore` reserves ahead of them).  A last line
-    without its newline is an append cut short by a crash: it was never
-    reported, and is ignored.
-    """
-    try:
-        data = journal.read_bytes()
-    except FileNotFoundError:
-        return 0, 0
-    except OSError as exc:
-        raise ModelError(f"{journal}: cannot read journal: {exc}") from None
-    data = data.split(b"\0", 1)[0]  # the entries end at the reserved zeros (JSON holds no zero byte)
-    lines = data.split(b"\n")[:-1]  # the part after the last newline is torn (or empty)
-    if not lines:
-        return 0, 0
-    try:
-        header = json.loads(lines[0])
-    except ValueError as exc:
-        raise ModelError(f"{journal}: line 1: not JSON: {exc}") from None
-    if not isinstance(header, dict) or header.get("format") != _JOURNAL_FORMAT:
-        raise ModelError(f"{journal}: line 1: not a journal of this package")
-    if header.get("snapshot_sha256") != snapshot_sha256:
-        return 0, 0  # stale: written for an earlier snapshot, whose rewrite already holds it
-    used = len(lines[0]) + 1
-    for number, line in enumerate(lines[1:], start=2):
-        try:
-            _apply_entry(model, json.loads(line))
-        except (ValueError, ModelError) as exc:
-            raise ModelError(f"{journal}: line {number}: {exc}") from None
-        used += len(line) + 1
-    return len(lines) - 1, used
-
-
-def _entry(model: OnlineClassifier, classes_before: int) -> dict:
-    """The journal entry of the last :meth:`OnlineClassifier.learn`: what changed, exactly."""
-    pa = model.pa
-    rows = sorted(set(pa.changed_rows) | set(range(classes_before, len(pa.classes))))
-    std = model.scaler.standardizer
-    return {"version": model.version, "new_classes": pa.classes[classes_before:], "rows": rows,
-            "weights": pa.weights[rows].tolist(), "weighted_sum": pa._u[rows].tolist(),
-            "updates": pa.updates, "mistakes": pa.mistakes,
-            "scaler": {"n": std.n, "mean": std.mean.tolist(), "m2": std.m2.tolist()}}
-
-
-def _apply_entry(model: OnlineClassifier, entry: dict) -> None:
-    """Apply one journal entry (checked like a model file)."""
-    if not isinstance(entry, dict):
-        raise ModelError("an entry must be an object")
-    version = _integer(entry, "version", "entry", minimum=1)
-    if version != model.version + 1:
-        raise ModelError(f"entry of version {version} does not follow version {model.version}")
-    pa = model.pa
-    new = entry.get("new_classes")
-    if not isinstance(new, list) or not all(isinstance(c, str) and c for c in new):
-        raise ModelError("'new_classes' must be a list of class names")
-    for name in new:
-        if name in pa.classes:
-            raise ModelError(f"'new_classes' adds {name!r}, already a class")
-        pa.add_class(name)
-    rows = entry.get("rows")
-    if not isinstance(rows, list) or not all(isinstance(r, int) and not isinstance(r, bool)
-                                             and 0 <= r < len(pa.classes) for r in rows):
-        raise ModelError(f"'rows' must be class indices below {len(pa.classes)}")
-    width = pa.n_features + 1
-    weights = _matrix(entry.get("weights"), (len(rows), width), "weights")
-    weighted = _matrix(entry.get("weighted_sum"), (len(rows), width), "weighted_sum")
-    updates = _integer(entry, "updates", "entry", minimum=pa.updates)
-    mistakes = _integer(entry, "mistakes", "entry", minimum=pa.mistakes)
-    if mistakes > updates:
-        raise ModelError(f"'mistakes' ({mistakes}) exceeds 'updates' ({updates})")
-    sc = entry.get("scaler")
-    if not isinstance(sc, dict):
-        raise ModelError("'scaler' must be an object")
-    n = len(model.labels)
-    std = model.scaler.standardizer
-    count = _integer(sc, "n", "scaler", minimum=std.n)
-    mean = _matrix(sc.get("mean"), (n,), "scaler.mean")
-    m2 = _matrix(sc.get("m2"), (n,), "scaler.m2")
-    if np.any(m2 < 0):
-        raise ModelError("'scaler.m2' holds negative sums of squares")
-    pa.weights[rows] = weights
-    pa._u[rows] = weighted
-    pa.updates, pa.mistakes = updates, mistakes
-    std.n, std.mean, std.m2 = count, mean, m2
-    model.version = version
-
-
-class ModelStore:
-    """A model file with an append-only journal: a durable save per label, at a cost independent of the classes.
-
-    :meth:`OnlineClassifier.save` rewrites the whole file (78 ms with 1,000
-    classes).  After each label the store instead appends one line to
-    ``<model file>.journal`` holding exactly what the update changed (the two
-    weight rows of eq. 31, their averaging sums, new classes, the counters and
-    the feature statistics) and ``fdatasync`` s it: when :meth:`record`
-    returns, the label survives a crash, a SIGKILL or a power loss.  Loading
-    (:meth:`OnlineClassifier.load`) replays the journal onto the file, so every
-    reader sees every recorded label.
-
-    Guarantees:
-
-    * **Durable before reported**: :meth:`record` returns only after the
-      entry is on disk; report a label only after it returns.
-    * **Atomic per label**: a crash mid-append leaves a last line without its
-      newline, which loading ignores; the label is then wholly absent, never
-      half applied.  Entries are checked like a model file (finite, shapes,
-      counts, consecutive versions); a corrupt entry is an error naming the
-      journal and line.
-    * **Compaction**: once the journal outgrows the file (and ``min_compact_bytes``)
-      the store rewrites the file atomically and starts a new journal.  The
-      journal's first line names the SHA-256 of the file it extends, so a
-      journal left behind by a crash between the two steps is recognised as
-      stale and never replayed twice.
-    * **Exact**: entries hold floats as JSON's shortest round-trip repr; the
-      replayed model equals the one in memory bit for bit.
-    * **Pre-sized**: the journal file is extended with written zeros ahead
-      of its entries (``reserve_bytes`` at a time, at least four entries), and
-      each entry is written over those zeros.  The file's size and blocks then
-      do not change when an entry is synced, so ``fdatasync`` flushes the
-      entry's data only, without a filesystem metadata commit; only the
-      extension, once per ``reserve_bytes``, syncs the size.  The entries end
-      at the first zero byte (JSON text holds none), so a torn entry followed
-      by the zeros is a last line without its newline, ignored as above.
-
-    Parameters
-    ----------
-    path : path-like
-        The model file.
-    min_compact_bytes : int, default 1 MiB
-        Never compact a journal smaller than this.
-    reserve_bytes : int, default 256 KiB
-        Zeros written ahead of the entries at a time (at least four entries'
-        worth, in whole 4 KiB pages); 0 appends without reserving (every sync
-        then also commits the file's new size).
-    """
-
-    def __init__(self, path: str | os.PathLike[str], min_compact_bytes: int = 1 << 20,
-                 reserve_bytes: int = 1 << 18) -> None:
-        self.path = Path(path)
-        self.journal = journal_path(self.path)
-        self.min_compact_bytes = int(min_compact_bytes)
-        if reserve_bytes < 0:
-            raise ValueError(f"reserve_bytes must not be negative, got {reserve_bytes}")
-        self.reserve_bytes = int(reserve_bytes)
-        self._fd: int | None = None
-        self._reserved_bytes = 0  # the journal file's size: entries, then written zeros
-        #: times the journal file was extended (created included)
-        self.extensions = 0
-        self._snapshot_bytes = 0
-        self._snapshot_sha256 = ""
-        self._journal_bytes = 0
-        self._synced_version: int | None = None
-        self._synced_classes = 0
-        self.compactions = 0
-
-    def load(self, labels: Sequence[str] | None = None) -> OnlineClassifier:
-        """Load the model (replaying the journal) and compact it, so the next record starts clean."""
-        model, _, entries, _ = _load(self.path, labels)
-        if entries or self.journal.exists():
-            self.save(model)
-        else:
-            self._adopt(model, self.path.read_bytes())
-        return model
-
-    def save(self, model: OnlineClassifier) -> None:
-        """Rewrite the whole file atomically and drop the journal (``~/save``, compaction)."""
-        self.close()
-        model.save(self.path)
-        self._adopt(model, self.path.read_bytes())
-
-    def _adopt(self, model: OnlineClassifier, raw: bytes) -> None:
-        self._snapshot_bytes = len(raw)
-        self._snapshot_sha256 = hashlib.sha256(raw).hexdigest()
-        self._journal_bytes = 0
-        self._synced_version = model.version
-        self._synced_classes = len(model.classes)
-
-    def record(self, model: OnlineClassifier) -> None:
-        """Make the last :meth:`OnlineClassifier.learn` durable (append and sync one entry).
-
-        Falls back to :meth:`save` when the store cannot express the change as
-        one entry (no file yet, or several updates since the last record).
+    def apply_delta(self, delta: dict) -> None:
+        """Apply one :meth:`delta` (checked like a model state: versions, shapes, finite values, counts).
 
         Raises
         ------
         ModelError
-            When writing fails (e.g. disk full); the label is then not durable.
+            Naming the key, for a delta this model cannot take (e.g. not the
+            next version); the model is then unchanged.
         """
-        if self._synced_version is None or model.version != self._synced_version + 1 or not self.path.exists():
-            self.save(model)
-            return
-        line = (json.dumps(_entry(model, self._synced_classes)) + "\n").encode()
-        try:
-            new_file = self._fd is None
-            if new_file:
-                header = (json.dumps({"format": _JOURNAL_FORMAT, "snapshot_sha256": self._snapshot_sha256})
-                          + "\n").encode()
-                # a new journal replaces any stale one
-                self._fd = os.open(self.journal, os.O_RDWR | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0),
-                                   0o644)
-                self._reserved_bytes = 0
-                self._journal_bytes = 0
-                self._extend(len(header) + len(line))
-                self._pwrite(header, 0)
-                self._journal_bytes = len(header)
-            elif self._journal_bytes + len(line) > self._reserved_bytes:
-                self._extend(len(line))
-            self._pwrite(line, self._journal_bytes)
-            _datasync(self._fd)  # over written zeros: the entry's data only, no metadata commit
-            if new_file:
-                _fsync_dir(self.path.parent)  # the journal's name itself must survive
-        except OSError as exc:
-            self.close()
-            raise ModelError(f"cannot append to the model journal {self.journal}: {exc}") from None
-        self._journal_bytes += len(line)
-        self._synced_version = model.version
-        self._synced_classes = len(model.classes)
-        if self._journal_bytes > max(self._snapshot_bytes, self.min_compact_bytes):
-            self.save(model)
-            self.compactions += 1
-
-    @property
-    def journal_bytes(self) -> int:
-        """Bytes of the journal's header and entries (the file is longer by its reserved zeros)."""
-        return self._journal_bytes
-
-    def _extend(self, need: int) -> None:
-        """Write zeros from the end of the entries to make room for ``need`` bytes and more; sync the new size."""
-        if not self.reserve_bytes:
-            return
-        start = self._journal_bytes
-        size = start + max(self.reserve_bytes, 4 * need)
-        size = -(-size // _PAGE) * _PAGE
-        zeros = bytes(min(size - start, 1 << 20))
-        pos = start
-        while pos < size:
-            pos += os.pwrite(self._fd, zeros[:size - pos], pos)
-        os.fsync(self._fd)  # the new size and blocks, once per reserve
-        self._reserved_bytes = size
-        self.extensions += 1
-
-    def _pwrite(self, data: bytes, offset: int) -> None:
-        view = memoryview(data)
-        while view:
-            n = os.pwrite(self._fd, view, offset)
-            view, offset = view[n:], offset + n
-
-    def close(self) -> None:
-        """Close the journal file (entries already recorded stay durable)."""
-        if self._fd is not None:
-            try:
-                os.close(self._fd)
-            except OSError:
-                pass
-            self._fd = None
-
-
-def save_json_atomic(path: str | os.PathLike[str], obj: dict) -> None:
-    """Write JSON to a temporary file in the same folder, fsync, then rename over ``path``.
-
-    Raises
-    ------
-    ModelError
-        If writing fails (e.g. disk full); the previous file is left untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-        _fsync_dir(path.parent)  # make the rename itself survive a power loss
-    except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise ModelError(f"cannot save model to {path}: {exc}") from None
-
-
-#: Journal extensions are whole pages of this many bytes.
-_PAGE = 4096
-
-
-def _datasync(fd: int) -> None:
-    """``fdatasync`` where the platform has it, else ``fsync``."""
-    if hasattr(os, "fdatasync"):
-        os.fdatasync(fd)
-    else:  # pragma: no cover - macOS, Windows
-        os.fsync(fd)
-
-
-def _fsync_dir(folder: Path) -> None:
-    """fsync a folder so a rename inside it is on disk (a no-op where folders cannot be opened)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+        if not isinstance(delta, dict):
+            raise ModelError("an entry must be an object")
+        version = _integer(delta, "version", "entry", minimum=1)
+        if version != self.version + 1:
+            raise ModelError(f"entry of version {version} does not follow version {self.version}")
+        pa = self.pa
+        new = delta.get("new_classes")
+        if not isinstance(new, list) or not all(isinstance(c, str) and c for c in new):
+            raise ModelError("'new_classes' must be a list of class names")
+        known = set(pa.classes)
+        if any(name in known for name in new) or len(set(new)) != len(new):
+            raise ModelError(f"'new_classes' adds {new!r}, of which some are already classes")
+        n_classes = len(pa.classes) + len(new)
+        rows = delta.get("rows")
+        if not isinstance(rows, list) or not all(isinstance(r, int) and not isinstance(r, bool)
+                                                 and 0 <= r < n_classes for r in rows):
+            raise ModelError(f"'rows' must be class indices below {n_classes}")
+        width = pa.n_features + 1
+        weights = _matrix(delta.get("weights"), (len(rows), width), "weights")
+        weighted = _matrix(delta.get("weighted_sum"), (len(rows), width), "weighted_sum")
+        updates = _integer(delta, "updates", "entry", minimum=pa.updates)
+        mistakes = _integer(delta, "mistakes", "entry", minimum=pa.mistakes)
+        if mistakes > updates:
+            raise ModelError(f"'mistakes' ({mistakes}) exceeds 'updates' ({updates})")
+        sc = delta.get("scaler")
+        if not isinstance(sc, dict):
+            raise ModelError("'scaler' must be an object")
+        n = len(self.labels)
+        std = self.scaler.standardizer
+        count = _integer(sc, "n", "scaler", minimum=std.n)
+        mean = _matrix(sc.get("mean"), (n,), "scaler.mean")
+        m2 = _matrix(sc.get("m2"), (n,), "scaler.m2")
+        if np.any(m2 < 0):
+            raise ModelError("'scaler.m2' holds negative sums of squares")
+        for name in new:  # everything checked: now change the model
+            pa.add_class(name)
+        pa.weights[rows] = weights
+        pa._u[rows] = weighted
+        pa.updates, pa.mistakes = updates, mistakes
+        std.n, std.mean, std.m2 = count, mean, m2
+        self.version = version

@@ -77,7 +77,9 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
         "standardize": "bool", "pa_update": "string", "pa_average": "bool", "label_horizon": "integer",
         "save_after_update": "bool", "load_model": "bool", "frame_id": "string", "diagnostics_period_s": "double",
         "label_expiry_explorations": "integer", "max_class_name_chars": "integer", "label_wait_s": "double",
-        **_qos("descriptor", "label", "prediction"),
+        "max_classes": "integer", "max_exploration_id_step": "integer", "label_hold_s": "double",
+        "prediction_order": "string", "clock_jump_s": "double", "enable_reset": "bool",
+        "qos.label.history": "string", **_qos("descriptor", "label", "prediction"),
     },
 }
 

@@ -1,40 +1,45 @@
 """``classifier_node``: online material recognition (PA-I, Kaboli et al. 2018, eq. 30-32).
 
 * Every ``Descriptor`` with contact is predicted and a ``Prediction`` is
-  published (``has_model`` false until the first label was learned).
-* A ``Label`` names an exploration id (0 = the most recent descriptor) and a
-  class name; the kept descriptor of that exploration is learned (predict
-  first, then update).  A new class name adds a class at run time.
+  published at once (``has_model`` false until the first label was
+  learned); its ``header.frame_id`` is the descriptor's (or ``frame_id``).
+* A ``Label`` on ``tactile/label``, or a call of the ``~/label`` service
+  (``LearnLabel``: answered once the label is learned and saved, or refused
+  with the reason), names an exploration id (0 = the most recent descriptor)
+  and a class name; the kept descriptor of that exploration is learned
+  (predict first, then update).  A new class name adds a class at run time.
 * Which descriptor a label teaches, and when, is
-  :class:`~tactile_descriptors_ros.core.labels.LabelProtocol`: late labels
-  match the last ``label_horizon`` kept descriptors; a label that arrives
-  *before* its descriptor is held and learned right after that descriptor's
-  prediction, and expires (counted, warned) once a descriptor
-  ``label_expiry_explorations`` ids past it arrived; the first label of an
-  exploration wins (a second one is refused, counted, warned); class names
-  longer than ``max_class_name_chars`` are refused.  Every label is learned,
-  held, or counted in ``/diagnostics``.
-* Descriptors and labels are taken in the order of their stamps (window end,
-  label header stamp), not of their arrival
-  (:class:`~tactile_descriptors_ros.core.labels.StampOrder`): a descriptor is
-  predicted with the model that learned every label stamped before its window
-  end, and a stamped label with id 0 names the last exploration that ended
-  before it; each waits at most ``label_wait_s`` for what may still come before
-  it.  A replay thus gives the same predictions however the executor orders a
-  label and a descriptor that are ready together.
-* Every update is made durable before it is reported ("learned exploration
-  N"): one entry appended and synced to ``<model_path>.journal``
-  (:class:`~tactile_descriptors_ros.core.learning.ModelStore`), compacted into
-  ``model_path`` as it grows and at shutdown.  ``model_path`` defaults to
-  ``$ROS_HOME/tactile_descriptors_ros/<robot>/<node name>.json`` with the
-  ``robot`` parameter, ``$ROS_HOME/tactile_descriptors_ros/<node name>.json``
-  without (``ROS_HOME`` defaulting to ``~/.ros``), so two robots never share a
-  model file; the parameter reads the path used.  It is reloaded at start.  A
-  model trained on
-  another descriptor layout is refused (an error in ``/diagnostics``; call
-  ``~/reset`` or choose another path), never silently overwritten; a corrupt
-  model file stops the node with an error naming the file and the key.
-* Services ``~/save`` and ``~/reset`` (``std_srvs/Trigger``).
+  :class:`~tactile_descriptors_ros.core.labels.LabelProtocol` (late labels,
+  labels held for explorations not seen yet and their expiry by id and by
+  time, the first label of an exploration wins, class names NFKC-normalised
+  and checked, at most ``max_classes`` classes, exploration ids far from the
+  latest refused); every label is learned, held, or counted in
+  ``/diagnostics``, and a held or refused one is logged.
+* Labels are taken in the order of their stamps, not of their arrival
+  (:class:`~tactile_descriptors_ros.core.labels.StampOrder`): a stamped label
+  with id 0 names the last exploration that ended before it.  With
+  ``prediction_order: immediate`` (the default) a descriptor is predicted the
+  moment it arrives, with the model as it is; with ``stamp`` it waits (at most
+  ``label_wait_s``) for the label due before it, so a replayed bag gives the
+  same predictions bit for bit.  A jump back in the stamps (a replay started
+  again, ``/clock`` going back) starts a new session, counted.
+* Every update is durable before it is reported ("learned exploration N ...,
+  saved"): one entry appended and synced to the model's journal
+  (:class:`~tactile_descriptors_ros.core.model_store.ModelStore`), compacted
+  into the model file as it grows and at shutdown; a compaction that fails
+  (a full disk) keeps the journal, and is counted.  The model file is locked:
+  a second node on it refuses to start, naming the first.
+* ``model_path`` '' (the default) keeps one model per descriptor layout in
+  ``$ROS_HOME/tactile_descriptors_ros/<robot>/<namespace>/<node name>/``
+  (``ROS_HOME`` defaulting to ``~/.ros``; the file for a layout is named by
+  its body parts, feature groups, value count and hash, and is opened at the
+  first descriptor): two robots, two namespaces or two layouts never share a
+  model.  A given ``model_path`` is loaded at start; a descriptor of another
+  layout than its model's is refused (an error in ``/diagnostics``), never
+  learned into it.  A corrupt model file stops the node with an error naming
+  the file, the line and the key.
+* Services ``~/save`` and ``~/reset`` (``std_srvs/Trigger``); ``~/reset``
+  erases the model and answers only with ``enable_reset: true``.
 
 The running accuracy of predictions made *before* their label arrived (the
 online learning curve) is reported in diagnostics as ``online_accuracy``.
@@ -54,34 +59,77 @@ from rclpy.node import Node
 
 from ..core.groups import groups_in_labels, selection_name
 from ..core.labels import (
+    DEFAULT_CLOCK_JUMP_S,
+    DEFAULT_LABEL_HOLD_S,
     DEFAULT_LABEL_WAIT_S,
     DEFAULT_MAX_CLASS_NAME_CHARS,
+    DEFAULT_MAX_CLASSES,
+    DEFAULT_MAX_ID_STEP,
     EXPIRED,
+    HELD,
     LEARN,
+    MAX_CLASS_NAME_CHARS,
+    MAX_CLASSES,
+    MAX_HORIZON,
+    MAX_ID_STEP,
+    MAX_WAIT_S,
     REFUSED,
+    LabelDecision,
     LabelProtocol,
     StampOrder,
 )
-from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, ModelStore, OnlineClassifier
+from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
+from ..core.model_store import ModelLock, ModelStore, layout_file_name
 from ..core.robot import load_robot
-from ..errors import ModelError, SignalError
+from ..errors import ConfigError, ModelError, SignalError
 from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
 from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
 from .qos import QosDefaults, declare_qos
 
-__all__ = ["ClassifierNode", "default_model_path", "main", "layout_mismatch"]
+__all__ = ["ClassifierNode", "default_model_folder", "check_frame_id", "PREDICTION_ORDERS", "main", "layout_mismatch"]
+
+#: ``prediction_order``: predict a descriptor on arrival, or in stamp order (bit-identical replays).
+PREDICTION_ORDERS = ("immediate", "stamp")
+
+#: Bounds of the learning rate eta (eq. 32): a larger or smaller one is a typo, and inf cannot be saved.
+ETA_RANGE = (1e-6, 1e6)
+#: Longest ``frame_id`` [characters].
+MAX_FRAME_ID_CHARS = 256
 
 
-def default_model_path(node_name: str, robot: str = "") -> Path:
-    """``$ROS_HOME/tactile_descriptors_ros/[<robot>/]<node_name>.json`` (``ROS_HOME`` defaults to ``~/.ros``).
+def default_model_folder(node_name: str, namespace: str = "/", robot: str = "") -> Path:
+    """``$ROS_HOME/tactile_descriptors_ros/[<robot>/][<namespace>/]<node_name>/`` (``ROS_HOME``: ``~/.ros``).
 
-    Each robot has its own folder, so a NAO and a Shadow Hand (both with a
-    ``classifier_node``) never read or reset each other's model.
+    Each robot, namespace and node has its own folder (a NAO's and a Shadow
+    Hand's ``classifier_node``, or ``/left`` and ``/right``, never share a
+    model); inside it, one model file per descriptor layout
+    (:func:`~tactile_descriptors_ros.core.model_store.layout_file_name`).
     """
     home = Path(os.environ.get("ROS_HOME") or Path.home() / ".ros")
     folder = home / "tactile_descriptors_ros"
-    return (folder / robot if robot else folder) / f"{node_name}.json"
+    if robot:
+        folder = folder / robot
+    for part in namespace.strip("/").split("/"):
+        if part:
+            folder = folder / part
+    return folder / node_name
+
+
+def _model_path(value: str, default_folder: Path) -> str:
+    """``model_path`` as used: a file, or a folder ending in the path separator ('' = ``default_folder``)."""
+    if not value:
+        return f"{default_folder}{os.sep}"
+    path = str(Path(os.path.expanduser(value)))
+    return f"{path}{os.sep}" if value.endswith(("/", os.sep)) else path
+
+
+def check_frame_id(value: str) -> str:
+    """``frame_id``: at most 256 printable characters ('' = the descriptor's frame)."""
+    if len(value) > MAX_FRAME_ID_CHARS or not value.isprintable():
+        raise ConfigError(f"must be at most {MAX_FRAME_ID_CHARS} printable characters, got "
+                          f"{len(value)} characters", key="frame_id")
+    return value
 
 
 @dataclass(frozen=True)
@@ -92,12 +140,12 @@ class _Predicted:
     prediction: str | None
 
 
-def layout_mismatch(sample: DescriptorSample, model_labels: Sequence[str]) -> str:
+def layout_mismatch(sample: DescriptorSample, model_labels: Sequence[str], advice: str = "") -> str:
     """Why a model refuses a descriptor: both feature-group selections, value counts and body parts."""
     return (f"descriptor of feature groups {selection_name(groups_in_labels(sample.labels))} "
             f"({len(sample.labels)} values, {sample.robot} {'/'.join(sample.body_parts)}) does not fit the model, "
             f"trained on feature groups {selection_name(groups_in_labels(model_labels))} ({len(model_labels)} "
-            "values); call ~/reset or set another model_path")
+            f"values){'; ' + advice if advice else ''}")
 
 
 class ClassifierNode(Node):
@@ -105,20 +153,27 @@ class ClassifierNode(Node):
 
     def __init__(self, node_name: str = "classifier_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.event_handler import SubscriptionEventCallbacks
         from std_srvs.srv import Trigger
 
         from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+        from tactile_descriptors_msgs.srv import LearnLabel
 
-        robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model file is per robot "
+        self.holder = self.get_fully_qualified_name()
+        robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model folder is per robot "
                             "('' = no robot folder)")
         self.robot_name = load_robot(robot_arg).name if robot_arg else ""
-        fallback = default_model_path(self.get_name(), self.robot_name)
+        folder = default_model_folder(self.get_name(), self.get_namespace(), self.robot_name)
         path = declare(self, "model_path", "",
-                       "model file (JSON); '' = $ROS_HOME/tactile_descriptors_ros/<robot>/<node>.json; reads the "
-                       "path used", resolve=lambda p: str(Path(os.path.expanduser(p)) if p else fallback))
-        self.model_path = Path(path)
+                       "model file (JSON), or a folder (ending in /) of one model per descriptor layout; '' = the "
+                       "folder $ROS_HOME/tactile_descriptors_ros/<robot>/<namespace>/<node>/ (the parameter reads "
+                       "it)", resolve=lambda p: _model_path(p, folder))
+        #: the model file given, or None: one per layout in :attr:`model_folder`
+        self.given_path: Path | None = Path(path) if not path.endswith(os.sep) else None
+        self.model_folder: Path | None = None if self.given_path else Path(path)
         self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1); from the next update on",
-                           minimum=1e-12, on_set=self._set_eta)
+                           minimum=ETA_RANGE[0], maximum=ETA_RANGE[1], on_set=self._set_eta)
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
         self.standardize = declare(self, "standardize", True, "running standardisation of features")
         self.pa_update = declare(self, "pa_update", RECOMMENDED_PA_UPDATE,
@@ -127,30 +182,54 @@ class ClassifierNode(Node):
                                   "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,
                                "descriptors kept for late labels (and early labels held)", minimum=1,
-                               on_set=self._set_horizon)
-        expiry = declare(self, "label_expiry_explorations", 10,
-                         "a held label expires when a descriptor this many ids past it arrives", minimum=1)
-        max_name = declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
-                           "longest class name accepted [characters]", minimum=1)
-        self.labels = LabelProtocol(self.horizon, expiry, max_name)
+                               maximum=MAX_HORIZON, on_set=self._set_horizon)
+        self.labels = LabelProtocol(
+            self.horizon,
+            declare(self, "label_expiry_explorations", 10,
+                    "a held label expires when a descriptor this many ids past it arrives", minimum=1,
+                    maximum=MAX_HORIZON),
+            declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
+                    "longest class name accepted [characters]", minimum=1, maximum=MAX_CLASS_NAME_CHARS),
+            declare(self, "max_classes", DEFAULT_MAX_CLASSES, "most classes: a label naming a new class beyond "
+                    "them is refused", minimum=1, maximum=MAX_CLASSES),
+            declare(self, "max_exploration_id_step", DEFAULT_MAX_ID_STEP, "an exploration id farther than this "
+                    "from the latest is refused for labels (and, for a descriptor, moves nothing)", minimum=1,
+                    maximum=MAX_ID_STEP),
+            declare(self, "label_hold_s", DEFAULT_LABEL_HOLD_S, "a label held for an exploration not seen yet "
+                    "expires after this long [s]", minimum=0.1, maximum=MAX_WAIT_S, on_set=self._set_label_hold))
+        order = declare(self, "prediction_order", PREDICTION_ORDERS[0],
+                        "immediate: predict a descriptor on arrival; stamp: after the labels stamped before its "
+                        "window end (a replay gives the same bits)", choices=PREDICTION_ORDERS)
         self.order: StampOrder[DescriptorSample, _Predicted] = StampOrder(
             self.labels, self._predict, self._apply,
             declare(self, "label_wait_s", DEFAULT_LABEL_WAIT_S,
-                    "longest wait of a descriptor for the label due before it, and of a stamped label for its "
-                    "descriptor [s] (0: arrival order)", minimum=0.0, on_set=self._set_label_wait))
+                    "longest wait of a stamped label for its descriptor, and with prediction_order stamp of a "
+                    "descriptor for the label due before it [s] (0: arrival order)", minimum=0.0,
+                    maximum=MAX_WAIT_S, on_set=self._set_label_wait),
+            hold_descriptors=order == "stamp",
+            jump_s=declare(self, "clock_jump_s", DEFAULT_CLOCK_JUMP_S, "a stamp this far behind the latest of "
+                           "its stream starts a new session (a replay started again) [s]", minimum=0.001,
+                           maximum=MAX_WAIT_S))
         self.save_after_update = declare(self, "save_after_update", True, "save the model after every update",
                                          on_set=lambda v: lambda: setattr(self, "save_after_update", v))
-        self.load_on_start = declare(self, "load_model", True, "load model_path at start if it exists")
-        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions",
-                                on_set=lambda v: lambda: setattr(self, "frame_id", v))
+        self.load_on_start = declare(self, "load_model", True, "load the model file if it exists")
+        self.enable_reset = declare(self, "enable_reset", False, "answer ~/reset (it erases the model; off: "
+                                    "anyone on the ROS domain could call it)")
+        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions ('' = the descriptor's)",
+                                on_set=self._set_frame_id)
+        check_frame_id(self.frame_id)
 
         self.model: OnlineClassifier | None = None
-        self.store = ModelStore(self.model_path)
+        self.store: ModelStore | None = None
+        self.folder_lock: ModelLock | None = None
         self.layout_error: str | None = None
-        if self.load_on_start and self.model_path.is_file():
-            self.model = self.store.load()  # ModelError: corrupt file -> refuse to start
-            self.get_logger().info(f"loaded model {self.model_path}: {len(self.model.classes)} classes "
-                                   f"({', '.join(self.model.classes)}), {self.model.pa.updates} updates")
+        # ModelError: another node holds the file or folder, or the file is corrupt -> refuse to start
+        if self.given_path is not None:
+            self.store = ModelStore(self.given_path, holder=self.holder)
+            self._adopt_store()
+        else:
+            self.folder_lock = ModelLock(self.model_folder, self.holder)
+            self.folder_lock.acquire()
         self.latest: DescriptorSample | None = None
         self.counts: Counter[str] = Counter()
         self.correct_before_label = 0
@@ -158,21 +237,39 @@ class ClassifierNode(Node):
         self.last_save_error: str | None = None
 
         qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 50))
-        # A burst of labels must not overflow the history: each lost label is a lost update (docs/nodes.md).
-        qos_label = declare_qos(self, "label", QosDefaults("reliable", "volatile", 1000))
+        # A reliable KEEP_ALL reader replaces nothing; what a publisher's own history drops is reported by
+        # DDS as lost and counted (docs/nodes.md).
+        qos_label = declare_qos(self, "label", QosDefaults("reliable", "volatile", 1000, history="keep_all"))
         qos_pred = declare_qos(self, "prediction", QosDefaults("reliable", "volatile", 50))
         self.pub = self.create_publisher(Prediction, PREDICTION_TOPIC, qos_pred)
-        self.sub_desc = self.create_subscription(Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, qos_desc)
-        self.sub_label = self.create_subscription(Label, LABEL_TOPIC, self._on_label, qos_label)
+        self.sub_desc = self.create_subscription(
+            Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, qos_desc,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("descriptors_lost", e)))
+        self.sub_label = self.create_subscription(
+            Label, LABEL_TOPIC, self._on_label, qos_label,
+            event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("labels_lost", e)))
+        # a call waits (a coroutine) until its label is decided; in its own reentrant group, so that the waiting
+        # calls never hold back the descriptors and labels they wait for
+        self.srv_label = self.create_service(LearnLabel, "~/label", self._srv_label,
+                                             callback_group=ReentrantCallbackGroup())
         self.srv_save = self.create_service(Trigger, "~/save", self._srv_save)
         self.srv_reset = self.create_service(Trigger, "~/reset", self._srv_reset)
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01))
+                                                     minimum=0.01, maximum=MAX_WAIT_S))
         self.diagnostics.add("classifier", self._status)
         # what waits in stamp order is released when its wait runs out, even if nothing else arrives
         self.order_timer = self.create_timer(0.05, lambda: self.order.poll(time.monotonic()))
         report_unknown_overrides(self)
-        self.get_logger().info(f"model file {self.model_path}; predictions on {self.pub.topic_name}")
+        where = self.given_path or self.model_folder / "<layout>.json"
+        self.get_logger().info(f"model file {where}; predictions on {self.pub.topic_name} "
+                               f"({order} prediction order); ~/reset {'enabled' if self.enable_reset else 'disabled'}")
+
+    @property
+    def model_path(self) -> Path:
+        """The model file in use (with ``model_path`` '', the layout's file once known, else the folder)."""
+        if self.store is not None:
+            return self.store.path
+        return self.given_path or self.model_folder
 
     # ------------------------------------------------------------- parameters
     def _set_eta(self, value: float):
@@ -188,23 +285,53 @@ class ClassifierNode(Node):
         """``ros2 param set ... label_horizon``: a smaller horizon forgets the oldest kept descriptors now."""
         def apply() -> None:
             self.horizon = value
-            dropped = self.labels.set_horizon(value)
-            if dropped:
-                self.get_logger().warning(f"label_horizon {value}: dropped the {dropped} oldest held labels")
+            for decision in self.labels.set_horizon(value):
+                self._apply(decision)
 
         return apply
+
+    def _set_label_hold(self, value: float):
+        """``ros2 param set ... label_hold_s``: held labels expire after the new time from the next poll on."""
+        return lambda: setattr(self.labels, "hold_s", value)
 
     def _set_label_wait(self, value: float):
         """``ros2 param set ... label_wait_s``: from the next message (or poll) on."""
         return lambda: self.order.set_wait(value)
 
-    # ------------------------------------------------------------ descriptors
+    def _set_frame_id(self, value: str):
+        check_frame_id(value)
+        return lambda: setattr(self, "frame_id", value)
+
+    # ------------------------------------------------------------------ model
+    def _adopt_store(self) -> None:
+        """Open the store (lock, stray temp files, load): raises ModelError for a held or corrupt file."""
+        self.model = self.store.open(load=self.load_on_start)
+        if self.store.strays_removed:
+            self.get_logger().info(f"removed a temporary file of a killed rewrite: "
+                                   f"{', '.join(map(str, self.store.strays_removed))}")
+        if self.store.compaction_error:
+            self.get_logger().warning(f"model loaded, but not compacted ({self.store.compaction_error}); new "
+                                      "labels go to its journal")
+        if self.model is not None:
+            self.labels.known_classes(self.model.classes)
+            self.get_logger().info(f"loaded model {self.store.path}: {len(self.model.classes)} classes "
+                                   f"({', '.join(self.model.classes)}), {self.model.pa.updates} updates")
 
     def _new_model(self, labels) -> OnlineClassifier:
         """An empty model of a descriptor layout, with this node's learning parameters."""
         return OnlineClassifier(labels, eta=self.eta, log_activity=self.log_activity, standardize=self.standardize,
                                 update=self.pa_update, average=self.pa_average)
 
+    def _model_for(self, sample: DescriptorSample) -> OnlineClassifier:
+        """The model descriptors of this layout are predicted with (opening the layout's file with a default path)."""
+        if self.store is None:
+            self.store = ModelStore(self.model_folder / layout_file_name(sample.labels), holder=self.holder)
+            self._adopt_store()
+        if self.model is None:
+            self.model = self._new_model(sample.labels)
+        return self.model
+
+    # ------------------------------------------------------------ descriptors
     def _on_descriptor(self, msg) -> None:
         try:
             sample = descriptor_from_msg(msg)
@@ -224,21 +351,23 @@ class ClassifierNode(Node):
 
     def _predict(self, sample: DescriptorSample) -> _Predicted | None:
         """Predict one descriptor in its turn (:class:`StampOrder`); None when its layout does not fit the model."""
-        if self.model is None:
-            self.model = self._new_model(sample.labels)
-        if sample.labels != self.model.labels:
+        model = self._model_for(sample)
+        if sample.labels != model.labels:
             self.counts["layout_mismatch"] += 1
-            self.layout_error = layout_mismatch(sample, self.model.labels)
+            advice = ("give this node another model_path, or '' for one model per descriptor layout"
+                      if self.given_path else "two layouts reach one classifier: give each window node's "
+                      "descriptors a classifier of their own (another namespace)")
+            self.layout_error = layout_mismatch(sample, model.labels, f"{advice} (model file {self.model_path})")
             self.get_logger().error(self.layout_error, throttle_duration_sec=5.0)
             return None
         self.layout_error = None
         # the kept descriptors (label_horizon of them) share the model's labels: one copy, not one per
         # descriptor (a NAO descriptor's 917 label strings are about 80 kB; the node grew by that per touch)
-        sample = replace(sample, labels=self.model.labels)
-        self.model.observe(sample.values)
-        name, scores = self.model.predict(sample.values)
-        self.pub.publish(prediction_to_msg(sample, class_name=name, class_names=self.model.classes, scores=scores,
-                                           model_version=self.model.version, updates=self.model.pa.updates,
+        sample = replace(sample, labels=model.labels)
+        model.observe(sample.values)
+        name, scores = model.predict(sample.values)
+        self.pub.publish(prediction_to_msg(sample, class_name=name, class_names=model.classes, scores=scores,
+                                           model_version=model.version, updates=model.pa.updates,
                                            frame_id=self.frame_id))
         self.counts["predictions"] += 1
         self.latest = sample
@@ -250,32 +379,68 @@ class ClassifierNode(Node):
         self.order.add_label(int(msg.exploration_id), str(msg.class_name), stamp_to_ns(msg.header.stamp),
                              time.monotonic())
 
-    def _apply(self, decision) -> None:
-        """Carry out a :class:`~..core.labels.LabelDecision`: learn, or warn about a refusal or expiry."""
-        if decision.action == LEARN:
-            self._learn(decision.item, decision.class_name)
-        elif decision.action in (REFUSED, EXPIRED):
-            self.get_logger().warning(decision.message, throttle_duration_sec=1.0)
+    def _lost(self, key: str, event) -> None:
+        """DDS reports samples a publisher dropped before this node took them (a burst beyond its history)."""
+        self.counts[key] += int(event.total_count_change)
+        self.get_logger().warning(f"{key.replace('_', ' ')}: {self.counts[key]} so far (the publisher's history "
+                                  "overflowed; use a deeper one, or ~/label)", throttle_duration_sec=5.0)
 
-    def _learn(self, kept: _Predicted, name: str) -> None:
+    async def _srv_label(self, request, response):
+        """``~/label``: one label, answered once it is learned and saved (or refused, expired, dropped)."""
+        from rclpy.task import Future
+
+        self.counts["labels_received"] += 1
+        done = Future()
+        self.order.add_label(int(request.exploration_id), str(request.class_name),
+                             stamp_to_ns(request.header.stamp), time.monotonic(), token=done)
+        outcome = await done
+        for key, value in outcome.items():
+            setattr(response, key, value)
+        return response
+
+    def _apply(self, decision: LabelDecision) -> None:
+        """Carry out a :class:`~..core.labels.LabelDecision`: learn, or log a hold, refusal or expiry."""
+        answer: dict = {"exploration_id": int(decision.exploration_id), "class_name": decision.class_name,
+                        "reason": decision.reason or "", "message": decision.message}
+        if decision.action == LEARN:
+            answer.update(self._learn(decision.item, decision.class_name))
+        elif decision.action == HELD:
+            self.get_logger().info(decision.message, throttle_duration_sec=1.0)
+            return  # answered when it is learned or expires
+        else:
+            self.get_logger().warning(decision.message, throttle_duration_sec=1.0)
+            dropped = decision.action == EXPIRED and "dropped" in (decision.reason or "")
+            answer["outcome"] = "dropped" if dropped else decision.action
+        if decision.token is not None and not decision.token.done():
+            answer.setdefault("success", False)
+            answer.setdefault("saved", False)
+            answer["model_version"] = self.model.version if self.model is not None else 0
+            decision.token.set_result(answer)
+
+    def _learn(self, kept: _Predicted, name: str) -> dict:
+        """Learn one label; what to answer: ``success`` (learned), ``saved`` (durable), the log line."""
         sample = kept.sample
         if self.model is None or sample.labels != self.model.labels:  # the model was reset to another layout meanwhile
             self.counts["layout_mismatch"] += 1
-            return
+            return {"outcome": REFUSED, "reason": "layout_mismatch",
+                    "message": f"label {name!r}: the model was reset to another descriptor layout meanwhile"}
         self.scored_labels += 1
         self.correct_before_label += int(kept.prediction == name)
         new_class = name not in self.model.classes
         loss = self.model.learn(sample.values, name)
         self.counts["updates"] += 1
         saved = self._record() if self.save_after_update else None
-        if saved is False:
-            return  # _record logged the error: the update is in memory only, never reported as saved
-        self.get_logger().info(f"learned exploration {sample.exploration_id}: {name!r}"
-                               f"{' (new class)' if new_class else ''}, loss {loss:.3f}, "
-                               f"{len(self.model.classes)} classes{', saved' if saved else ''}")
+        text = (f"learned exploration {sample.exploration_id}: {name!r}{' (new class)' if new_class else ''}, "
+                f"loss {loss:.3f}, {len(self.model.classes)} classes")
+        if saved is False:  # _record logged the error: in memory only, never reported as saved
+            return {"outcome": "learned", "success": True, "saved": False,
+                    "message": f"{text}, NOT saved: {self.last_save_error}"}
+        self.get_logger().info(f"{text}{', saved' if saved else ''}")
+        return {"outcome": "learned", "success": True, "saved": bool(saved), "message": text}
 
     def _record(self) -> bool:
         """Make the last update durable (journal entry, synced); False and an error when it failed."""
+        failures = self.store.compaction_failures
         try:
             self.store.record(self.model)
         except ModelError as exc:
@@ -284,6 +449,9 @@ class ClassifierNode(Node):
             self.get_logger().error(f"update learned in memory but not saved: {exc}")
             return False
         self.last_save_error = None
+        if self.store.compaction_failures > failures:
+            self.get_logger().warning(f"the label is saved in the journal, but compacting the model failed: "
+                                      f"{self.store.compaction_error}", throttle_duration_sec=60.0)
         return True
 
     # --------------------------------------------------------------- services
@@ -310,23 +478,29 @@ class ClassifierNode(Node):
         return response
 
     def _srv_reset(self, request, response):
+        if not self.enable_reset:
+            self.counts["reset_refused"] += 1
+            response.success = False
+            response.message = ("~/reset is disabled: it erases the model, and anyone on the ROS domain could call "
+                                "it; start the node with enable_reset:=true to allow it")
+            self.get_logger().warning(response.message, throttle_duration_sec=5.0)
+            return response
         labels = self.latest.labels if self.latest is not None else None
         self.model = None
         self.layout_error = None
-        self.labels.reset()
         self.order.reset()
         self.latest = None
         self.correct_before_label = self.scored_labels = 0
         try:
-            if labels is not None:
+            if labels is not None and self.given_path is not None:
                 self.model = self._new_model(labels)
                 self.store.save(self.model)
-            else:
-                self.store.close()
-                for path in (self.model_path, self.store.journal):
-                    if path.exists():
-                        path.unlink()
-        except (ModelError, OSError) as exc:
+            elif self.store is not None:
+                self.store.reset()
+                if self.given_path is None:  # the next descriptor opens its layout's file anew
+                    self.store.close()
+                    self.store = None
+        except ModelError as exc:
             response.success, response.message = False, f"model reset in memory, but {exc}"
             return response
         self.counts["resets"] += 1
@@ -335,10 +509,22 @@ class ClassifierNode(Node):
         return response
 
     def close(self) -> None:
-        """At shutdown: compact the journal into the model file (a clean stop leaves one file)."""
-        if self.model is not None and self.save_after_update and self.store.journal.exists():
+        """At shutdown: compact the journal into the model file (a clean stop leaves one file), release the locks."""
+        if self.store is not None and self.model is not None and self.save_after_update \
+                and self.store.journal.exists():
             self._save()
-        self.store.close()
+        self._release()
+
+    def _release(self) -> None:
+        if self.store is not None:
+            self.store.close()
+        if self.folder_lock is not None:
+            self.folder_lock.release()
+
+    def destroy_node(self) -> None:
+        """Release the model's locks (without compacting: :meth:`close` does that) and destroy the node."""
+        self._release()
+        super().destroy_node()
 
     # ------------------------------------------------------------ diagnostics
     @property
@@ -347,22 +533,29 @@ class ClassifierNode(Node):
         return self.correct_before_label / self.scored_labels if self.scored_labels else float("nan")
 
     def _status(self) -> Status:
+        store = self.store
         values = {"model_path": str(self.model_path), "classes": len(self.model.classes) if self.model else 0,
                   "class_names": ", ".join(self.model.classes) if self.model else "",
                   "updates": self.model.pa.updates if self.model else 0,
                   "model_version": self.model.version if self.model else 0,
                   "labelled_predictions": self.scored_labels, "online_accuracy": self.online_accuracy,
                   "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held,
-                  "waiting_in_stamp_order": self.order.waiting}
+                  "waiting_in_stamp_order": self.order.waiting,
+                  "compactions": store.compactions if store else 0,
+                  "compaction_failures": store.compaction_failures if store else 0}
         values.update({k: v for k, v in sorted((self.counts + self.labels.counts + self.order.counts).items())})
         if self.layout_error:
             return Status("error", self.layout_error, values)
         if self.last_save_error:
             return Status("error", self.last_save_error, values)
+        if store is not None and store.compaction_error:
+            return Status("warn", f"labels are saved in the journal, but compacting failed: {store.compaction_error}",
+                          values)
         refused = {k: v for k, v in sorted(self.labels.counts.items()) if v and k not in ("labels_learned",
                                                                                           "early_labels")}
-        if refused or self.counts["malformed_descriptor"]:
-            what = ", ".join(f"{k}={v}" for k, v in refused.items())
+        lost = {k: self.counts[k] for k in ("labels_lost", "descriptors_lost", "reset_refused") if self.counts[k]}
+        if refused or lost or self.counts["malformed_descriptor"]:
+            what = ", ".join(f"{k}={v}" for k, v in {**refused, **lost}.items())
             return Status("warn", f"labels not learned: {what or 'none'}; "
                                   f"{self.counts['malformed_descriptor']} malformed descriptors", values)
         return Status("ok", f"{values['classes']} classes, {values['updates']} updates", values)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import gc
+import math
 import sys
 import threading
 import time
@@ -208,6 +209,8 @@ def check_value(name: str, value: Any, default: Any, *, choices: Sequence[Any] |
         raise ConfigError(f"must be true or false, got {value!r}", key=name)
     if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
+    if isinstance(value, float) and not math.isfinite(value):  # NaN passes every comparison below
+        raise ConfigError(f"must be a finite number, got {value!r}", key=name)
     if choices is not None and value not in choices:
         raise ConfigError(f"must be one of {tuple(choices)}, got {value!r}", key=name)
     if minimum is not None and (not isinstance(value, (int, float)) or value < minimum):

@@ -467,6 +467,7 @@ class DescriptorSample:
     window_mode: str
     robot: str
     body_parts: tuple[str, ...]
+    frame_id: str = ""
 
 
 def descriptor_from_msg(msg) -> DescriptorSample:
@@ -487,17 +488,21 @@ def descriptor_from_msg(msg) -> DescriptorSample:
         window_mode=str(msg.window_mode),
         robot=str(msg.robot),
         body_parts=tuple(msg.body_parts),
+        frame_id=str(msg.header.frame_id),
     )
 
 
 def prediction_to_msg(sample: DescriptorSample, *, class_name: str | None, class_names: Sequence[str],
                       scores: np.ndarray, model_version: int, updates: int, frame_id: str = ""):
-    """Build a ``Prediction`` message (``has_model`` false before the first class is known)."""
+    """Build a ``Prediction`` message (``has_model`` false before the first class is known).
+
+    ``frame_id`` '' takes the descriptor's (the window node's frame: the robot's name by default).
+    """
     from tactile_descriptors_msgs.msg import Prediction
 
     msg = Prediction()
     msg.header.stamp = ns_to_stamp(sample.window_end_ns)
-    msg.header.frame_id = frame_id
+    msg.header.frame_id = frame_id or sample.frame_id
     msg.exploration_id = int(sample.exploration_id)
     msg.window_end = ns_to_stamp(sample.window_end_ns)
     msg.has_model = class_name is not None

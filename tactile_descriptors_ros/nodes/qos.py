@@ -8,7 +8,8 @@ after the endpoint::
 
     qos.<endpoint>.reliability   reliable | best_effort | system_default
     qos.<endpoint>.durability    volatile | transient_local | system_default
-    qos.<endpoint>.depth         history depth (KEEP_LAST), >= 1
+    qos.<endpoint>.depth         history depth (KEEP_LAST), 1 .. 1,000,000
+    qos.<endpoint>.history       keep_last | keep_all (only where an endpoint offers the choice)
 
 The defaults are chosen so that the package's own graph always matches and a
 foreign publisher or subscriber most likely does:
@@ -28,10 +29,13 @@ from dataclasses import dataclass
 
 from ..errors import ConfigError
 
-__all__ = ["QosDefaults", "RELIABILITIES", "DURABILITIES", "declare_qos", "qos_profile"]
+__all__ = ["QosDefaults", "RELIABILITIES", "DURABILITIES", "HISTORIES", "MAX_DEPTH", "declare_qos", "qos_profile"]
 
 RELIABILITIES = ("reliable", "best_effort", "system_default")
 DURABILITIES = ("volatile", "transient_local", "system_default")
+HISTORIES = ("keep_last", "keep_all")
+#: Deepest history accepted (a deeper one is a typo, and preallocates that many samples).
+MAX_DEPTH = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -41,9 +45,11 @@ class QosDefaults:
     reliability: str = "reliable"
     durability: str = "volatile"
     depth: int = 10
+    #: ``keep_last`` or ``keep_all``; None: KEEP_LAST, and no ``history`` parameter
+    history: str | None = None
 
 
-def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "?"):
+def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "?", history: str = "keep_last"):
     """Build an :class:`rclpy.qos.QoSProfile` from policy names.
 
     Raises
@@ -59,10 +65,12 @@ def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "
         raise ConfigError(f"must be one of {RELIABILITIES}, got {reliability!r}", key=f"qos.{endpoint}.reliability")
     if dur not in DURABILITIES:
         raise ConfigError(f"must be one of {DURABILITIES}, got {durability!r}", key=f"qos.{endpoint}.durability")
-    if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
-        raise ConfigError(f"must be an integer >= 1, got {depth!r}", key=f"qos.{endpoint}.depth")
+    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= MAX_DEPTH:
+        raise ConfigError(f"must be an integer from 1 to {MAX_DEPTH}, got {depth!r}", key=f"qos.{endpoint}.depth")
+    if history not in HISTORIES:
+        raise ConfigError(f"must be one of {HISTORIES}, got {history!r}", key=f"qos.{endpoint}.history")
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST,
+        history=HistoryPolicy.KEEP_LAST if history == "keep_last" else HistoryPolicy.KEEP_ALL,
         depth=int(depth),
         reliability={"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT,
                      "system_default": ReliabilityPolicy.SYSTEM_DEFAULT}[rel],
@@ -85,5 +93,10 @@ def declare_qos(node, endpoint: str, defaults: QosDefaults):
     dur = declare(node, f"{prefix}.durability", defaults.durability, f"QoS durability of '{endpoint}'",
                   choices=DURABILITIES, resolve=str.lower)
     depth = declare(node, f"{prefix}.depth", defaults.depth, f"QoS history depth of '{endpoint}' (KEEP_LAST)",
-                    minimum=1)
-    return qos_profile(rel, dur, depth, endpoint)
+                    minimum=1, maximum=MAX_DEPTH)
+    history = "keep_last"
+    if defaults.history is not None:
+        history = declare(node, f"{prefix}.history", defaults.history,
+                          f"QoS history of '{endpoint}' (keep_all: no sample replaced, losses counted)",
+                          choices=HISTORIES, resolve=str.lower)
+    return qos_profile(rel, dur, depth, endpoint, history)

@@ -15,6 +15,7 @@ import pytest
 from tactile_descriptors_ros.core.aggregation import describe_window
 from tactile_descriptors_ros.core.descriptors import Quality
 from tactile_descriptors_ros.core.learning import OnlineClassifier
+from tactile_descriptors_ros.core.model_store import load_model, save_model
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.core.windowing import CellChunk, Windower
 from tactile_descriptors_ros.errors import ModelError
@@ -161,7 +162,7 @@ def _trained(labels=("a", "b")) -> OnlineClassifier:
 @pytest.mark.parametrize("target", ["fsync", "replace"])
 def test_full_disk_while_saving_keeps_the_previous_model(tmp_path, monkeypatch, target):
     path = tmp_path / "model.json"
-    _trained(("a",)).save(path)
+    save_model(_trained(("a",)), path)
     before = path.read_bytes()
 
     def enospc(*args, **kwargs):
@@ -169,24 +170,25 @@ def test_full_disk_while_saving_keeps_the_previous_model(tmp_path, monkeypatch, 
 
     monkeypatch.setattr(os, target, enospc)
     with pytest.raises(ModelError, match="No space left"):
-        _trained(("a", "b", "c")).save(path)
+        save_model(_trained(("a", "b", "c")), path)
     monkeypatch.undo()
     assert path.read_bytes() == before
-    assert OnlineClassifier.load(path).classes == ["a"]
-    assert [p.name for p in tmp_path.iterdir()] == ["model.json"]   # no temporary left behind
+    assert load_model(path).classes == ["a"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json", "model.json.lock"]  # no temp file left
 
 
 _WORKER = textwrap.dedent("""
     import sys
     import numpy as np
     from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.model_store import save_model
     path = sys.argv[1]
     rng = np.random.default_rng(0)
     clf = OnlineClassifier([f"f{i}" for i in range(8)])
     i = 0
     while True:
         clf.learn(rng.standard_normal(8), f"class_{i}")
-        clf.save(path)
+        save_model(clf, path)
         print(i, flush=True)   # the save of class_<i> has returned
         i += 1
 """)
@@ -211,6 +213,6 @@ def test_sigkill_while_learning_loses_no_saved_label(tmp_path):
             proc.wait(timeout=10)
             proc.stdout.close()
         assert proc.returncode == -signal.SIGKILL
-        model = OnlineClassifier.load(path)                   # never a torn file
+        model = load_model(path)                   # never a torn file
         assert {f"class_{i}" for i in acked} <= set(model.classes)
         assert model.version >= len(acked)

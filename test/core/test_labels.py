@@ -227,3 +227,165 @@ def test_stamp_order_reset_drops_waiting_labels_counted_and_bad_wait_is_refused(
     for bad in (-1.0, float("inf"), float("nan"), True):
         with pytest.raises(ConfigError, match="label_wait_s"):
             StampOrder(p, lambda eid: eid, lambda d: None, wait_s=bad)
+
+
+# ------------------------------------------------------- a hostile or careless domain
+def test_class_names_are_nfkc_normalised_and_controls_and_mixed_alphabets_refused():
+    p = LabelProtocol()
+    for eid in range(1, 8):
+        p.add_descriptor(eid, f"d{eid}")
+    assert (p.add_label(1, "ｃｏｒｋ").class_name, p.counts["labels_learned"]) == ("cork", 1)  # fullwidth: cork
+    for eid, name in ((2, "cork\x00felt"), (3, "\u202ecork"), (4, "\u0441ork"), (5, "cork\u200b")):
+        d = p.add_label(eid, name)  # NUL, a bidi override, a Cyrillic es in Latin, a zero-width space
+        assert (d.action, d.reason) == (REFUSED, "bad_class_name"), name
+    assert p.add_label(6, "日本語テキスト").action == LEARN and p.add_label(7, " Ölfarbe ").class_name == "Ölfarbe"
+
+
+def test_a_new_class_beyond_max_classes_is_refused_counted():
+    p = LabelProtocol(max_classes=3)
+    p.known_classes(["cork", "felt"])  # a loaded model's
+    for eid in range(1, 6):
+        p.add_descriptor(eid, f"d{eid}")
+    assert p.add_label(1, "steel").action == LEARN
+    d = p.add_label(2, "wood")
+    assert (d.action, d.reason) == (REFUSED, "too_many_classes") and "max_classes (3)" in d.message
+    assert p.add_label(3, "cork").action == LEARN  # a known class is always taken
+    assert p.add_label(9, "glass").reason == "too_many_classes"  # a held label would promise a class too
+
+
+def test_one_spoofed_huge_exploration_id_switches_nothing_off():
+    p = LabelProtocol()
+    for eid in (1, 2, 3):
+        p.add_descriptor(eid, f"d{eid}")
+    assert p.add_descriptor(2**63 - 1, "spoof") == [] and p.counts["exploration_id_out_of_range"] == 1
+    assert p.add_label(5, "cork").action == HELD  # still early, not "too far behind"
+    p.add_descriptor(4, "d4")
+    (d,) = p.add_descriptor(5, "d5")
+    assert (d.action, d.item) == (LEARN, "d5")
+    far = p.add_label(5 + 1001, "felt")
+    assert (far.action, far.reason) == (REFUSED, "exploration_id_too_far")
+    # a window node restarted with other ids: two in a row rebase, and labels work there again
+    assert p.add_descriptor(50_000, "r1") == [] and p.add_descriptor(50_001, "r2") == []
+    assert p.counts["exploration_ids_rebased"] == 1
+    assert p.add_label(50_003, "glass").action == HELD and p.add_label(50_001, "glass").action == LEARN
+
+
+def test_held_labels_expire_by_time_as_well_as_by_id():
+    p = LabelProtocol(horizon=100, hold_s=10.0)
+    p.add_descriptor(1, "d1", now_s=0.0)
+    for eid in range(2, 102):  # labels for 100 explorations that never come fill the hold
+        assert p.add_label(eid, "cork", now_s=1.0).action == HELD
+    assert p.add_label(102, "felt", now_s=2.0).reason == "held_full"
+    assert p.expire(10.9) == []
+    expired = p.expire(11.0)
+    assert len(expired) == 100 and {d.reason for d in expired} == {"label_expired"} and p.held == 0
+    assert "10 s" in expired[0].message
+    assert p.add_label(3, "felt", now_s=12.0).action == HELD  # early labels work again
+
+
+def test_decisions_carry_the_labels_token_through_a_hold():
+    p = LabelProtocol()
+    p.add_descriptor(1, "d1")
+    assert p.add_label(2, "cork", token="call-7").token == "call-7"
+    (d,) = p.add_descriptor(2, "d2")
+    assert (d.action, d.token) == (LEARN, "call-7")
+
+
+@pytest.mark.parametrize("bad", [
+    {"horizon": 2**62}, {"max_classes": 0}, {"max_id_step": 2**62}, {"hold_s": float("inf")},
+    {"hold_s": float("nan")}, {"hold_s": 1e300}, {"max_class_name_chars": 10**6}])
+def test_every_protocol_setting_is_checked_completely(bad):
+    with pytest.raises(ConfigError):
+        LabelProtocol(**bad)
+
+
+@pytest.mark.parametrize("bad", [{"wait_s": 1e300}, {"wait_s": float("nan")}, {"jump_s": 0.0},
+                                 {"jump_s": float("inf")}])
+def test_every_stamp_order_setting_is_checked_completely(bad):
+    with pytest.raises(ConfigError):
+        StampOrder(LabelProtocol(), lambda d: d, lambda d: None, **bad)
+
+
+# ----------------------------------------------------------- predictions at once
+def _race(hold: bool) -> tuple[list, list, list]:
+    """Exploration 2's label overtaken by exploration 3's descriptor; (predicted on arrival, predicted, learned)."""
+    predictions, learned = [], []
+    p = LabelProtocol()
+    order = StampOrder(p, lambda eid: predictions.append(eid) or eid,
+                       lambda d: learned.append((d.item, d.class_name)) if d.action == LEARN else None,
+                       wait_s=30.0, hold_descriptors=hold)
+    order.add_descriptor(1, 2 * _S, 1, 0.0)
+    order.add_label(0, "cork", 0, 0.1)            # exploration 1 labelled: labels are being given
+    order.add_descriptor(2, 12 * _S, 2, 1.0)
+    order.add_descriptor(3, 22 * _S, 3, 2.0)     # exploration 2's label is due, and not here yet
+    at_arrival = list(predictions)
+    order.add_label(0, "felt", 13 * _S, 3.0)      # stamped after 2 ended, before 3 ended
+    return at_arrival, predictions, learned
+
+
+def test_immediate_prediction_never_waits_and_the_late_label_still_teaches_its_exploration():
+    """Exploration 1's label (id 0, stamped after 1 ended) reaches the node after exploration 2's descriptor:
+    predicted on arrival, exploration 2 does not wait for it, and the label still teaches exploration 1."""
+    runs = {hold: _race(hold) for hold in (False, True)}
+    at_arrival, predictions, learned = runs[False]
+    assert at_arrival == [1, 2, 3] and learned == [(1, "cork"), (2, "felt")]
+    at_arrival, predictions, learned = runs[True]  # stamp order: 3 waits for the label due before it
+    assert at_arrival == [1, 2] and predictions == [1, 2, 3] and learned == [(1, "cork"), (2, "felt")]
+
+
+# ------------------------------------------------------------------ jumps back
+def _session(first_id: int, ids_from_bag: bool, n: int = 5) -> list[tuple]:
+    """A bag's explorations and labels: exploration k ends at 10 k + 2 s, its label half a second later
+    (id 0, or the recorded id when ``ids_from_bag``)."""
+    events = []
+    for k in range(1, n + 1):
+        events.append(("d", first_id + k - 1, (10 * k + 2) * _S))
+        events.append(("l", k if ids_from_bag else 0, (10 * k + 2) * _S + _S // 2, f"class{k}"))
+    return events
+
+
+@pytest.mark.parametrize("label_first", [False, True])
+@pytest.mark.parametrize("hold", [False, True])
+def test_a_replay_started_again_is_a_new_session_and_its_labels_teach_the_new_explorations(label_first, hold):
+    """The same bag twice through live nodes: the window node's ids go on (6..10), the stamps jump back.
+    Every second-pass label (id 0, stamped) teaches its second-pass exploration, whether the first label or
+    the first descriptor of the second pass comes first."""
+    first, second = _session(1, False), _session(6, False)
+    if label_first:  # the second pass's first label overtakes its descriptor
+        second[0], second[1] = second[1], second[0]
+    predictions, learned = [], []
+    p = LabelProtocol()
+    order = StampOrder(p, lambda eid: predictions.append(eid) or eid,
+                       lambda d: learned.append((d.item, d.class_name)) if d.action == LEARN else None,
+                       wait_s=30.0, hold_descriptors=hold)
+    now = 0.0
+    for ev in first + second:
+        now += 0.1
+        if ev[0] == "d":
+            order.add_descriptor(ev[1], ev[2], ev[1], now)
+        else:
+            order.add_label(ev[1], ev[3], ev[2], now)
+    order.poll(now + 100)
+    assert learned == [(k, f"class{k}") for k in range(1, 6)] + [(k + 5, f"class{k}") for k in range(1, 6)]
+    assert order.counts["clock_jumps_back"] == 1 and predictions == list(range(1, 11))
+    refused = {k for k in p.counts if k in ("duplicate_label", "conflicting_label", "unknown_exploration")}
+    assert refused == set()
+
+
+def test_a_bag_of_descriptors_and_explicit_id_labels_looped_teaches_both_passes():
+    """A bag holding the descriptors (ids 1..5) and labels naming them, looped into the classifier: the second
+    pass's labels teach the second pass's descriptors instead of being refused as duplicates."""
+    learned = []
+    p = LabelProtocol()
+    order = StampOrder(p, lambda eid: eid, lambda d: learned.append((d.item, d.class_name))
+                       if d.action == LEARN else None, wait_s=30.0)
+    now = 0.0
+    for ev in _session(1, True) + _session(1, True):
+        now += 0.1
+        if ev[0] == "d":
+            order.add_descriptor(ev[1], ev[2], ev[1], now)
+        else:
+            order.add_label(ev[1], ev[3], ev[2], now)
+    order.poll(now + 100)
+    assert learned == [(k, f"class{k}") for k in range(1, 6)] * 2
+    assert p.counts["duplicate_label"] == 0 and order.counts["clock_jumps_back"] == 1

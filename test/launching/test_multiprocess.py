@@ -17,7 +17,8 @@ def test_launcher_runs_the_simulated_graph_and_predictions_learn(tmp_path):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from tactile_descriptors_msgs.msg import Label, Prediction
+    from tactile_descriptors_msgs.msg import Prediction
+    from tactile_descriptors_msgs.srv import LearnLabel
     from tactile_descriptors_ros.launching.graph import build_graph
     from tactile_descriptors_ros.launching.processes import GraphProcesses, localhost_environment
 
@@ -33,7 +34,7 @@ def test_launcher_runs_the_simulated_graph_and_predictions_learn(tmp_path):
     qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     preds: list = []
     node.create_subscription(Prediction, "tactile/prediction", preds.append, qos)
-    labels = node.create_publisher(Label, "tactile/label", qos)
+    client = node.create_client(LearnLabel, "/classifier_node/label")
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(node)
     procs.start()
@@ -48,11 +49,20 @@ def test_launcher_runs_the_simulated_graph_and_predictions_learn(tmp_path):
         assert list(first.class_names) == [] and len(first.scores) == 0
         t_end = first.window_end.sec + first.window_end.nanosec * 1e-9
         assert 1.0 < t_end < 75.0  # simulated sensor time (stamp_source device): inside the scene
-        labels.publish(Label(exploration_id=first.exploration_id, class_name="steel"))
-        while time.monotonic() < deadline and len(preds) < 2:
+        # ~/label answers once the label is learned and saved: the test waits for that event, then for a
+        # prediction made with the model that learned it (one already in flight may still arrive first)
+        assert client.wait_for_service(timeout_sec=90.0), "no /classifier_node/label service"
+        answer = client.call_async(LearnLabel.Request(exploration_id=first.exploration_id, class_name="steel"))
+        while time.monotonic() < deadline and not answer.done() and not procs.exited():
             ex.spin_once(timeout_sec=0.1)
-        assert len(preds) >= 2, "no second prediction"
-        second = preds[1]
+        assert answer.done(), f"the label was not answered: {[n.lines[-5:] for n in procs.nodes]}"
+        result = answer.result()
+        assert (result.success, result.saved, result.exploration_id, result.model_version) == \
+            (True, True, first.exploration_id, 1), result
+        while time.monotonic() < deadline and not any(p.updates >= 1 for p in preds) and not procs.exited():
+            ex.spin_once(timeout_sec=0.1)
+        second = next((p for p in preds if p.updates >= 1), None)
+        assert second is not None, "no prediction with the learned model"
         assert second.exploration_id > first.exploration_id
         assert second.has_model and second.class_name == "steel" and list(second.class_names) == ["steel"]
         assert second.updates == 1 and len(second.scores) == 1

@@ -61,7 +61,7 @@ def _describe(g, eids, rng) -> None:
 
 
 def test_a_burst_of_1000_labels_is_learned_completely_and_durably(classifier):
-    from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.model_store import load_model
 
     g = classifier
     rng = np.random.default_rng(0)
@@ -73,7 +73,7 @@ def test_a_burst_of_1000_labels_is_learned_completely_and_durably(classifier):
     assert node.labels.counts["labels_learned"] == 1000 and node.model.pa.updates == 1000
     refused = {k: v for k, v in node.labels.counts.items() if k not in ("labels_learned", "early_labels")}
     assert refused == {}
-    assert OnlineClassifier.load(g["model"]).version == 1000   # every one of them saved
+    assert load_model(g["model"]).version == 1000   # every one of them saved
 
 
 def test_held_label_expires_and_bad_labels_are_counted_in_diagnostics(classifier):
@@ -114,7 +114,8 @@ def _stamp_order_run(ros_context, tmp_path, run: str, descriptor_first: bool, wa
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
 
     c = ClassifierNode(context=ros_context, namespace=f"/{run}", parameter_overrides=[
-        Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s)])
+        Parameter("model_path", value=str(tmp_path / f"{run}.json")), Parameter("label_wait_s", value=wait_s),
+        Parameter("prediction_order", value="stamp")])
     io, ex, desc, labels, preds = _wired(ros_context, c, namespace=f"/{run}")
     try:
         assert spin_until(ex, lambda: desc.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1

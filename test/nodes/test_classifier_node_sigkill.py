@@ -86,7 +86,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
-    from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.model_store import load_model as load_saved
 
     rng = np.random.default_rng(7)
     model_path = tmp_path / "model.json"
@@ -132,7 +132,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         """The saved model's version: the file with its journal replayed (-1 before the first save)."""
         if _file_state(model_path) is None:
             return -1
-        return OnlineClassifier.load(model_path).version
+        return load_saved(model_path).version
 
     first = _Node(ns, model_path, env, tmp_path / "first.log", load_model=False)
     second: _Node | None = None
@@ -169,7 +169,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         # ---- the file after the kill: valid JSON, loads, self-consistent, holds every confirmed label
         state = _file_state(model_path)
         assert state is not None
-        model = OnlineClassifier.load(model_path)
+        model = load_saved(model_path)
         v = model.version
         assert v in (_N_CONFIRMED, last), v                      # nothing saved was lost, nothing invented
         assert model.pa.updates == v and len(model.classes) == v
@@ -201,7 +201,7 @@ def test_classifier_node_sigkilled_after_a_label_reloads_every_saved_label(tmp_p
         assert spin_until(lambda: any(p.exploration_id == probe + 1 for p in preds), 60.0, second)
         p2 = next(p for p in preds if p.exploration_id == probe + 1)
         assert list(p2.class_names) == model.classes + ["after_restart"] and p2.updates == v + 1
-        again = OnlineClassifier.load(model_path)
+        again = load_saved(model_path)
         assert again.classes == model.classes + ["after_restart"] and again.version == v + 1
     finally:
         first.stop()

@@ -182,38 +182,49 @@ def _classifier(ros_context, name="classifier_node", **values):
     return ClassifierNode(name, context=ros_context, parameter_overrides=_params(**values))
 
 
-def test_each_robot_has_its_own_model_file_and_the_parameter_reads_it(ros_context, tmp_path, monkeypatch):
+def test_each_robot_and_namespace_has_its_own_model_folder_and_the_parameter_reads_it(ros_context, tmp_path,
+                                                                                       monkeypatch):
     monkeypatch.setenv("ROS_HOME", str(tmp_path))
+    from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+
     hand, nao = _classifier(ros_context, robot="shadow_hand"), _classifier(ros_context, robot="nao")
+    left = ClassifierNode(context=ros_context, namespace="/left", parameter_overrides=_params(robot="shadow_hand"))
+    right = ClassifierNode(context=ros_context, namespace="/right", parameter_overrides=_params(robot="shadow_hand"))
     try:
-        want_hand = tmp_path / "tactile_descriptors_ros" / "shadow_hand" / "classifier_node.json"
-        want_nao = tmp_path / "tactile_descriptors_ros" / "nao" / "classifier_node.json"
-        assert hand.model_path == want_hand and nao.model_path == want_nao
-        assert hand.get_parameter("model_path").value == str(want_hand)
-        assert nao.get_parameter("model_path").value == str(want_nao)
+        base = tmp_path / "tactile_descriptors_ros"
+        want = {hand: base / "shadow_hand" / "classifier_node", nao: base / "nao" / "classifier_node",
+                left: base / "shadow_hand" / "left" / "classifier_node",
+                right: base / "shadow_hand" / "right" / "classifier_node"}
+        for node, folder in want.items():
+            assert node.model_path == folder  # one model file per descriptor layout inside, opened when one comes
+            assert node.get_parameter("model_path").value == f"{folder}/"
         assert _describe(hand, "model_path").read_only
     finally:
-        hand.destroy_node()
-        nao.destroy_node()
+        for node in (hand, nao, left, right):
+            node.destroy_node()
+    # a folder of one's own: a model_path ending in /
+    mine = _classifier(ros_context, model_path=f"{tmp_path}/mine/")
+    try:
+        assert mine.model_path == tmp_path / "mine" and mine.given_path is None
+        assert mine.get_parameter("model_path").value == f"{tmp_path}/mine/"
+    finally:
+        mine.destroy_node()
 
 
 def test_reset_of_one_robot_keeps_the_other_robots_model(ros_context, tmp_path, monkeypatch):
     from std_srvs.srv import Trigger
 
-    monkeypatch.setenv("ROS_HOME", str(tmp_path))
-    hand_file = tmp_path / "tactile_descriptors_ros" / "shadow_hand" / "classifier_node.json"
-    hand_file.parent.mkdir(parents=True)
-    hand = _classifier(ros_context, robot="shadow_hand")
-    try:
-        from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.learning import OnlineClassifier
+    from tactile_descriptors_ros.core.model_store import layout_file_name, save_model
+    from tactile_descriptors_ros.nodes.classifier_node import default_model_folder
 
-        model = OnlineClassifier(["index/A_pac", "index/A_e"])
-        model.learn([1.0, 2.0], "cork")
-        model.save(hand_file)
-    finally:
-        hand.destroy_node()
+    monkeypatch.setenv("ROS_HOME", str(tmp_path))
+    model = OnlineClassifier(["index/A_pac", "index/A_e"])
+    model.learn([1.0, 2.0], "cork")
+    hand_file = default_model_folder("classifier_node", "/", "shadow_hand") / layout_file_name(model.labels)
+    save_model(model, hand_file)
     before = hand_file.read_bytes()
-    nao = _classifier(ros_context, robot="nao")
+    nao = _classifier(ros_context, robot="nao", enable_reset=True)
     try:
         assert nao.model is None  # the hand's model is not loaded by the NAO
         resp = nao._srv_reset(Trigger.Request(), Trigger.Response())

@@ -8,6 +8,8 @@ import pytest
 from node_helpers import BiotacStream, spin_until
 
 from tactile_descriptors_ros.core.learning import OnlineClassifier
+from tactile_descriptors_ros.core.model_store import load_model
+from tactile_descriptors_ros.errors import ModelError
 
 pytestmark = pytest.mark.ros
 
@@ -26,7 +28,8 @@ def graph(ros_context, tmp_path):
     w = WindowNode(context=ros_context, parameter_overrides=[
         Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
         Parameter("qos.frames.reliability", value="reliable")])
-    c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model))])
+    c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model)),
+                                                                 Parameter("enable_reset", value=True)])
     io = rclpy.create_node("io", context=ros_context)
     out = {"pred": [], "desc": []}
     io.create_subscription(Prediction, "tactile/prediction", out["pred"].append, 50)
@@ -39,6 +42,7 @@ def graph(ros_context, tmp_path):
     spin_until(ex, lambda: frames.get_subscription_count() >= 1 and labels.get_subscription_count() >= 1, 10)
     yield {"ex": ex, "window": w, "classifier": c, "frames": frames, "labels": labels, "out": out, "model": model,
            "Label": Label}
+    c.close()
 
 
 def _explore(g, stream, freq_hz):
@@ -66,7 +70,7 @@ def test_predict_then_learn_online(graph):
     assert list(second.class_names) == ["cork"] and len(second.scores) == 1
     g["labels"].publish(g["Label"](exploration_id=0, class_name="felt"))  # 0 = the most recent
     assert spin_until(g["ex"], lambda: g["classifier"].model.classes == ["cork", "felt"])
-    saved = OnlineClassifier.load(g["model"])  # durable after the update (file and journal)
+    saved = load_model(g["model"])  # durable after the update (file and journal)
     assert saved.classes == ["cork", "felt"] and saved.pa.updates == 2
     third = _explore(g, stream, 40.0)
     assert list(third.class_names) == ["cork", "felt"] and third.model_version == 2
@@ -97,14 +101,15 @@ def test_save_reset_and_reload(graph, ros_context):
     g["labels"].publish(g["Label"](exploration_id=0, class_name="cork"))
     assert spin_until(g["ex"], lambda: c.model.pa.updates == 1)
     assert c._srv_save(Trigger.Request(), Trigger.Response()).success
-    again = ClassifierNode("classifier_reloaded", context=ros_context,
-                           parameter_overrides=[Parameter("model_path", value=str(g["model"]))])
-    assert again.model.classes == ["cork"]
-    again.destroy_node()
+    assert load_model(g["model"]).classes == ["cork"] and not g["model"].with_name("model.json.journal").exists()
+    # a second node on the same file is refused, naming the first (two writers would lose labels)
+    with pytest.raises(ModelError, match=r"in use by /classifier_node \(pid "):
+        ClassifierNode("classifier_reloaded", context=ros_context,
+                       parameter_overrides=[Parameter("model_path", value=str(g["model"]))])
     resp = c._srv_reset(Trigger.Request(), Trigger.Response())
     assert resp.success and c.model.classes == []
     assert json.loads(g["model"].read_text())["pa"]["classes"] == []
-    assert OnlineClassifier.load(g["model"]).classes == []
+    assert load_model(g["model"]).classes == []
 
 
 def test_layout_mismatch_refused(graph, tmp_path, ros_context):

@@ -3,13 +3,13 @@
 The classifier node makes every update durable before it reports it.  This
 measures, on a model of ``classes`` classes, the wall time per label of
 
-* the journal (:class:`~tactile_descriptors_ros.core.learning.ModelStore`:
+* the journal (:class:`~tactile_descriptors_ros.core.model_store.ModelStore`:
   one synced line per update, written over zeros reserved ahead of it, so
   ``fdatasync`` commits no metadata; compaction and extensions included when
   they happen),
 * the same journal appending without a reserve (``reserve_bytes=0``: every
   sync also commits the file's new size), and
-* the whole-file atomic rewrite (:meth:`OnlineClassifier.save`, what every
+* the whole-file atomic rewrite (:func:`~tactile_descriptors_ros.core.model_store.save_model`, what every
   label cost before the journal),
 
 in the same run and the same folder, so the ratio holds on a loaded machine
@@ -26,12 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_descriptors_ros.core.learning import (
-    RECOMMENDED_PA_AVERAGE,
-    RECOMMENDED_PA_UPDATE,
-    ModelStore,
-    OnlineClassifier,
-)
+from tactile_descriptors_ros.core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
+from tactile_descriptors_ros.core.model_store import ModelStore, load_model, save_model
 
 __all__ = ["measure_model_save", "format_model_save"]
 
@@ -103,20 +99,20 @@ def measure_model_save(classes: int = 1000, labels: int = 50, features: int = 8,
         floor.close()
         for m in methods:
             stores[m].close()
-            if OnlineClassifier.load(stores[m].path).version != clfs[m].version:
+            if load_model(stores[m].path).version != clfs[m].version:
                 raise RuntimeError(f"{m}: the saved model lacks labels")
         clf = _model(classes, features, rng)
         path = Path(tmp) / "rewrite.json"
-        clf.save(path)
+        save_model(clf, path)
         for k in range(labels):
             v = rng.uniform(0.5, 5.0, features)
             clf.observe(v)
             clf.learn(v, f"material_{k % classes}")
             start = time.perf_counter()
-            clf.save(path)
+            save_model(clf, path)
             results["rewrite"].append(time.perf_counter() - start)
         sizes["rewrite"] = path.stat().st_size
-        if OnlineClassifier.load(path).version != clf.version:
+        if load_model(path).version != clf.version:
             raise RuntimeError("rewrite: the saved model lacks labels")
         journal, rewrite = _summary(results["journal"]), _summary(results["rewrite"])
     return {"classes": classes, "labels": labels, "features": features, "model_file_bytes": sizes["rewrite"],

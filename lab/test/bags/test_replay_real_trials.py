@@ -10,8 +10,9 @@ import pytest
 pytestmark = [pytest.mark.ros, pytest.mark.realdata]
 
 
-def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0):
-    """Replay ``bag`` into fresh window + classifier nodes; return (descriptors, predictions, model file bytes)."""
+def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0, passes=1, after_pass=None):
+    """Replay ``bag`` into fresh window + classifier nodes (``passes`` times, ``after_pass(classifier, k)`` after
+    each); return (descriptors, predictions, model file bytes)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -28,7 +29,9 @@ def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0):
         # the node's work per window changes the timing between labels and descriptors
         Parameter("descriptor.groups", value=["paper"])])
     c = ClassifierNode(context=ros_context, parameter_overrides=[
-        Parameter("model_path", value=str(model_path)), Parameter("load_model", value=False)])
+        Parameter("model_path", value=str(model_path)), Parameter("load_model", value=False),
+        # predictions in stamp order: a replay gives the same bits (the default predicts on arrival)
+        Parameter("prediction_order", value="stamp")])
     io = rclpy.create_node("graph_probe", context=ros_context)
     desc, pred = [], []
     io.create_subscription(Descriptor, "tactile/descriptor",
@@ -56,17 +59,23 @@ def _run_graph(ros_context, bag, model_path, n_explorations, rate=8.0):
     for t in spins:
         t.start()
     try:
-        # discovery on a loaded machine can take seconds: wait for it (a generous bound), never play unheard
-        player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=60), context=ros_context)
-        report = player.play()
-        player.destroy()
-        labels = report.published["/tactile/label"]
-        # every exploration described and predicted, and every label received (learned in the same callback)
-        end = time.monotonic() + 60
-        while time.monotonic() < end and not (len(desc) == len(pred) == n_explorations
-                                              and c.counts["labels_received"] == labels):
-            stop.wait(0.05)
-        assert (len(desc), len(pred), c.counts["labels_received"]) == (n_explorations, n_explorations, labels)
+        labels = 0
+        for k in range(1, passes + 1):
+            # discovery on a loaded machine can take seconds: wait for it (a generous bound), never play unheard
+            player = Player(str(bag), PlayOptions(rate=rate, wait_for_subscribers_s=60), context=ros_context)
+            report = player.play()
+            player.destroy()
+            labels += report.published["/tactile/label"]
+            # every exploration described and predicted, and every label received, then learned or refused
+            end = time.monotonic() + 60
+            while time.monotonic() < end and not (len(desc) == len(pred) == k * n_explorations
+                                                  and c.counts["labels_received"] == labels
+                                                  and c.labels.held == 0 and c.order.waiting == 0):
+                stop.wait(0.05)
+            assert (len(desc), len(pred), c.counts["labels_received"]) == \
+                (k * n_explorations, k * n_explorations, labels)
+            if after_pass is not None:
+                after_pass(c, k)
     finally:
         stop.set()
         for t in spins:
@@ -96,3 +105,30 @@ def test_replaying_one_bag_twice_gives_identical_predictions(ros_context, tmp_pa
     assert first[1] == second[1]  # predictions and scores bit-identical
     assert first[2] == second[2]  # the final model file, byte for byte
     assert not (tmp_path / "m1.json.journal").exists()
+
+
+def test_a_bag_looped_through_the_same_nodes_teaches_each_pass_its_own_explorations(ros_context, tmp_path,
+                                                                                    biotac_data_dir):
+    """The same bag played twice into one window node and one classifier: the stamps jump back, the window node's
+    exploration ids go on.  Each pass's labels (id 0, stamped after their trial) are learned on that pass's
+    explorations, in the bag's material order, and none is refused as a duplicate."""
+    from tactile_descriptors_lab.datasets.importer import ImportOptions, import_biotac_slide
+
+    bag = tmp_path / "real"
+    report = import_biotac_slide(biotac_data_dir, bag, trials=[1, 2], materials=[2, 12, 20],
+                                 options=ImportOptions(max_frames=300))
+    n = len(report.trials)
+    learned = {}
+
+    def record(c, k):
+        learned[k] = sorted((kept.exploration_id, kept.learned_as) for kept in c.labels._kept.values())
+        learned[f"counts{k}"] = dict(c.labels.counts) | dict(c.order.counts)
+
+    _run_graph(ros_context, bag, tmp_path / "looped.json", n, passes=2, after_pass=record)
+    names = [t.material_name for t in report.trials]
+    assert learned[1] == list(zip(range(1, n + 1), names))
+    assert learned[2] == list(zip(range(n + 1, 2 * n + 1), names))  # the second pass, not the first one's
+    counts = learned["counts2"]
+    assert counts["labels_learned"] == 2 * n and counts["clock_jumps_back"] == 1
+    assert not {k: v for k, v in counts.items() if k in ("duplicate_label", "conflicting_label",
+                                                         "unknown_exploration") and v}
