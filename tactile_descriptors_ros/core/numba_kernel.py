@@ -134,6 +134,12 @@ _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
 # Sums of exact integers (every partial sum below 2**53, which is checked
 # before they are used) are the same in any order: reassociation (fastmath)
 # lets LLVM vectorise them without changing a bit.
+#
+# Indexing: numba wraps a negative signed index around (x[-1] is the last
+# element), a branch per access that LLVM cannot prove away for x[i - 1] or
+# table[a - lo]; it then gathers where it could load, or does not vectorise.
+# Lagged rows are therefore read through shifted slices (x[1:], x[:n - 1])
+# and computed indices, never negative here, are cast to np.uint64.
 _jit_exact = numba.njit(cache=True, nogil=True, boundscheck=False, fastmath=True)
 
 
@@ -154,7 +160,7 @@ def cell_bounds(x, lo, hi):  # pragma: no cover - compiled
 def _moments_row(x, out):  # pragma: no cover - compiled
     """Sum, sum of squares, lag-1 and lag-2 products, x[0], x[1], x[n-2], x[n-1], min, max (n >= 3).
 
-    Three short loops vectorise; one loop with all four sums does not (twice as slow).
+    Three short loops vectorise (the lags over shifted slices); one loop with all four sums does not.
     """
     n = x.shape[0]
     s1 = 0.0
@@ -168,11 +174,15 @@ def _moments_row(x, out):  # pragma: no cover - compiled
         lo = min(lo, x[i])
         hi = max(hi, x[i])
     r1 = 0.0
-    for i in range(1, n):
-        r1 += float(x[i]) * float(x[i - 1])
+    a1 = x[1:]
+    b1 = x[:n - 1]
+    for i in range(n - 1):
+        r1 += float(a1[i]) * float(b1[i])
     r2 = 0.0
-    for i in range(2, n):
-        r2 += float(x[i]) * float(x[i - 2])
+    a2 = x[2:]
+    b2 = x[:n - 2]
+    for i in range(n - 2):
+        r2 += float(a2[i]) * float(b2[i])
     out[0] = s1
     out[1] = q
     out[2] = r1
@@ -252,20 +262,20 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
         for k in range(n_runs):
             a0 = row[k]
             run_x[k] = a0
-            run_r[k] = table[a0 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)]
     elif length == 2:
         for k in range(n_runs):
             a0 = row[2 * k]
             a1 = row[2 * k + 1]
             run_x[k] = np.int64(a0) + a1
-            run_r[k] = table[a0 - lo] + table[a1 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)]
     elif length == 3:
         for k in range(n_runs):
             a0 = row[3 * k]
             a1 = row[3 * k + 1]
             a2 = row[3 * k + 2]
             run_x[k] = np.int64(a0) + a1 + a2
-            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)] + table[np.uint64(a2 - lo)]
     else:
         for k in range(n_runs):
             a0 = row[4 * k]
@@ -273,7 +283,7 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
             a2 = row[4 * k + 2]
             a3 = row[4 * k + 3]
             run_x[k] = np.int64(a0) + a1 + a2 + a3
-            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo] + table[a3 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)] + table[np.uint64(a2 - lo)] + table[np.uint64(a3 - lo)]
 
 
 @_jit
@@ -396,6 +406,8 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     n = 0
     length = 0
     regular = False
+    uniform = False
+    contiguous = False
     for c in range(n_cells):
         if c == 0 or ts.shape[0] > 1 or tv.shape[0] > 1:
             first, n_runs = _hold_runs(tv[min(c, tv.shape[0] - 1)], ts[min(c, ts.shape[0] - 1)],
@@ -404,11 +416,15 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
             if n < 3:
                 return DEGENERATE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
             length = weights[0]
-            regular = length <= 4
+            uniform = True
+            contiguous = True
             for k in range(n_runs):
                 wf[k] = weights[k]
                 if weights[k] != length:
-                    regular = False
+                    uniform = False
+                if slow_index[k] != slow_index[0] + k:
+                    contiguous = False
+            regular = uniform and length <= 4
         for i in range(n_s):
             _moments_row(s[c, i], mom_s[c, i])
             peak_s = max(peak_s, abs(mom_s[c, i, 8]), abs(mom_s[c, i, 9]))
@@ -445,12 +461,22 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 qc |= flat_flag
         # V rows: the held samples, ranked with run-length weights
         for j in range(n_v):
-            lo = np.int64(v[c, j, slow_index[0]])
+            vrow = v[c, j]
+            vkj = vk[j]
+            vfj = vf[j]
+            rvj = rv[j]
+            if contiguous:  # run k holds slow sample s0 + k (every slow sample in the window)
+                seg = vrow[slow_index[0]:slow_index[0] + n_runs]
+                for k in range(n_runs):
+                    vkj[k] = seg[k]
+            else:
+                for k in range(n_runs):
+                    vkj[k] = vrow[slow_index[k]]
+            lo = vkj[0]
             hi = lo
             for k in range(n_runs):
-                a = np.int64(v[c, j, slow_index[k]])
-                vk[j, k] = a
-                vf[j, k] = a
+                a = vkj[k]
+                vfj[k] = a
                 lo = min(lo, a)
                 hi = max(hi, a)
             span = hi - lo + 1
@@ -460,22 +486,31 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 counts = np.zeros(span, dtype=np.int64)
                 table = np.zeros(span, dtype=np.int64)
             counts[:span] = 0
+            if uniform:  # every run as long: counts of values, times the length
+                for k in range(n_runs):
+                    counts[np.uint64(vkj[k] - lo)] += 1
+                cum = 0
+                for b in range(span):
+                    cnt = counts[b] * length
+                    cum += cnt
+                    table[b] = 2 * cum - cnt - n
+            else:
+                for k in range(n_runs):
+                    counts[np.uint64(vkj[k] - lo)] += weights[k]
+                cum = 0
+                for b in range(span):
+                    cnt = counts[b]
+                    cum += cnt
+                    table[b] = 2 * cum - cnt - n
             for k in range(n_runs):
-                counts[vk[j, k] - lo] += weights[k]
-            cum = 0
-            for b in range(span):
-                cnt = counts[b]
-                cum += cnt
-                table[b] = 2 * cum - cnt - n
+                rvj[k] = table[np.uint64(vkj[k] - lo)]
             for k in range(n_runs):
-                rv[j, k] = table[vk[j, k] - lo]
+                wrv[k] = wf[k] * vfj[k]
+            sums_v[j, 0] = _dot(wf[:n_runs], vfj[:n_runs])
+            sums_v[j, 1] = _dot(wrv[:n_runs], vfj[:n_runs])
             for k in range(n_runs):
-                wrv[k] = wf[k] * vf[j, k]
-            sums_v[j, 0] = _dot(wf[:n_runs], vf[j, :n_runs])
-            sums_v[j, 1] = _dot(wrv[:n_runs], vf[j, :n_runs])
-            for k in range(n_runs):
-                wrv[k] = wf[k] * rv[j, k]
-            sums_v[j, 2] = _dot(wrv[:n_runs], rv[j, :n_runs])
+                wrv[k] = wf[k] * rvj[k]
+            sums_v[j, 2] = _dot(wrv[:n_runs], rvj[:n_runs])
         # S rows: counting ranks, run sums of samples and of ranks, cross sums
         for i in range(n_s):
             row = s[c, i, first:]
@@ -496,7 +531,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 table = np.zeros(span, dtype=np.int64)
             counts[:span] = 0
             for p in range(n):
-                counts[row[p] - lo] += 1
+                counts[np.uint64(row[p] - lo)] += 1
             cum = 0
             rss = 0.0
             for b in range(span):
@@ -515,7 +550,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                     for p in range(p0, p0 + weights[k]):
                         a = row[p]
                         acc += a
-                        accr += table[a - lo]
+                        accr += table[np.uint64(a - lo)]
                     run_x[k] = acc
                     run_r[k] = accr
             if first == 0:
