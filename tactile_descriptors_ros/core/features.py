@@ -100,6 +100,12 @@ def _band_sums(p: np.ndarray, bins: tuple[tuple[int, int], ...]) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=256)
+def _bin_edges(bins: tuple[tuple[int, int], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The first and end bins of :func:`_band_bins` as int64 arrays (for the compiled kernel)."""
+    return (np.array([lo for lo, _ in bins], dtype=np.int64), np.array([hi for _, hi in bins], dtype=np.int64))
+
+
 @functools.lru_cache(maxsize=64)
 def _difference_gain(n: int, rate_hz: float) -> np.ndarray:
     """``|2 sin(pi k / n) rate|^2``: the power gain of the first difference times the rate at bin k."""
@@ -141,11 +147,20 @@ def band_hjorth(vibration: np.ndarray, rate_hz: float, spectrum: np.ndarray | No
     p = power_spectrum(x) if spectrum is None else spectrum
     bins = _band_bins(n, float(rate_hz), vibration_bands(rate_hz))
     g = _difference_gain(n, float(rate_hz))
-    pg = p * g
-    s0 = _band_sums(p, bins)
-    s1 = _band_sums(pg, bins)
-    pg *= g
-    s2 = _band_sums(pg, bins)
+    kernel = fast.kernel_module() if p.dtype == np.float64 and p.size and bins else None
+    if kernel is not None:  # one compiled pass over the spectrum
+        m = p.shape[-1]
+        sums = np.empty((p.size // m, len(bins), 3))
+        lo, hi = _bin_edges(bins)
+        kernel.band_moments(np.ascontiguousarray(p).reshape(-1, m), g, lo, hi, sums)
+        sums = sums.reshape(p.shape[:-1] + (len(bins), 3))
+        s0, s1, s2 = sums[..., 0], sums[..., 1], sums[..., 2]
+    else:
+        pg = p * g
+        s0 = _band_sums(p, bins)
+        s1 = _band_sums(pg, bins)
+        pg *= g
+        s2 = _band_sums(pg, bins)
     with np.errstate(divide="ignore", invalid="ignore"):
         mob = np.where(s0 > 0, np.sqrt(s1 / np.where(s0 > 0, s0, 1.0)), 0.0)
         mob_d = np.where(s1 > 0, np.sqrt(s2 / np.where(s1 > 0, s1, 1.0)), 0.0)

@@ -135,6 +135,13 @@ _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
 # before they are used) are the same in any order: reassociation (fastmath)
 # lets LLVM vectorise them without changing a bit.
 #
+# Sums of floats that are not exact integers change bits when reassociated;
+# where a few roundings do not matter (sums of a power spectrum, all terms
+# >= 0) 'reassoc' alone lets them vectorise, without fastmath's other
+# assumptions (no NaN, no inf: a window with a non-finite sample must give
+# a non-finite value, which the caller drops and reports).
+_jit_reassoc = numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc"})
+#
 # Indexing: numba wraps a negative signed index around (x[-1] is the last
 # element), a branch per access that LLVM cannot prove away for x[i - 1] or
 # table[a - lo]; it then gathers where it could load, or does not vectorise.
@@ -588,36 +595,98 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
 
 
 @_jit
+def _two_pass_moments(row, out):  # pragma: no cover - compiled
+    """:func:`central_moments` of one row in float: the mean, then sums of the centred powers, in row order."""
+    n = row.shape[0]
+    s = 0.0
+    peak = 0.0
+    for i in range(n):
+        v = float(row[i])
+        s += v
+        peak = max(peak, abs(v))
+    mean = s / n
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    for i in range(n):
+        d = float(row[i]) - mean
+        d2 = d * d
+        s2 += d2
+        s3 += d2 * d
+        s4 += d2 * d2
+    out[0] = mean
+    out[1] = s2 / n
+    out[2] = s3 / n
+    out[3] = s4 / n
+    out[4] = peak
+
+
+@_jit_exact
+def _row_sum_bounds(row):  # pragma: no cover - compiled
+    """Exact sum (int64), smallest and largest value of an integer row."""
+    s1 = np.int64(0)
+    lo = np.int64(row[0])
+    hi = lo
+    for i in range(row.shape[0]):
+        a = np.int64(row[i])
+        s1 += a
+        lo = min(lo, a)
+        hi = max(hi, a)
+    return s1, lo, hi
+
+
+@_jit_exact
+def _shifted_power_sums(row, x0):  # pragma: no cover - compiled
+    """Sums of ``y``, ``y^2``, ``y^3``, ``y^4`` with ``y = row - x0``, exact int64 (bounds checked by the caller)."""
+    s1 = np.int64(0)
+    s2 = np.int64(0)
+    s3 = np.int64(0)
+    s4 = np.int64(0)
+    for i in range(row.shape[0]):
+        y = np.int64(row[i]) - x0
+        y2 = y * y
+        s1 += y
+        s2 += y2
+        s3 += y2 * y
+        s4 += y2 * y2
+    return s1, s2, s3, s4
+
+
+@_jit
 def central_moments(x, out):  # pragma: no cover - compiled
     """Per row of integer ``x`` (rows, n >= 1): mean, m2, m3, m4 (biased central moments), max |x| into ``out``.
 
-    Two passes in row order, sequential sums (no reassociation): the
-    ``statistics`` group's skewness and kurtosis without the float copies
-    and temporaries of the numpy formulation (:func:`.features.moments`).
+    From exact integer sums: the row's sum and bounds, then the sums of the
+    powers 1-4 of ``y = x - x0`` with ``x0`` the mean rounded to an
+    integer, exact in int64 while ``n (max |y|)^4 < 2**62``; with
+    ``d = sum(y) / n`` (``|d| <= 1/2``) the central moments are
+    ``m2 = S2/n - d^2``, ``m3 = S3/n - 3 d S2/n + 2 d^3``,
+    ``m4 = S4/n - 4 d S3/n + 6 d^2 S2/n - 3 d^4``: a few roundings of
+    well-scaled terms, no sum of 2,000 rounded terms, and loops that
+    vectorise (the ``statistics`` group's skewness and kurtosis,
+    :func:`.features.moments`).  Rows whose powers would not be exact take
+    the two float passes (mean, then centred powers).
     """
     n = x.shape[1]
     for r in range(x.shape[0]):
-        s = 0.0
-        peak = 0.0
-        for i in range(n):
-            v = float(x[r, i])
-            s += v
-            peak = max(peak, abs(v))
-        mean = s / n
-        s2 = 0.0
-        s3 = 0.0
-        s4 = 0.0
-        for i in range(n):
-            d = float(x[r, i]) - mean
-            d2 = d * d
-            s2 += d2
-            s3 += d2 * d
-            s4 += d2 * d2
-        out[r, 0] = mean
-        out[r, 1] = s2 / n
-        out[r, 2] = s3 / n
-        out[r, 3] = s4 / n
-        out[r, 4] = peak
+        row = x[r]
+        total, lo, hi = _row_sum_bounds(row)
+        x0 = (2 * total + n) // (2 * n)  # the mean rounded (floor division: half up)
+        span = float(max(hi - x0, x0 - lo))
+        if float(n) * span * span * span * span >= _I64_SAFE:
+            _two_pass_moments(row, out[r])
+            continue
+        s1, s2, s3, s4 = _shifted_power_sums(row, x0)
+        d = float(s1) / n
+        a2 = float(s2) / n
+        a3 = float(s3) / n
+        a4 = float(s4) / n
+        dd = d * d
+        out[r, 0] = float(total) / n
+        out[r, 1] = a2 - dd
+        out[r, 2] = a3 - 3.0 * d * a2 + 2.0 * dd * d
+        out[r, 3] = a4 - 4.0 * d * a3 + 6.0 * dd * a2 - 3.0 * dd * dd
+        out[r, 4] = float(max(abs(lo), abs(hi)))
 
 
 @_jit
@@ -635,3 +704,30 @@ def power_spectrum(xf, w, out):  # pragma: no cover - compiled
             a = xf[r, 2 * k]
             b = xf[r, 2 * k + 1]
             out[r, k] = (a * a + b * b) * w[k]
+
+
+@_jit_reassoc
+def band_moments(p, g, lo, hi, out):  # pragma: no cover - compiled
+    """Spectral moments of bands: ``out[r, b] = sum over k in [lo[b], hi[b]) of p[r, k] (1, g[k], g[k]^2)``.
+
+    ``p`` (rows, bins) is a power spectrum and ``g`` the first difference's
+    gain per bin: the ``bands`` group's Hjorth parameters of each band
+    (:func:`.features.band_hjorth`) in one pass over the spectrum.
+    """
+    for r in range(p.shape[0]):
+        pr = p[r]
+        for b in range(lo.shape[0]):
+            pb = pr[lo[b]:hi[b]]
+            gb = g[lo[b]:hi[b]]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for k in range(pb.shape[0]):
+                pk = pb[k]
+                pg = pk * gb[k]
+                s0 += pk
+                s1 += pg
+                s2 += pg * gb[k]
+            out[r, b, 0] = s0
+            out[r, b, 1] = s1
+            out[r, b, 2] = s2
