@@ -35,6 +35,10 @@ __all__ = [
 ]
 
 
+#: numpy.fft.rfft writes into a given array since numpy 2.0 (pocketfft, as scipy.fft; the same values).
+_RFFT_OUT = np.lib.NumpyVersion(np.__version__) >= "2.0.0"
+
+
 def spectral_length(n: int) -> int:
     """Samples of an ``n``-sample window the spectral features use: the largest fast FFT length ``L <= n``.
 
@@ -53,15 +57,23 @@ def spectral_length(n: int) -> int:
     return int(sfft.prev_fast_len(int(n))) if n >= 1 else 0
 
 
-def power_spectrum(x: np.ndarray) -> np.ndarray:
+def power_spectrum(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """One-sided power spectrum of each signal (last axis), scaled so that a band's sum is its variance share.
 
     Over the signal's last ``L = spectral_length(n)`` samples (:func:`spectral_length`):
-    ``P_k = w_k |X_k|^2 / L^2`` with ``X = rfft`` of those samples (:func:`scipy.fft.rfft`) and ``P_0 = 0``
-    (the mean removed), ``w_k = 2`` for bins that stand for a conjugate pair and 1 for the DC and
+    ``P_k = w_k |X_k|^2 / L^2`` with ``X = rfft`` of those samples
+    (pocketfft through :func:`numpy.fft.rfft`, as :func:`scipy.fft.rfft`) and ``P_0 = 0`` (the mean removed),
+    ``w_k = 2`` for bins that stand for a conjugate pair and 1 for the DC and
     Nyquist bins: ``sum_k P_k`` is the variance of those samples (Parseval),
     and the sum over a band is their variance band-limited to it (an ideal
     band-pass over the window, taken as one period).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., n)
+    out : numpy.ndarray, optional
+        Filled with the spectrum and returned (float64, shape as below);
+        a new array otherwise.
 
     Returns
     -------
@@ -69,20 +81,33 @@ def power_spectrum(x: np.ndarray) -> np.ndarray:
     """
     x = np.asarray(x)
     n = spectral_length(x.shape[-1])
-    X = sfft.rfft(x[..., x.shape[-1] - n:], axis=-1)
-    kernel = fast.kernel_module() if X.size and X.dtype == np.complex128 else None
+    x = x[..., x.shape[-1] - n:]
+    m = n // 2 + 1
+    kernel = fast.kernel_module() if x.size and (x.dtype.kind in "biu" or x.dtype == np.float64) else None
     if kernel is not None:  # one compiled pass, the same operations as below (the live path's cost)
-        out = np.empty(X.shape, dtype=np.float64)
-        m = X.shape[-1]
+        # the samples as float64 and their transform in reused buffers: with scipy's float64 copy of the
+        # counts and its new transform array allocated afresh, a NAO window's spectra took up to twice as long
+        xf = fast.scratch("features.spectrum.x", x.shape, np.float64)
+        np.copyto(xf, x)
+        if _RFFT_OUT:
+            X = np.fft.rfft(xf, axis=-1, out=fast.scratch("features.spectrum.X", x.shape[:-1] + (m,), np.complex128))
+        else:  # numpy < 2 has no out: scipy's transform (the same pocketfft) into a new array
+            X = sfft.rfft(xf, axis=-1, overwrite_x=True)
+        if out is None:
+            out = np.empty(X.shape, dtype=np.float64)
         kernel.power_spectrum(X.reshape(-1, m).view(np.float64), _pair_weights(n), out.reshape(-1, m))
         return out
-    # |X|^2 from the interleaved real and imaginary parts, in place (the live path's cost: 348 spectra per
-    # NAO window); the mean only moves the DC bin, which is set to 0 instead of centring every sample
+    X = sfft.rfft(x, axis=-1)
+    # |X|^2 from the interleaved real and imaginary parts, in place; the mean only moves the DC bin, which
+    # is set to 0 instead of centring every sample
     v = X.view(np.float64 if X.dtype == np.complex128 else np.float32)
     np.square(v, out=v)
     p = v[..., 0::2] + v[..., 1::2]
     p[..., 0] = 0.0
     p *= _pair_weights(n)
+    if out is not None:
+        out[...] = p
+        return out
     return p
 
 
@@ -295,8 +320,14 @@ def level_values(cell_type: CellType, group: str, deformation: np.ndarray, defor
         Means over the window; NaN for a channel without any finite sample
         (the caller flags the body part ``INVALID``).
     """
-    v = np.asarray(deformation, dtype=np.float64)
-    means = [v.mean(axis=-1) - np.asarray(deformation_tare, dtype=np.float64)]
+    v = np.asarray(deformation)
+    if v.dtype.kind in "iu" and v.dtype.itemsize <= 4 and v.shape[-1] < 1 << 22:
+        # counts: the integer sum is exact, and so is the float sum of their mean (every partial sum is an
+        # integer below 2**53), so the same means without a float copy of the window
+        mean = np.add.reduce(v, axis=-1, dtype=np.int64) / v.shape[-1]
+    else:
+        mean = np.asarray(v, dtype=np.float64).mean(axis=-1)
+    means = [mean - np.asarray(deformation_tare, dtype=np.float64)]
     e = np.asarray(extra, dtype=np.float64)
     if e.shape[1]:
         ok = np.isfinite(e)

@@ -157,6 +157,8 @@ def test_power_spectrum_of_an_odd_length_is_that_of_its_last_fast_length(dtype):
     # Parseval over those samples
     rtol = 1e-5 if dtype == np.float32 else 1e-12
     np.testing.assert_allclose(got.sum(-1), x[..., 1:].astype(np.float64).var(axis=-1), rtol=rtol)
+    out = np.empty_like(got, dtype=np.float64)
+    assert power_spectrum(x, out=out) is out and np.array_equal(out, got)
 
 
 def test_band_powers_equal_scipy_periodogram_sums():
@@ -188,6 +190,17 @@ def test_levels_known_answer_with_tare_and_missing_samples():
     assert np.isnan(got[0, 4])  # no temperature sample at all
     sub = level_values(ct, "levels:proximity,f1", dfm, np.zeros((1, 3)), extra)
     np.testing.assert_array_equal(sub, [[2.0, 25.0]])
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint16, np.int32, np.uint32, np.int64, np.float64])
+def test_levels_of_counts_are_the_float_means_bit_for_bit(dtype):
+    """Counts are averaged from their exact integer sum: the same bits as numpy's mean of the float copy."""
+    ct = load_robot("nao").cell_types["skin_cell"]
+    rng = np.random.default_rng(3)
+    hi = np.iinfo(dtype).max if np.dtype(dtype).kind in "iu" else 1e6
+    dfm = rng.integers(0, min(hi, 2**31 - 1), (9, 3, 777), endpoint=True).astype(dtype)
+    got = level_values(ct, "levels", dfm, np.zeros((9, 3)), np.zeros((9, 2, 777)))
+    np.testing.assert_array_equal(got[:, :3], dfm.astype(np.float64).mean(axis=-1))
 
 
 def test_labels_carry_the_group_and_name_it():
