@@ -167,7 +167,7 @@ def cell_bounds(x, lo, hi):  # pragma: no cover - compiled
 def _moments_row(x, out):  # pragma: no cover - compiled
     """Sum, sum of squares, lag-1 and lag-2 products, x[0], x[1], x[n-2], x[n-1], min, max (n >= 3).
 
-    Three short loops vectorise (the lags over shifted slices); one loop with all four sums does not.
+    Two loops that vectorise: the sum, squares and bounds, then both lag products over shifted slices.
     """
     n = x.shape[0]
     s1 = 0.0
@@ -180,16 +180,15 @@ def _moments_row(x, out):  # pragma: no cover - compiled
         q += a * a
         lo = min(lo, x[i])
         hi = max(hi, x[i])
-    r1 = 0.0
-    a1 = x[1:]
-    b1 = x[:n - 1]
-    for i in range(n - 1):
-        r1 += float(a1[i]) * float(b1[i])
-    r2 = 0.0
     a2 = x[2:]
+    b1 = x[1:n - 1]
     b2 = x[:n - 2]
+    r1 = float(x[1]) * float(x[0])
+    r2 = 0.0
     for i in range(n - 2):
-        r2 += float(a2[i]) * float(b2[i])
+        a = float(a2[i])
+        r1 += a * float(b1[i])
+        r2 += a * float(b2[i])
     out[0] = s1
     out[1] = q
     out[2] = r1
@@ -400,6 +399,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     weights = np.empty(m, dtype=np.int64)
     counts = np.zeros(1024, dtype=np.int64)
     table = np.zeros(1024, dtype=np.int64)
+    counts4 = np.zeros(4096, dtype=np.int32)
     vk = np.empty((n_v, m), dtype=np.int64)
     vf = np.empty((n_v, m))
     rv = np.empty((n_v, m))
@@ -536,13 +536,24 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
             if span > counts.shape[0]:
                 counts = np.zeros(span, dtype=np.int64)
                 table = np.zeros(span, dtype=np.int64)
-            counts[:span] = 0
-            for p in range(n):
-                counts[np.uint64(row[p] - lo)] += 1
+            if 2 * span > counts4.shape[0]:
+                counts4 = np.zeros(2 * span, dtype=np.int32)
+            ca = counts4[:span]
+            cb = counts4[span:2 * span]
+            ca[:] = 0
+            cb[:] = 0
+            # even and odd samples counted apart: a value repeated in consecutive samples (a slowly
+            # varying signal) does not wait for its own previous increment
+            n2 = n // 2
+            for q in range(n2):
+                ca[np.uint64(row[2 * q] - lo)] += 1
+                cb[np.uint64(row[2 * q + 1] - lo)] += 1
+            if n % 2:
+                ca[np.uint64(row[n - 1] - lo)] += 1
             cum = 0
             rss = 0.0
             for b in range(span):
-                cnt = counts[b]
+                cnt = np.int64(ca[b]) + cb[b]
                 cum += cnt
                 t = 2 * cum - cnt - n
                 table[b] = t
