@@ -289,7 +289,8 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
             a2 = row[4 * k + 2]
             a3 = row[4 * k + 3]
             run_x[k] = np.int64(a0) + a1 + a2 + a3
-            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)] + table[np.uint64(a2 - lo)] + table[np.uint64(a3 - lo)]
+            run_r[k] = (table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)]
+                        + table[np.uint64(a2 - lo)] + table[np.uint64(a3 - lo)])
 
 
 @_jit
