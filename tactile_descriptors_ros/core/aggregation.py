@@ -38,7 +38,7 @@ from ..errors import SignalError
 from .cell_types import CellType
 from .descriptors import Quality
 from .fast import cell_bounds, cell_quantities, cell_quantities_bounded, exact_integer_ok, scratch
-from .features import band_hjorth, level_values, power_spectrum, statistics_values
+from .features import band_hjorth, level_values, power_spectrum, spectral_length, statistics_values
 from .groups import (
     KERNEL_GROUPS,
     body_part_layout,
@@ -741,7 +741,7 @@ def _shared_or_stacked(times: list) -> np.ndarray:
     cells sharing time bases.)
     """
     t0 = times[0]
-    if all(t is t0 for t in times):
+    if len(set(map(id, times))) == 1:
         return np.asarray(t0, dtype=np.int64)
     return _stack_times(times)
 
@@ -821,8 +821,16 @@ def _touching(part_ids: tuple[tuple[int, ...], ...], cells: Mapping[int, CellSig
     return out
 
 
-def _stack(arrays: list[np.ndarray]) -> np.ndarray:
-    return np.stack([np.asarray(a) for a in arrays])
+def _stack(arrays: list[np.ndarray], slot: str | None = None) -> np.ndarray:
+    """``numpy.stack`` of the arrays; into the reused buffer ``slot`` (:func:`.fast.scratch`) when they are
+    ndarrays of one shape and dtype (valid until that slot's next use)."""
+    a0 = arrays[0] if arrays else None
+    if slot is None or not isinstance(a0, np.ndarray) or a0.ndim == 0 \
+            or not all(isinstance(a, np.ndarray) and a.shape == a0.shape and a.dtype == a0.dtype for a in arrays):
+        return np.stack([np.asarray(a) for a in arrays])
+    out = scratch(slot, (len(arrays),) + a0.shape, a0.dtype)
+    np.concatenate(arrays, out=out.reshape((len(arrays) * a0.shape[0],) + a0.shape[1:]))
+    return out
 
 
 def _extra_of(sig: CellSignals, cell_type: CellType, cid: int) -> np.ndarray:
@@ -856,13 +864,15 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
     for k, sig in enumerate(sigs):
         batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
     for rows in batches.values():
-        vib = _stack([sigs[k].vibration for k in rows])
-        dfm = _stack([sigs[k].deformation for k in rows])
+        vib = _stack([sigs[k].vibration for k in rows], "groups.vib")
+        dfm = _stack([sigs[k].deformation for k in rows], "groups.dfm")
         spectrum = None  # the vibration's power spectrum, shared by bands and statistics
         for g in groups:
             with np.errstate(all="ignore"):  # non-finite samples give non-finite values: _cells_mean drops them
                 if g in ("bands", "statistics") and spectrum is None:
-                    spectrum = power_spectrum(vib)
+                    n_bins = spectral_length(vib.shape[-1]) // 2 + 1
+                    spectrum = power_spectrum(vib, out=scratch("groups.spectrum", vib.shape[:-1] + (n_bins,),
+                                                               np.float64))
                 if g == "bands":
                     vals = band_hjorth(vib, fs_s, spectrum)
                 elif g == "statistics":

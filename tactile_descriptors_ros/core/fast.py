@@ -57,7 +57,7 @@ __all__ = [
 
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
-#: ``central_moments``, ``power_spectrum``, the status ``OK`` and ``CACHE_DIR``
+#: ``central_moments``, ``power_spectrum``, ``band_moments``, the status ``OK`` and ``CACHE_DIR``
 #: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 
@@ -325,6 +325,8 @@ def warm_up() -> dict:
         cell_bounds(s)
         kernel.central_moments(s.reshape(4, 40), np.empty((4, 5)))  # the statistics feature group
     kernel.power_spectrum(np.zeros((2, 8)), np.ones(4), np.empty((2, 4)))  # the bands and statistics groups
+    kernel.band_moments(np.zeros((2, 4)), np.ones(4), np.zeros(1, dtype=np.int64), np.full(1, 4, dtype=np.int64),
+                        np.empty((2, 1, 3)))  # the bands group
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info

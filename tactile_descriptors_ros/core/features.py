@@ -24,6 +24,7 @@ from .groups import deformation_bands, level_channels, parse_group, vibration_ba
 from .scaling import activity_mask, log_activity
 
 __all__ = [
+    "spectral_length",
     "power_spectrum",
     "band_hjorth",
     "moments",
@@ -34,35 +35,79 @@ __all__ = [
 ]
 
 
-def power_spectrum(x: np.ndarray) -> np.ndarray:
+#: numpy.fft.rfft writes into a given array since numpy 2.0 (pocketfft, as scipy.fft; the same values).
+_RFFT_OUT = np.lib.NumpyVersion(np.__version__) >= "2.0.0"
+
+
+def spectral_length(n: int) -> int:
+    """Samples of an ``n``-sample window the spectral features use: the largest fast FFT length ``L <= n``.
+
+    ``L`` is :func:`scipy.fft.prev_fast_len` of ``n`` (its default
+    definition: no prime factor above 11, lengths pocketfft transforms
+    without its slow generic passes); the spectrum is that of the window's
+    last ``L`` samples.  The windows the robots and the evaluation cut (2 s:
+    2000 and 500 samples for a skin cell, 4400 and 200 for a BioTac; 1 s
+    blocks; 0.5-6 s touches of a BioTac in steps of 0.5 s) are such lengths
+    and lose nothing; another length loses its oldest samples, at most 2.2 %
+    of a window of 1000 samples or more and 6 % of one of 100 to 1000
+    (501 -> 500, 2003 -> 2000), and its FFT costs 2-8 ns a sample instead of
+    up to 30 (a length with a large prime factor: 501 = 3 x 167 costs 8.5
+    times 500).  ``n < 1`` gives 0.
+    """
+    return int(sfft.prev_fast_len(int(n))) if n >= 1 else 0
+
+
+def power_spectrum(x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """One-sided power spectrum of each signal (last axis), scaled so that a band's sum is its variance share.
 
-    ``P_k = w_k |X_k|^2 / n^2`` with ``X = rfft(x)`` (:func:`scipy.fft.rfft`) and ``P_0 = 0`` (the mean removed),
+    Over the signal's last ``L = spectral_length(n)`` samples (:func:`spectral_length`):
+    ``P_k = w_k |X_k|^2 / L^2`` with ``X = rfft`` of those samples
+    (pocketfft through :func:`numpy.fft.rfft`, as :func:`scipy.fft.rfft`) and ``P_0 = 0`` (the mean removed),
     ``w_k = 2`` for bins that stand for a conjugate pair and 1 for the DC and
-    Nyquist bins: ``sum_k P_k`` is the variance of ``x`` (Parseval), and the
-    sum over a band is the variance of ``x`` band-limited to it (an ideal
+    Nyquist bins: ``sum_k P_k`` is the variance of those samples (Parseval),
+    and the sum over a band is their variance band-limited to it (an ideal
     band-pass over the window, taken as one period).
+
+    Parameters
+    ----------
+    x : array_like, shape (..., n)
+    out : numpy.ndarray, optional
+        Filled with the spectrum and returned (float64, shape as below);
+        a new array otherwise.
 
     Returns
     -------
-    numpy.ndarray, shape ``x.shape[:-1] + (n // 2 + 1,)``
+    numpy.ndarray, shape ``x.shape[:-1] + (L // 2 + 1,)``
     """
     x = np.asarray(x)
-    n = x.shape[-1]
-    X = sfft.rfft(x, axis=-1)
-    kernel = fast.kernel_module() if X.size and X.dtype == np.complex128 else None
+    n = spectral_length(x.shape[-1])
+    x = x[..., x.shape[-1] - n:]
+    m = n // 2 + 1
+    kernel = fast.kernel_module() if x.size and (x.dtype.kind in "biu" or x.dtype == np.float64) else None
     if kernel is not None:  # one compiled pass, the same operations as below (the live path's cost)
-        out = np.empty(X.shape, dtype=np.float64)
-        m = X.shape[-1]
+        # the samples as float64 and their transform in reused buffers: with scipy's float64 copy of the
+        # counts and its new transform array allocated afresh, a NAO window's spectra took up to twice as long
+        xf = fast.scratch("features.spectrum.x", x.shape, np.float64)
+        np.copyto(xf, x)
+        if _RFFT_OUT:
+            X = np.fft.rfft(xf, axis=-1, out=fast.scratch("features.spectrum.X", x.shape[:-1] + (m,), np.complex128))
+        else:  # numpy < 2 has no out: scipy's transform (the same pocketfft) into a new array
+            X = sfft.rfft(xf, axis=-1, overwrite_x=True)
+        if out is None:
+            out = np.empty(X.shape, dtype=np.float64)
         kernel.power_spectrum(X.reshape(-1, m).view(np.float64), _pair_weights(n), out.reshape(-1, m))
         return out
-    # |X|^2 from the interleaved real and imaginary parts, in place (the live path's cost: 348 spectra per
-    # NAO window); the mean only moves the DC bin, which is set to 0 instead of centring every sample
-    v = X.view(np.float64)
+    X = sfft.rfft(x, axis=-1)
+    # |X|^2 from the interleaved real and imaginary parts, in place; the mean only moves the DC bin, which
+    # is set to 0 instead of centring every sample
+    v = X.view(np.float64 if X.dtype == np.complex128 else np.float32)
     np.square(v, out=v)
     p = v[..., 0::2] + v[..., 1::2]
     p[..., 0] = 0.0
     p *= _pair_weights(n)
+    if out is not None:
+        out[...] = p
+        return out
     return p
 
 
@@ -100,6 +145,12 @@ def _band_sums(p: np.ndarray, bins: tuple[tuple[int, int], ...]) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=256)
+def _bin_edges(bins: tuple[tuple[int, int], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The first and end bins of :func:`_band_bins` as int64 arrays (for the compiled kernel)."""
+    return (np.array([lo for lo, _ in bins], dtype=np.int64), np.array([hi for _, hi in bins], dtype=np.int64))
+
+
 @functools.lru_cache(maxsize=64)
 def _difference_gain(n: int, rate_hz: float) -> np.ndarray:
     """``|2 sin(pi k / n) rate|^2``: the power gain of the first difference times the rate at bin k."""
@@ -115,7 +166,8 @@ def band_hjorth(vibration: np.ndarray, rate_hz: float, spectrum: np.ndarray | No
     Complexity (eq. 1-3) are those of the band-limited signal with the
     derivative taken as the circular first difference times the rate.  All
     come from the spectral moments of one power spectrum
-    (:func:`power_spectrum`): with ``G_k = |2 sin(pi k / n) rate|^2`` the
+    (:func:`power_spectrum`, over the window's last ``L`` samples,
+    :func:`spectral_length`): with ``G_k = |2 sin(pi k / L) rate|^2`` the
     gain of that difference, ``var(y) = sum P_k``, ``var(y') = sum P_k G_k``,
     ``var(y'') = sum P_k G_k^2`` over the band's bins.  Equal (float
     rounding) to the time-domain computation on ``irfft`` of the masked
@@ -137,15 +189,25 @@ def band_hjorth(vibration: np.ndarray, rate_hz: float, spectrum: np.ndarray | No
         :func:`.descriptors.hjorth` for a flat signal).
     """
     x = np.asarray(vibration)
-    n_cells, n_ch, n = x.shape
+    n_cells, n_ch, _ = x.shape
+    n = spectral_length(x.shape[-1])
     p = power_spectrum(x) if spectrum is None else spectrum
     bins = _band_bins(n, float(rate_hz), vibration_bands(rate_hz))
     g = _difference_gain(n, float(rate_hz))
-    pg = p * g
-    s0 = _band_sums(p, bins)
-    s1 = _band_sums(pg, bins)
-    pg *= g
-    s2 = _band_sums(pg, bins)
+    kernel = fast.kernel_module() if p.dtype == np.float64 and p.size and bins else None
+    if kernel is not None:  # one compiled pass over the spectrum
+        m = p.shape[-1]
+        sums = np.empty((p.size // m, len(bins), 3))
+        lo, hi = _bin_edges(bins)
+        kernel.band_moments(np.ascontiguousarray(p).reshape(-1, m), g, lo, hi, sums)
+        sums = sums.reshape(p.shape[:-1] + (len(bins), 3))
+        s0, s1, s2 = sums[..., 0], sums[..., 1], sums[..., 2]
+    else:
+        pg = p * g
+        s0 = _band_sums(p, bins)
+        s1 = _band_sums(pg, bins)
+        pg *= g
+        s2 = _band_sums(pg, bins)
     with np.errstate(divide="ignore", invalid="ignore"):
         mob = np.where(s0 > 0, np.sqrt(s1 / np.where(s0 > 0, s0, 1.0)), 0.0)
         mob_d = np.where(s1 > 0, np.sqrt(s2 / np.where(s1 > 0, s1, 1.0)), 0.0)
@@ -195,8 +257,9 @@ def band_powers(x: np.ndarray, rate_hz: float, bands: Sequence[tuple[float, floa
 
     The power of a band ``[lo, hi)`` is the sum of :func:`power_spectrum`
     over its bins (a band reaching Nyquist includes it): the variance of the
-    signal band-limited to it, so the powers of bands covering the spectrum
-    add up to the variance.
+    signal's last ``L`` samples (:func:`spectral_length`) band-limited to
+    it, so the powers of bands covering the spectrum add up to their
+    variance.
 
     Returns
     -------
@@ -204,7 +267,7 @@ def band_powers(x: np.ndarray, rate_hz: float, bands: Sequence[tuple[float, floa
     """
     x = np.asarray(x)
     p = power_spectrum(x) if spectrum is None else spectrum
-    return np.log1p(_band_sums(p, _band_bins(x.shape[-1], float(rate_hz), tuple(bands))))
+    return np.log1p(_band_sums(p, _band_bins(spectral_length(x.shape[-1]), float(rate_hz), tuple(bands))))
 
 
 def statistics_values(vibration: np.ndarray, vibration_rate_hz: float, deformation: np.ndarray,
@@ -257,8 +320,14 @@ def level_values(cell_type: CellType, group: str, deformation: np.ndarray, defor
         Means over the window; NaN for a channel without any finite sample
         (the caller flags the body part ``INVALID``).
     """
-    v = np.asarray(deformation, dtype=np.float64)
-    means = [v.mean(axis=-1) - np.asarray(deformation_tare, dtype=np.float64)]
+    v = np.asarray(deformation)
+    if v.dtype.kind in "iu" and v.dtype.itemsize <= 4 and v.shape[-1] < 1 << 22:
+        # counts: the integer sum is exact, and so is the float sum of their mean (every partial sum is an
+        # integer below 2**53), so the same means without a float copy of the window
+        mean = np.add.reduce(v, axis=-1, dtype=np.int64) / v.shape[-1]
+    else:
+        mean = np.asarray(v, dtype=np.float64).mean(axis=-1)
+    means = [mean - np.asarray(deformation_tare, dtype=np.float64)]
     e = np.asarray(extra, dtype=np.float64)
     if e.shape[1]:
         ok = np.isfinite(e)

@@ -134,6 +134,19 @@ _jit = numba.njit(cache=True, nogil=True, boundscheck=False)
 # Sums of exact integers (every partial sum below 2**53, which is checked
 # before they are used) are the same in any order: reassociation (fastmath)
 # lets LLVM vectorise them without changing a bit.
+#
+# Sums of floats that are not exact integers change bits when reassociated;
+# where a few roundings do not matter (sums of a power spectrum, all terms
+# >= 0) 'reassoc' alone lets them vectorise, without fastmath's other
+# assumptions (no NaN, no inf: a window with a non-finite sample must give
+# a non-finite value, which the caller drops and reports).
+_jit_reassoc = numba.njit(cache=True, nogil=True, boundscheck=False, fastmath={"reassoc"})
+#
+# Indexing: numba wraps a negative signed index around (x[-1] is the last
+# element), a branch per access that LLVM cannot prove away for x[i - 1] or
+# table[a - lo]; it then gathers where it could load, or does not vectorise.
+# Lagged rows are therefore read through shifted slices (x[1:], x[:n - 1])
+# and computed indices, never negative here, are cast to np.uint64.
 _jit_exact = numba.njit(cache=True, nogil=True, boundscheck=False, fastmath=True)
 
 
@@ -154,7 +167,7 @@ def cell_bounds(x, lo, hi):  # pragma: no cover - compiled
 def _moments_row(x, out):  # pragma: no cover - compiled
     """Sum, sum of squares, lag-1 and lag-2 products, x[0], x[1], x[n-2], x[n-1], min, max (n >= 3).
 
-    Three short loops vectorise; one loop with all four sums does not (twice as slow).
+    Two loops that vectorise: the sum, squares and bounds, then both lag products over shifted slices.
     """
     n = x.shape[0]
     s1 = 0.0
@@ -167,12 +180,15 @@ def _moments_row(x, out):  # pragma: no cover - compiled
         q += a * a
         lo = min(lo, x[i])
         hi = max(hi, x[i])
-    r1 = 0.0
-    for i in range(1, n):
-        r1 += float(x[i]) * float(x[i - 1])
+    a2 = x[2:]
+    b1 = x[1:n - 1]
+    b2 = x[:n - 2]
+    r1 = float(x[1]) * float(x[0])
     r2 = 0.0
-    for i in range(2, n):
-        r2 += float(x[i]) * float(x[i - 2])
+    for i in range(n - 2):
+        a = float(a2[i])
+        r1 += a * float(b1[i])
+        r2 += a * float(b2[i])
     out[0] = s1
     out[1] = q
     out[2] = r1
@@ -252,20 +268,20 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
         for k in range(n_runs):
             a0 = row[k]
             run_x[k] = a0
-            run_r[k] = table[a0 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)]
     elif length == 2:
         for k in range(n_runs):
             a0 = row[2 * k]
             a1 = row[2 * k + 1]
             run_x[k] = np.int64(a0) + a1
-            run_r[k] = table[a0 - lo] + table[a1 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)]
     elif length == 3:
         for k in range(n_runs):
             a0 = row[3 * k]
             a1 = row[3 * k + 1]
             a2 = row[3 * k + 2]
             run_x[k] = np.int64(a0) + a1 + a2
-            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo]
+            run_r[k] = table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)] + table[np.uint64(a2 - lo)]
     else:
         for k in range(n_runs):
             a0 = row[4 * k]
@@ -273,7 +289,8 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
             a2 = row[4 * k + 2]
             a3 = row[4 * k + 3]
             run_x[k] = np.int64(a0) + a1 + a2 + a3
-            run_r[k] = table[a0 - lo] + table[a1 - lo] + table[a2 - lo] + table[a3 - lo]
+            run_r[k] = (table[np.uint64(a0 - lo)] + table[np.uint64(a1 - lo)]
+                        + table[np.uint64(a2 - lo)] + table[np.uint64(a3 - lo)])
 
 
 @_jit
@@ -383,6 +400,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     weights = np.empty(m, dtype=np.int64)
     counts = np.zeros(1024, dtype=np.int64)
     table = np.zeros(1024, dtype=np.int64)
+    counts4 = np.zeros(4096, dtype=np.int32)
     vk = np.empty((n_v, m), dtype=np.int64)
     vf = np.empty((n_v, m))
     rv = np.empty((n_v, m))
@@ -396,6 +414,8 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     n = 0
     length = 0
     regular = False
+    uniform = False
+    contiguous = False
     for c in range(n_cells):
         if c == 0 or ts.shape[0] > 1 or tv.shape[0] > 1:
             first, n_runs = _hold_runs(tv[min(c, tv.shape[0] - 1)], ts[min(c, ts.shape[0] - 1)],
@@ -404,11 +424,15 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
             if n < 3:
                 return DEGENERATE, act_s, mob_s, com_s, act_v, mob_v, com_v, lin, nonlin, quality
             length = weights[0]
-            regular = length <= 4
+            uniform = True
+            contiguous = True
             for k in range(n_runs):
                 wf[k] = weights[k]
                 if weights[k] != length:
-                    regular = False
+                    uniform = False
+                if slow_index[k] != slow_index[0] + k:
+                    contiguous = False
+            regular = uniform and length <= 4
         for i in range(n_s):
             _moments_row(s[c, i], mom_s[c, i])
             peak_s = max(peak_s, abs(mom_s[c, i, 8]), abs(mom_s[c, i, 9]))
@@ -445,12 +469,22 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 qc |= flat_flag
         # V rows: the held samples, ranked with run-length weights
         for j in range(n_v):
-            lo = np.int64(v[c, j, slow_index[0]])
+            vrow = v[c, j]
+            vkj = vk[j]
+            vfj = vf[j]
+            rvj = rv[j]
+            if contiguous:  # run k holds slow sample s0 + k (every slow sample in the window)
+                seg = vrow[slow_index[0]:slow_index[0] + n_runs]
+                for k in range(n_runs):
+                    vkj[k] = seg[k]
+            else:
+                for k in range(n_runs):
+                    vkj[k] = vrow[slow_index[k]]
+            lo = vkj[0]
             hi = lo
             for k in range(n_runs):
-                a = np.int64(v[c, j, slow_index[k]])
-                vk[j, k] = a
-                vf[j, k] = a
+                a = vkj[k]
+                vfj[k] = a
                 lo = min(lo, a)
                 hi = max(hi, a)
             span = hi - lo + 1
@@ -460,22 +494,31 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 counts = np.zeros(span, dtype=np.int64)
                 table = np.zeros(span, dtype=np.int64)
             counts[:span] = 0
+            if uniform:  # every run as long: counts of values, times the length
+                for k in range(n_runs):
+                    counts[np.uint64(vkj[k] - lo)] += 1
+                cum = 0
+                for b in range(span):
+                    cnt = counts[b] * length
+                    cum += cnt
+                    table[b] = 2 * cum - cnt - n
+            else:
+                for k in range(n_runs):
+                    counts[np.uint64(vkj[k] - lo)] += weights[k]
+                cum = 0
+                for b in range(span):
+                    cnt = counts[b]
+                    cum += cnt
+                    table[b] = 2 * cum - cnt - n
             for k in range(n_runs):
-                counts[vk[j, k] - lo] += weights[k]
-            cum = 0
-            for b in range(span):
-                cnt = counts[b]
-                cum += cnt
-                table[b] = 2 * cum - cnt - n
+                rvj[k] = table[np.uint64(vkj[k] - lo)]
             for k in range(n_runs):
-                rv[j, k] = table[vk[j, k] - lo]
+                wrv[k] = wf[k] * vfj[k]
+            sums_v[j, 0] = _dot(wf[:n_runs], vfj[:n_runs])
+            sums_v[j, 1] = _dot(wrv[:n_runs], vfj[:n_runs])
             for k in range(n_runs):
-                wrv[k] = wf[k] * vf[j, k]
-            sums_v[j, 0] = _dot(wf[:n_runs], vf[j, :n_runs])
-            sums_v[j, 1] = _dot(wrv[:n_runs], vf[j, :n_runs])
-            for k in range(n_runs):
-                wrv[k] = wf[k] * rv[j, k]
-            sums_v[j, 2] = _dot(wrv[:n_runs], rv[j, :n_runs])
+                wrv[k] = wf[k] * rvj[k]
+            sums_v[j, 2] = _dot(wrv[:n_runs], rvj[:n_runs])
         # S rows: counting ranks, run sums of samples and of ranks, cross sums
         for i in range(n_s):
             row = s[c, i, first:]
@@ -494,13 +537,24 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
             if span > counts.shape[0]:
                 counts = np.zeros(span, dtype=np.int64)
                 table = np.zeros(span, dtype=np.int64)
-            counts[:span] = 0
-            for p in range(n):
-                counts[row[p] - lo] += 1
+            if 2 * span > counts4.shape[0]:
+                counts4 = np.zeros(2 * span, dtype=np.int32)
+            ca = counts4[:span]
+            cb = counts4[span:2 * span]
+            ca[:] = 0
+            cb[:] = 0
+            # even and odd samples counted apart: a value repeated in consecutive samples (a slowly
+            # varying signal) does not wait for its own previous increment
+            n2 = n // 2
+            for q in range(n2):
+                ca[np.uint64(row[2 * q] - lo)] += 1
+                cb[np.uint64(row[2 * q + 1] - lo)] += 1
+            if n % 2:
+                ca[np.uint64(row[n - 1] - lo)] += 1
             cum = 0
             rss = 0.0
             for b in range(span):
-                cnt = counts[b]
+                cnt = np.int64(ca[b]) + cb[b]
                 cum += cnt
                 t = 2 * cum - cnt - n
                 table[b] = t
@@ -515,7 +569,7 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                     for p in range(p0, p0 + weights[k]):
                         a = row[p]
                         acc += a
-                        accr += table[a - lo]
+                        accr += table[np.uint64(a - lo)]
                     run_x[k] = acc
                     run_r[k] = accr
             if first == 0:
@@ -553,36 +607,98 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
 
 
 @_jit
+def _two_pass_moments(row, out):  # pragma: no cover - compiled
+    """:func:`central_moments` of one row in float: the mean, then sums of the centred powers, in row order."""
+    n = row.shape[0]
+    s = 0.0
+    peak = 0.0
+    for i in range(n):
+        v = float(row[i])
+        s += v
+        peak = max(peak, abs(v))
+    mean = s / n
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    for i in range(n):
+        d = float(row[i]) - mean
+        d2 = d * d
+        s2 += d2
+        s3 += d2 * d
+        s4 += d2 * d2
+    out[0] = mean
+    out[1] = s2 / n
+    out[2] = s3 / n
+    out[3] = s4 / n
+    out[4] = peak
+
+
+@_jit_exact
+def _row_sum_bounds(row):  # pragma: no cover - compiled
+    """Exact sum (int64), smallest and largest value of an integer row."""
+    s1 = np.int64(0)
+    lo = np.int64(row[0])
+    hi = lo
+    for i in range(row.shape[0]):
+        a = np.int64(row[i])
+        s1 += a
+        lo = min(lo, a)
+        hi = max(hi, a)
+    return s1, lo, hi
+
+
+@_jit_exact
+def _shifted_power_sums(row, x0):  # pragma: no cover - compiled
+    """Sums of ``y``, ``y^2``, ``y^3``, ``y^4`` with ``y = row - x0``, exact int64 (bounds checked by the caller)."""
+    s1 = np.int64(0)
+    s2 = np.int64(0)
+    s3 = np.int64(0)
+    s4 = np.int64(0)
+    for i in range(row.shape[0]):
+        y = np.int64(row[i]) - x0
+        y2 = y * y
+        s1 += y
+        s2 += y2
+        s3 += y2 * y
+        s4 += y2 * y2
+    return s1, s2, s3, s4
+
+
+@_jit
 def central_moments(x, out):  # pragma: no cover - compiled
     """Per row of integer ``x`` (rows, n >= 1): mean, m2, m3, m4 (biased central moments), max |x| into ``out``.
 
-    Two passes in row order, sequential sums (no reassociation): the
-    ``statistics`` group's skewness and kurtosis without the float copies
-    and temporaries of the numpy formulation (:func:`.features.moments`).
+    From exact integer sums: the row's sum and bounds, then the sums of the
+    powers 1-4 of ``y = x - x0`` with ``x0`` the mean rounded to an
+    integer, exact in int64 while ``n (max |y|)^4 < 2**62``; with
+    ``d = sum(y) / n`` (``|d| <= 1/2``) the central moments are
+    ``m2 = S2/n - d^2``, ``m3 = S3/n - 3 d S2/n + 2 d^3``,
+    ``m4 = S4/n - 4 d S3/n + 6 d^2 S2/n - 3 d^4``: a few roundings of
+    well-scaled terms, no sum of 2,000 rounded terms, and loops that
+    vectorise (the ``statistics`` group's skewness and kurtosis,
+    :func:`.features.moments`).  Rows whose powers would not be exact take
+    the two float passes (mean, then centred powers).
     """
     n = x.shape[1]
     for r in range(x.shape[0]):
-        s = 0.0
-        peak = 0.0
-        for i in range(n):
-            v = float(x[r, i])
-            s += v
-            peak = max(peak, abs(v))
-        mean = s / n
-        s2 = 0.0
-        s3 = 0.0
-        s4 = 0.0
-        for i in range(n):
-            d = float(x[r, i]) - mean
-            d2 = d * d
-            s2 += d2
-            s3 += d2 * d
-            s4 += d2 * d2
-        out[r, 0] = mean
-        out[r, 1] = s2 / n
-        out[r, 2] = s3 / n
-        out[r, 3] = s4 / n
-        out[r, 4] = peak
+        row = x[r]
+        total, lo, hi = _row_sum_bounds(row)
+        x0 = (2 * total + n) // (2 * n)  # the mean rounded (floor division: half up)
+        span = float(max(hi - x0, x0 - lo))
+        if float(n) * span * span * span * span >= _I64_SAFE:
+            _two_pass_moments(row, out[r])
+            continue
+        s1, s2, s3, s4 = _shifted_power_sums(row, x0)
+        d = float(s1) / n
+        a2 = float(s2) / n
+        a3 = float(s3) / n
+        a4 = float(s4) / n
+        dd = d * d
+        out[r, 0] = float(total) / n
+        out[r, 1] = a2 - dd
+        out[r, 2] = a3 - 3.0 * d * a2 + 2.0 * dd * d
+        out[r, 3] = a4 - 4.0 * d * a3 + 6.0 * dd * a2 - 3.0 * dd * dd
+        out[r, 4] = float(max(abs(lo), abs(hi)))
 
 
 @_jit
@@ -600,3 +716,30 @@ def power_spectrum(xf, w, out):  # pragma: no cover - compiled
             a = xf[r, 2 * k]
             b = xf[r, 2 * k + 1]
             out[r, k] = (a * a + b * b) * w[k]
+
+
+@_jit_reassoc
+def band_moments(p, g, lo, hi, out):  # pragma: no cover - compiled
+    """Spectral moments of bands: ``out[r, b] = sum over k in [lo[b], hi[b]) of p[r, k] (1, g[k], g[k]^2)``.
+
+    ``p`` (rows, bins) is a power spectrum and ``g`` the first difference's
+    gain per bin: the ``bands`` group's Hjorth parameters of each band
+    (:func:`.features.band_hjorth`) in one pass over the spectrum.
+    """
+    for r in range(p.shape[0]):
+        pr = p[r]
+        for b in range(lo.shape[0]):
+            pb = pr[lo[b]:hi[b]]
+            gb = g[lo[b]:hi[b]]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for k in range(pb.shape[0]):
+                pk = pb[k]
+                pg = pk * gb[k]
+                s0 += pk
+                s1 += pg
+                s2 += pg * gb[k]
+            out[r, b, 0] = s0
+            out[r, b, 1] = s1
+            out[r, b, 2] = s2

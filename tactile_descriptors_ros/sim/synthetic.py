@@ -72,9 +72,11 @@ def skin_window(robot: RobotDescription, length_s: float = 2.0, *, seed: int = 0
 
     Accelerometer (1 kHz, 10-bit signed counts): gravity on z plus a texture
     vibration (AR(2) noise, std about 13 counts); force sensors (250 Hz,
-    12-bit counts): a pressing profile around 0.5-2 N plus noise.  The last
-    force sample before the window is included (zero-order hold).  Counts
-    are ``dtype`` (int32, as the window node delivers them).
+    12-bit counts): a pressing profile around 0.5-2 N plus noise.  Like the
+    windows the window node cuts (:class:`~..core.windowing.Windower`), only
+    samples inside the window: 2,000 accelerometer and 500 force samples per
+    cell at 2 s, the first force sample at the first accelerometer sample's
+    stamp.  Counts are ``dtype`` (int32, as the window node delivers them).
     """
     rng = np.random.default_rng(seed)
     cell_type = next(iter(robot.cell_types.values()))
@@ -99,8 +101,10 @@ def skin_window(robot: RobotDescription, length_s: float = 2.0, *, seed: int = 0
     # extra channels (proximity counts, temperature), one value per force sample
     prox = np.rint(rng.normal(1500, 20, (n_cells, n_f + 1)))
     temp = rng.uniform(28.0, 33.0, (n_cells, 1)) + np.zeros(n_f + 1)
+    # the profile's first sample falls before the window: the window holds the n_f after it
+    force, prox, temp, t_f = (np.ascontiguousarray(a[..., 1:]) for a in (force, prox, temp, t_f))
     for c, cid in enumerate(ids):
-        force_n = force[c].mean(axis=0)[1:] * n_per_count
+        force_n = force[c].mean(axis=0) * n_per_count
         extra = np.stack([prox[c], temp[c]])[:len(cell_type.extra_channels)]
         out[cid] = CellSignals(accel[c], t_a, force[c], t_f, force_n, extra=extra)
     return out

@@ -270,3 +270,57 @@ def test_release_buffers_frees_the_pool():
     assert a.shape == (3, 50) and fast.scratch("test.a", (2, 10), np.int32).base is a.base
     assert fast.release_buffers() >= a.nbytes
     assert fast.release_buffers() == 0
+
+
+# --------------------------------------------------------- feature groups' compiled passes
+def _exact_central_moments(row) -> tuple[float, float, float]:
+    from fractions import Fraction
+
+    v = [int(t) for t in row]
+    mu = Fraction(sum(v), len(v))
+    return tuple(float(sum((Fraction(t) - mu) ** k for t in v) / len(v)) for k in (2, 3, 4))
+
+
+@needs_compiled
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 400), st.integers(1, 5), st.sampled_from([1, 3, 4095, 2**20, 2**40, 2**62]),
+       st.sampled_from([np.int32, np.int64]), st.integers(0, 2**32 - 1))
+def test_compiled_central_moments_are_the_exact_moments_rounded(n, rows, hi, dtype, seed):
+    """Integer rows: the kernel's m2, m3, m4 within a few roundings of the exact rational moments,
+    from exact integer sums or (values too wide for them) from two float passes."""
+    if dtype == np.int32:
+        hi = min(hi, 2**31 - 1)
+    rng = np.random.default_rng(seed)
+    x = rng.integers(-hi, hi, (rows, n), dtype=np.int64, endpoint=True).astype(dtype)
+    x[0] = x[0, 0]  # a flat row
+    out = np.empty((rows, 5))
+    fast.kernel_module().central_moments(x, out)
+    for r in range(rows):
+        want = _exact_central_moments(x[r])
+        scale = max(abs(float(x[r].astype(np.float64).mean())), float(np.abs(x[r] - x[r].mean()).max()), 1.0)
+        narrow = float(n) * (2.0 * hi) ** 4 < 2.0**62  # exact integer sums: a few roundings of well-scaled terms
+        tol = 1e-14 if narrow else 1e-9  # two float passes over the row
+        for k, w in enumerate(want):
+            assert abs(out[r, k + 1] - w) <= tol * scale ** (k + 2) + tol * abs(w), (r, k)
+        assert out[r, 0] == x[r].astype(np.float64).sum() / n or abs(out[r, 0] - x[r].mean()) <= 1e-12 * scale
+        assert out[r, 4] == float(np.abs(x[r].astype(np.float64)).max())
+    # a flat row: exactly no variance from exact sums; within the flatness tolerance of moments() otherwise
+    assert out[0, 1] == 0.0 if float(n) * (2.0 * hi) ** 4 < 2.0**62 else out[0, 1] <= 1e-12 * out[0, 4] ** 2
+
+
+@needs_compiled
+def test_compiled_feature_passes_equal_numpy():
+    """bands (spectral moments of each band) and statistics (moments) through the kernel = the numpy formulation."""
+    from tactile_descriptors_ros.core.features import band_hjorth, moments
+
+    rng = np.random.default_rng(11)
+    x = rng.integers(-300, 300, (7, 3, 2000)).astype(np.int32)
+    x[:, 2] += 256
+    previous = fast.set_backend(fast.REFERENCE)
+    try:
+        want_bands, want_moments = band_hjorth(x, 1000.0), moments(x)
+    finally:
+        fast.set_backend(None if previous != fast.REFERENCE else previous)
+    np.testing.assert_allclose(band_hjorth(x, 1000.0), want_bands, rtol=1e-12)
+    for got, want in zip(moments(x), want_moments):
+        np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-12)

@@ -15,7 +15,14 @@ from scipy import signal, stats
 
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
 from tactile_descriptors_ros.core.descriptors import Quality, hjorth
-from tactile_descriptors_ros.core.features import band_hjorth, band_powers, level_values, moments
+from tactile_descriptors_ros.core.features import (
+    band_hjorth,
+    band_powers,
+    level_values,
+    moments,
+    power_spectrum,
+    spectral_length,
+)
 from tactile_descriptors_ros.core.groups import (
     GROUPS,
     check_groups,
@@ -83,11 +90,12 @@ def test_band_hjorth_equals_time_domain_hjorth_of_the_band_limited_signal(n):
     x = rng.normal(0, 10, (2, 1, n)) + 3000
     got = band_hjorth(x, 2200.0)
     bands = vibration_bands(2200.0)
-    f = np.fft.rfftfreq(n, 1 / 2200.0)
+    m = spectral_length(n)  # 4401 -> its last 4400 samples
+    f = np.fft.rfftfreq(m, 1 / 2200.0)
     for c in range(2):
-        X = np.fft.rfft(x[c, 0] - x[c, 0].mean())
+        X = np.fft.rfft(x[c, 0, n - m:] - x[c, 0, n - m:].mean())
         for b, (lo, hi) in enumerate(bands):
-            y = np.fft.irfft(np.where((f >= lo) & (f < hi), X, 0.0), n)
+            y = np.fft.irfft(np.where((f >= lo) & (f < hi), X, 0.0), m)
             np.testing.assert_allclose(got[c, [b, len(bands) + b, 2 * len(bands) + b]], _circular_hjorth(y, 2200.0),
                                        rtol=1e-9)
 
@@ -115,6 +123,42 @@ def test_band_hjorth_puts_a_sine_in_its_band():
     assert np.argmax(act) == k and act[k] > 20 * np.delete(act, k).max()
     assert act[k] == pytest.approx(100**2 / 2, rel=0.02)  # the sine's variance
     assert got[len(bands) + k] == pytest.approx(2 * 2200 * np.sin(np.pi * 300 / 2200), rel=0.02)  # Mobility, rad/s
+
+
+def test_spectral_length_keeps_the_robots_windows_and_drops_few_samples_of_others():
+    # the windows the robots and the evaluation cut (skin 2 s, BioTac 2 s and 1 s blocks, 0.5-6 s touches)
+    for n in (2000, 500, 4400, 200, 2200, 100, 1100, 6600, 13200, 150, 600):
+        assert spectral_length(n) == n
+    assert spectral_length(501) == 500 and spectral_length(2003) == 2000 and spectral_length(0) == 0
+    for n in range(1, 20000, 7):
+        m = spectral_length(n)
+        assert m <= n and n - m <= (0.022 * n if n >= 1000 else 0.06 * n if n >= 100 else n / 2)
+        assert max(_prime_factors(m), default=1) <= 11
+
+
+def _prime_factors(m):
+    out, p = [], 2
+    while p * p <= m:
+        while m % p == 0:
+            out.append(p)
+            m //= p
+        p += 1
+    return out + ([m] if m > 1 else [])
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.int64, np.float64, np.float32])
+def test_power_spectrum_of_an_odd_length_is_that_of_its_last_fast_length(dtype):
+    rng = np.random.default_rng(5)
+    x = rng.integers(-500, 500, (4, 3, 501)).astype(dtype)
+    got = power_spectrum(x)
+    assert got.shape == (4, 3, 251)
+    want = power_spectrum(x[..., 1:])
+    np.testing.assert_array_equal(got, want)
+    # Parseval over those samples
+    rtol = 1e-5 if dtype == np.float32 else 1e-12
+    np.testing.assert_allclose(got.sum(-1), x[..., 1:].astype(np.float64).var(axis=-1), rtol=rtol)
+    out = np.empty_like(got, dtype=np.float64)
+    assert power_spectrum(x, out=out) is out and np.array_equal(out, got)
 
 
 def test_band_powers_equal_scipy_periodogram_sums():
@@ -146,6 +190,17 @@ def test_levels_known_answer_with_tare_and_missing_samples():
     assert np.isnan(got[0, 4])  # no temperature sample at all
     sub = level_values(ct, "levels:proximity,f1", dfm, np.zeros((1, 3)), extra)
     np.testing.assert_array_equal(sub, [[2.0, 25.0]])
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int16, np.uint16, np.int32, np.uint32, np.int64, np.float64])
+def test_levels_of_counts_are_the_float_means_bit_for_bit(dtype):
+    """Counts are averaged from their exact integer sum: the same bits as numpy's mean of the float copy."""
+    ct = load_robot("nao").cell_types["skin_cell"]
+    rng = np.random.default_rng(3)
+    hi = np.iinfo(dtype).max if np.dtype(dtype).kind in "iu" else 1e6
+    dfm = rng.integers(0, min(hi, 2**31 - 1), (9, 3, 777), endpoint=True).astype(dtype)
+    got = level_values(ct, "levels", dfm, np.zeros((9, 3)), np.zeros((9, 2, 777)))
+    np.testing.assert_array_equal(got[:, :3], dfm.astype(np.float64).mean(axis=-1))
 
 
 def test_labels_carry_the_group_and_name_it():

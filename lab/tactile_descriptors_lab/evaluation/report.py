@@ -44,7 +44,7 @@ LENGTH_SECTIONS: tuple[str, ...] = ("length", "length_cv", "short")
 #: How this release computes the feature groups, as a section's provenance records it: a section of
 #: results.json measured with another definition is rendered with a warning naming its date and definition.
 FEATURE_DEFINITION: str = (f"feature bank v{BANK_VERSION}: bands and band powers from one FFT per channel "
-                           "(core/features.py)")
+                           "over the window's last fast-length samples (core/features.py)")
 
 
 def section_provenance(date: str | None = None) -> dict:
