@@ -242,9 +242,11 @@ def register(subparsers) -> None:
                    help="contact gate (eq. 16; off by default: recorded slides are all in contact and the "
                    "tared PDC misfires on soft materials, see lab/docs/evaluation.md)")
     p.add_argument("--pa-update", default=RECOMMENDED_PA_UPDATE, choices=list(PA_UPDATES),
-                   help="PA-I update: max_loss (default) or prediction (the paper's eq. 30-32)")
+                   help="online update: arow (default; second-order), max_loss, or prediction (the paper's "
+                   "eq. 30-32)")
     p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=RECOMMENDED_PA_AVERAGE,
-                   help="predict with averaged PA weights (default on; --no-pa-average is the paper's PA-I)")
+                   help="predict with averaged weights (default off; --pa-update prediction --no-pa-average "
+                   "is the paper's PA-I)")
     p.add_argument("--drop", default="", help="quantities to leave out, e.g. L,N (ablation)")
     p.add_argument("--train-windows", type=int, default=None,
                    help="random windows per training trial (default: at least 8, and 16 s of windows per trial: "
