@@ -79,6 +79,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 from ..errors import ConfigError, SignalError
 from .cell_types import CellType
+from .yamlreader import config_dir
 
 __all__ = [
     "GROUPS",
@@ -261,7 +262,6 @@ def rocket_parameters(cell_type: CellType, *, key: str = "descriptor.groups", so
         and how to write it.
     """
     from . import rocket  # the transform and its files (numpy; its kernel loads on first use)
-    from .robot import config_dir  # the robot description's folder (robot.py reads this catalogue)
 
     try:
         path = config_dir() / "rocket" / f"{cell_type.name}.json"
