@@ -311,6 +311,15 @@ def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]
     return {g: selection_labels(ct, (g,)) if _fitted(ct, g) else () for g in GROUPS}
 
 
+def _rocket_too_short(cell_type: CellType, window) -> bool:
+    """True when a window is shorter than a fitted rocket transform's largest kernel (the group is then not computed)."""
+    if not _fitted(cell_type, "rocket"):
+        return False
+    params = rocket_parameters(cell_type)
+    n_fast = window.pac.size if isinstance(window, BiotacRecording) else np.shape(window.vibration)[-1]
+    return n_fast < params["vibration"].min_samples or window.n_frames < params["slow"].min_samples
+
+
 def _fitted(cell_type: CellType, group: str) -> bool:
     """False for ``rocket`` on a cell type without fitted transforms (its bank columns are then none)."""
     if group != "rocket":
@@ -390,8 +399,10 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
     present, _ = recording_channels(rec, cell_type)
     feedable = {parse_group(g)[0] for g in feedable_groups(cell_type, present)}
     feedable &= set(cell_type_groups(cell_type)[0])
+    short = _rocket_too_short(cell_type, w)
     for g in GROUPS:
-        if g not in feedable:  # a group reading a channel the recording lacks (or its cell type cannot feed)
+        if g not in feedable or (g == "rocket" and short):  # a group reading a channel the recording lacks (or
+            # its cell type cannot feed, or a window shorter than the rocket transforms' largest kernel)
             groups[g] = np.full(len(selection_labels(cell_type, (g,))) if _fitted(cell_type, g) else 0, np.nan)
             seconds[g] = 0.0
             continue
@@ -673,7 +684,7 @@ def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
     if np.isnan(X).all(axis=0).any():
         g = groups[int(np.flatnonzero([np.isnan(p[0]).all(axis=0).any() for p in parts])[0])]
         raise ConfigError(f"feature group {g!r} of mode {mode!r} was not computed: the recordings lack a channel "
-                          "it reads", key="channels")
+                          "it reads, or (rocket) the windows are shorter than its largest kernel", key="channels")
     keep = drop_quantities(labels, drop)
     if not keep.any():
         raise ConfigError(f"dropping {sorted(drop)} leaves no feature of mode {mode!r}")
