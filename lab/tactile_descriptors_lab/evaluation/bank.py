@@ -139,7 +139,7 @@ QUANTITIES: tuple[str, ...] = ("A", "M", "C", "L", "N")
 
 #: Version of the feature groups' definitions: bumped when a group's definition changes (cached banks
 #: of another version are recomputed; the report records it with every section it measures).
-BANK_VERSION: int = 5
+BANK_VERSION: int = 6
 _BANK_VERSION = BANK_VERSION
 
 
