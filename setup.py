@@ -16,6 +16,7 @@ setup(
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
         ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
+        ("share/" + PACKAGE + "/config/rocket", glob("config/rocket/*.json")),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
     ],
     # What the robot needs (drivers, window node, classifier, bags, the tactile CLI). The

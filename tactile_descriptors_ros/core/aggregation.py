@@ -38,7 +38,15 @@ from ..errors import SignalError
 from .cell_types import CellType
 from .descriptors import Quality
 from .fast import cell_bounds, cell_quantities, cell_quantities_bounded, exact_integer_ok, scratch
-from .features import band_hjorth, level_values, power_spectrum, spectral_length, statistics_values
+from .features import (
+    band_hjorth,
+    level_values,
+    plain_values,
+    power_spectrum,
+    rocket_values,
+    spectral_length,
+    statistics_values,
+)
 from .groups import (
     KERNEL_GROUPS,
     body_part_layout,
@@ -877,6 +885,11 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
                     vals = band_hjorth(vib, fs_s, spectrum)
                 elif g == "statistics":
                     vals = statistics_values(vib, fs_s, dfm, fs_v, spectrum)
+                elif g == "plain":
+                    vals = plain_values(vib, dfm, _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
+                elif g == "rocket":
+                    vals = rocket_values(cell_type, vib, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
+                                         _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
                 else:
                     vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
                                         _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
@@ -944,7 +957,7 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
                     vals, bad = _cells_mean(r[start:start + c])
                     per_part[p][g] = vals
                     if bad:
-                        flags[p] |= _INVALID if g.startswith("levels") else int(Quality.NONFINITE)
+                        flags[p] |= _INVALID if g.startswith(("levels", "plain", "rocket")) else int(Quality.NONFINITE)
                 start += c
     out = []
     for p, bp in enumerate(first):

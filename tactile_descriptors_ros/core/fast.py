@@ -327,6 +327,9 @@ def warm_up() -> dict:
     kernel.power_spectrum(np.zeros((2, 8)), np.ones(4), np.empty((2, 4)))  # the bands and statistics groups
     kernel.band_moments(np.zeros((2, 4)), np.ones(4), np.zeros(1, dtype=np.int64), np.full(1, 4, dtype=np.int64),
                         np.empty((2, 1, 3)))  # the bands group
+    one = np.ones(1, dtype=np.int64)  # the rocket group: one kernel, one dilation, one bias
+    kernel.rocket_ppv(np.zeros((1, 1, 9)), one, one, one, np.zeros(1, dtype=np.int64), np.zeros(1),
+                      np.array([[0, 1, 2]], dtype=np.int64), np.empty((1, 1)))
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info

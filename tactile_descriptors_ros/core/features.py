@@ -6,7 +6,8 @@ and returns one row of values per cell in the order of
 cells of a body part in contact.  ``paper`` and ``per_channel`` come from the
 descriptor kernel (:mod:`.fast`); ``bands`` from :func:`band_hjorth`,
 ``statistics`` from :func:`statistics_values` (both over the vibration's
-:func:`power_spectrum`), ``levels`` from :func:`level_values`.
+:func:`power_spectrum`), ``levels`` from :func:`level_values`, ``plain`` from :func:`plain_values`,
+``rocket`` from :func:`rocket_values` (:mod:`.rocket`).
 :func:`piece_summary` summarises a selection over the pieces of a window.
 """
 
@@ -32,6 +33,8 @@ __all__ = [
     "statistics_values",
     "level_values",
     "piece_summary",
+    "plain_values",
+    "rocket_values",
 ]
 
 
@@ -365,3 +368,69 @@ def piece_summary(values: np.ndarray, labels: Sequence[str]) -> tuple[np.ndarray
     v = log_activity(v.reshape(-1, v.shape[-1]), activity_mask(labels)).reshape(v.shape)
     return (np.concatenate([v.mean(axis=1), v.std(axis=1)], axis=1),
             tuple([f"mean_{lab}" for lab in labels] + [f"sd_{lab}" for lab in labels]))
+
+
+def plain_values(vibration: np.ndarray, deformation: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """The ``plain`` group of a stack of cells: mean, standard deviation, minimum, maximum of every channel.
+
+    Parameters
+    ----------
+    vibration : array_like, shape (n_cells, n_s, n_fast)
+    deformation : array_like, shape (n_cells, n_v, n_slow)
+    extra : array_like, shape (n_cells, n_extra, n_slow)
+        NaN where a sample is missing (a channel without any finite sample gives NaN).
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_cells, 4 * n_channels)
+        In the order of :func:`group_labels`: the statistic, then the channel.
+    """
+    s = np.asarray(vibration, dtype=np.float64)
+    v = np.asarray(deformation, dtype=np.float64)
+    e = np.asarray(extra, dtype=np.float64)
+    out = []
+    for q in (np.mean, np.std, np.min, np.max):
+        parts = [q(s, axis=-1), q(v, axis=-1)]
+        if e.shape[1]:
+            parts.append(q(e, axis=-1) if np.isfinite(e).all() else _nan_stat(q, e))
+        out.append(np.concatenate(parts, axis=1))
+    return np.concatenate(out, axis=1)
+
+
+def _nan_stat(q, e: np.ndarray) -> np.ndarray:
+    """``nan<q>`` of rows, NaN (without a warning) for a row with no finite sample."""
+    out = np.full(e.shape[:-1], np.nan)
+    for idx in np.ndindex(*e.shape[:-1]):
+        row = e[idx][np.isfinite(e[idx])]
+        if row.size:
+            out[idx] = q(row)
+    return out
+
+
+def rocket_values(cell_type: CellType, vibration: np.ndarray, deformation: np.ndarray,
+                  deformation_tare: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """The ``rocket`` group of a stack of cells (:mod:`.rocket`, transforms of :func:`rocket_parameters`).
+
+    Parameters
+    ----------
+    cell_type : CellType
+    vibration : array_like, shape (n_cells, n_s, n_fast)
+    deformation : array_like, shape (n_cells, n_v, n_slow)
+    deformation_tare : array_like, shape (n_cells, n_v)
+        Subtracted from the deformation samples (as ``levels`` does).
+    extra : array_like, shape (n_cells, n_extra, n_slow)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_cells, n_values)
+        The vibration transform's features, then the slow channels'; NaN for
+        a cell whose signal holds a non-finite sample (a missing extra value).
+    """
+    from . import rocket
+    from .groups import rocket_parameters
+
+    params = rocket_parameters(cell_type)
+    v = np.asarray(deformation, dtype=np.float64) - np.asarray(deformation_tare, dtype=np.float64)[..., None]
+    slow = np.concatenate([v, np.asarray(extra, dtype=np.float64)], axis=1)
+    return np.concatenate([rocket.transform(np.asarray(vibration), params["vibration"]),
+                           rocket.transform(slow, params["slow"])], axis=1)

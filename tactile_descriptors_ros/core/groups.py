@@ -56,6 +56,20 @@ Groups (labels for a BioTac: S = ``pac``, V = ``e1..e19``, extra channels
     of each vibration channel in :func:`vibration_bands` and of each
     deformation channel in :func:`deformation_bands` (``logvar_pac``,
     ``skew_e3``, ``kurt_ax``, ``logbp_pac_20-50Hz``, ``logbp_e1_0-2Hz``).
+``plain``
+    Plain statistics of every channel over the window: mean, standard
+    deviation, minimum and maximum (``avg_pac``, ``std_e3``, ``min_tdc``,
+    ``max_proximity``): the floor a selection must beat.
+``rocket``
+    Random-convolution features (MiniRocket, :mod:`.rocket`): proportions of
+    positive values of the vibration signal's and the slow channels'
+    (deformation, tare subtracted as for ``levels``, and extra channels)
+    convolutions with MiniRocket's 84 kernels at several dilations, against
+    biases fitted on training recordings (``ppv_vibration_0000``,
+    ``ppv_slow_0000``, ...).  The fitted transforms of a cell type are read
+    from ``config/rocket/<cell type>.json`` (:func:`rocket_parameters`;
+    ``tactile fit-rocket`` writes it); a cell type without that file cannot
+    feed the group.
 """
 
 from __future__ import annotations
@@ -65,6 +79,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 from ..errors import ConfigError, SignalError
 from .cell_types import CellType
+from .yamlreader import config_dir
 
 __all__ = [
     "GROUPS",
@@ -87,6 +102,9 @@ __all__ = [
     "selection_labels",
     "selection_name",
     "groups_in_labels",
+    "ROCKET_SIGNALS",
+    "rocket_parameters",
+    "fitted",
 ]
 
 #: Every feature group and what it reads: ``"signals"`` (every vibration and
@@ -94,7 +112,10 @@ __all__ = [
 #: the channels a ``<group>:<ch>,<ch>`` token names), in the order the
 #: evaluation's feature bank stores them.
 GROUP_READS: dict[str, str] = {"paper": "signals", "per_channel": "signals", "bands": "signals",
-                               "levels": "slow", "statistics": "signals"}
+                               "levels": "slow", "statistics": "signals", "plain": "all", "rocket": "all"}
+
+#: The signals of the ``rocket`` group, in label order: the vibration channels, then the slow channels.
+ROCKET_SIGNALS: tuple[str, ...] = ("vibration", "slow")
 
 #: Every feature group, in the order of :data:`GROUP_READS`.
 GROUPS: tuple[str, ...] = tuple(GROUP_READS)
@@ -202,6 +223,8 @@ def check_groups(cell_type: CellType, groups: tuple[str, ...], *, key: str = "de
             raise ConfigError(f"feature group 'bands' cannot be fed by cell type {cell_type.name!r}: its vibration "
                               f"rate ({cell_type.vibration.rate_hz:g} Hz) has no band of {VIBRATION_BANDS_HZ} "
                               "below Nyquist", key=key, source=source)
+        if name == "rocket":
+            rocket_parameters(cell_type, key=key, source=source)
         if GROUP_READS[name] == "slow" and chans is not None:
             slow = level_channels(cell_type)
             missing = [c for c in chans if c not in slow]
@@ -218,7 +241,55 @@ def group_channels(cell_type: CellType, group: str) -> tuple[str, ...]:
     name, chans = parse_group(group)
     if GROUP_READS[name] == "slow":
         return level_channels(cell_type, chans)
+    if GROUP_READS[name] == "all":
+        return cell_type.channels
     return cell_type.vibration.channels + cell_type.deformation.channels
+
+
+def rocket_parameters(cell_type: CellType, *, key: str = "descriptor.groups", source: str | None = None) -> dict:
+    """The fitted transforms of the ``rocket`` group for a cell type: ``config/rocket/<cell type>.json``.
+
+    Returns
+    -------
+    dict of str to :class:`.rocket.RocketParameters`
+        ``vibration`` (the vibration channels) and ``slow`` (deformation and
+        extra channels), checked against the cell type's channel counts.
+
+    Raises
+    ------
+    ConfigError
+        When the file is missing or does not fit the cell type, naming it
+        and how to write it.
+    """
+    from . import rocket  # the transform and its files (numpy; its kernel loads on first use)
+
+    try:
+        path = config_dir() / "rocket" / f"{cell_type.name}.json"
+    except ConfigError as exc:
+        raise ConfigError(f"feature group 'rocket': {exc}", key=key, source=source) from None
+    if not path.is_file():
+        raise ConfigError(f"feature group 'rocket' cannot be fed by cell type {cell_type.name!r}: no fitted "
+                          f"transform {path} (write one with `tactile fit-rocket`)", key=key, source=source)
+    params = rocket.load_parameters(path)
+    want = {"vibration": len(cell_type.vibration.channels),
+            "slow": len(cell_type.deformation.channels) + len(cell_type.extra_channels)}
+    for sig in ROCKET_SIGNALS:
+        if sig not in params or params[sig].n_channels != want[sig]:
+            got = params[sig].n_channels if sig in params else "no"
+            raise ConfigError(f"{path}: the {sig!r} transform takes {got} channels, cell type {cell_type.name!r} "
+                              f"has {want[sig]}", key=key, source=source)
+    return params
+
+
+def fitted(cell_type: CellType, group: str) -> bool:
+    """False for ``rocket`` when the cell type has no fitted transform (every other group needs none)."""
+    if parse_group(group)[0] != "rocket":
+        return True
+    try:
+        rocket_parameters(cell_type)
+    except ConfigError:
+        return False
+    return True
 
 
 def feedable_groups(cell_type: CellType, present: Iterable[str]) -> tuple[str, ...]:
@@ -228,7 +299,7 @@ def feedable_groups(cell_type: CellType, present: Iterable[str]) -> tuple[str, .
     stands in for ``levels`` when some slow channel is absent.
     """
     have = set(present)
-    out = [g for g in GROUPS if all(c in have for c in group_channels(cell_type, g))]
+    out = [g for g in GROUPS if all(c in have for c in group_channels(cell_type, g)) and fitted(cell_type, g)]
     if "levels" not in out:
         slow = [c for c in level_channels(cell_type, None) if c in have]
         if slow:
@@ -331,6 +402,11 @@ def group_labels(cell_type: CellType, group: str) -> tuple[str, ...]:
         return tuple(f"{q}_{ch}_{b}" for q in ("A", "M", "C") for ch in vib for b in vbands)
     if name == "levels":
         return tuple(f"level_{ch}" for ch in level_channels(cell_type, chans))
+    if name == "plain":
+        return tuple(f"{q}_{ch}" for q in ("avg", "std", "min", "max") for ch in cell_type.channels)
+    if name == "rocket":
+        params = rocket_parameters(cell_type)
+        return tuple(f"ppv_{sig}_{i:04d}" for sig in ROCKET_SIGNALS for i in range(params[sig].n_features))
     dbands = [_band_name(lo, hi) for lo, hi in deformation_bands(cell_type.deformation.rate_hz)]
     both = vib + dfm
     return tuple([f"logvar_{c}" for c in both] + [f"skew_{c}" for c in both] + [f"kurt_{c}" for c in both]

@@ -743,3 +743,69 @@ def band_moments(p, g, lo, hi, out):  # pragma: no cover - compiled
             out[r, b, 0] = s0
             out[r, b, 1] = s1
             out[r, b, 2] = s2
+
+
+@_jit
+def rocket_ppv(x, dilations, per_dilation, channels_per_combination, channel_indices, biases, indices,
+               out):  # pragma: no cover - compiled
+    """MiniRocket's PPV features (:func:`.rocket.transform`): ``out[i, f] = mean_t [C_t > b_f]``.
+
+    Per series and dilation, the nine shifted copies of every channel (zeros
+    past the ends) and their sum are formed once; a kernel's output is then,
+    for the channels of its combination, ``-sum + 3 (three taps)``, counted
+    against its biases over the whole series (even ``dilation index +
+    kernel index``) or the positions where the kernel lies inside it (odd).
+    The operations of :func:`.rocket.convolve` in another order: integer
+    counts give the same outputs exactly (floats: up to rounding).
+    """
+    n_series, n_ch, n_t = x.shape
+    n_kernels = indices.shape[0]
+    shifted = np.empty((9, n_ch, n_t))
+    total = np.empty((n_ch, n_t))
+    c = np.empty(n_t)
+    for i in range(n_series):
+        f = 0
+        c0 = 0
+        comb = 0
+        for j in range(dilations.shape[0]):
+            d = dilations[j]
+            pad = 4 * d
+            for k in range(9):
+                s = (k - 4) * d
+                for ch in range(n_ch):
+                    for t in range(n_t):
+                        u = t + s
+                        shifted[k, ch, t] = x[i, ch, u] if 0 <= u < n_t else 0.0
+            for ch in range(n_ch):
+                for t in range(n_t):
+                    acc = 0.0
+                    for k in range(9):
+                        acc += shifted[k, ch, t]
+                    total[ch, t] = acc
+            for kern in range(n_kernels):
+                a = indices[kern, 0]
+                b = indices[kern, 1]
+                g = indices[kern, 2]
+                nc = channels_per_combination[comb]
+                for t in range(n_t):
+                    c[t] = 0.0
+                for q in range(nc):
+                    ch = channel_indices[c0 + q]
+                    for t in range(n_t):
+                        c[t] += 3.0 * (shifted[a, ch, t] + shifted[b, ch, t] + shifted[g, ch, t]) - total[ch, t]
+                lo = 0
+                hi = n_t
+                if (j + kern) % 2 == 1:
+                    lo = pad
+                    hi = n_t - pad
+                m = per_dilation[j]
+                for q in range(m):
+                    bias = biases[f + q]
+                    count = 0
+                    for t in range(lo, hi):
+                        if c[t] > bias:
+                            count += 1
+                    out[i, f + q] = count / (hi - lo) if hi > lo else 0.0
+                f += m
+                c0 += nc
+                comb += 1

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +33,7 @@ import yaml
 from ..errors import ConfigError
 from .cell_types import CellType, parse_cell_type
 from .groups import check_groups, groups_of_channels
-from .yamlreader import YamlReader, resolve_yaml
+from .yamlreader import YamlReader, config_dir, resolve_yaml
 
 __all__ = [
     "VIBRATION_GROUPS",
@@ -175,29 +174,6 @@ class RobotDescription:
 
 
 # --------------------------------------------------------------------------- paths
-
-
-def config_dir() -> Path:
-    """Directory holding the shipped robot descriptions and scenes.
-
-    Looked up in order: ``$TACTILE_CONFIG_DIR``; the source checkout
-    (``<repo>/config``); the installed share directory
-    (``<prefix>/share/tactile_descriptors_ros/config``); the ament index.
-    """
-    env = os.environ.get("TACTILE_CONFIG_DIR")
-    candidates = [Path(env)] if env else []
-    candidates.append(Path(__file__).resolve().parents[2] / "config")
-    candidates.append(Path(sys.prefix) / "share" / "tactile_descriptors_ros" / "config")
-    for path in candidates:
-        if (path / "shadow_hand.yaml").is_file():
-            return path
-    try:  # a colcon install on a real ROS 2 system
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory("tactile_descriptors_ros")) / "config"
-    except Exception:  # noqa: BLE001 - ament_index may be absent or not know the package
-        pass
-    raise ConfigError("cannot find the config directory; set TACTILE_CONFIG_DIR")
 
 
 def robot_config_path(name_or_path: str | os.PathLike[str]) -> Path:

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
 
-__all__ = ["YamlReader", "kind_names", "resolve_yaml"]
+__all__ = ["YamlReader", "kind_names", "resolve_yaml", "config_dir"]
 
 
 def _kinds(kind: Any) -> tuple:
@@ -134,3 +135,26 @@ def resolve_yaml(name_or_path: str | os.PathLike[str], folder: Path, *, noun: st
         known = ", ".join(sorted(p.stem for p in folder.glob("*.yaml")))
         raise error(f"unknown {noun} {text!r} (known: {known})")
     return candidate
+
+
+def config_dir() -> Path:
+    """Directory holding the shipped robot descriptions and scenes.
+
+    Looked up in order: ``$TACTILE_CONFIG_DIR``; the source checkout
+    (``<repo>/config``); the installed share directory
+    (``<prefix>/share/tactile_descriptors_ros/config``); the ament index.
+    """
+    env = os.environ.get("TACTILE_CONFIG_DIR")
+    candidates = [Path(env)] if env else []
+    candidates.append(Path(__file__).resolve().parents[2] / "config")
+    candidates.append(Path(sys.prefix) / "share" / "tactile_descriptors_ros" / "config")
+    for path in candidates:
+        if (path / "shadow_hand.yaml").is_file():
+            return path
+    try:  # a colcon install on a real ROS 2 system
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("tactile_descriptors_ros")) / "config"
+    except Exception:  # noqa: BLE001 - ament_index may be absent or not know the package
+        pass
+    raise ConfigError("cannot find the config directory; set TACTILE_CONFIG_DIR")

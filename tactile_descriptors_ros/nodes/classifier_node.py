@@ -177,7 +177,8 @@ class ClassifierNode(Node):
         self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
         self.standardize = declare(self, "standardize", True, "running standardisation of features")
         self.pa_update = declare(self, "pa_update", RECOMMENDED_PA_UPDATE,
-                                 "PA-I update: max_loss, or prediction (the paper's eq. 30-32)", choices=PA_UPDATES)
+                                 "online update: max_loss, prediction (the paper's eq. 30-32), or arow "
+                                 "(second-order, shared covariance)", choices=PA_UPDATES)
         self.pa_average = declare(self, "pa_average", RECOMMENDED_PA_AVERAGE,
                                   "predict with the running mean of the PA weights (false: the paper's PA-I)")
         self.horizon = declare(self, "label_horizon", 100,

@@ -326,3 +326,24 @@ def test_describe_window_refuses_a_group_the_cell_type_cannot_feed():
     robot = load_robot("shadow_hand")
     with pytest.raises(ConfigError, match="'biotac'"):
         describe_window(robot, {0: _biotac_cell(np.random.default_rng(6))}, groups=("levels:proximity",))
+
+
+def test_plain_group_is_mean_sd_min_max_of_every_channel_and_a_lost_extra_sample_is_skipped():
+    from tactile_descriptors_ros.core.features import plain_values
+    from tactile_descriptors_ros.core.groups import group_labels
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    ct = load_robot("shadow_hand").cell_types["biotac"]
+    rng = np.random.default_rng(1)
+    s, v = rng.integers(0, 4096, (2, 1, 220)), rng.integers(0, 4096, (2, 19, 10))
+    e = rng.normal(size=(2, 3, 10))
+    e[1, 2, 4] = np.nan
+    e[1, 0, :] = np.nan  # no sample at all: NaN, flagged by the caller
+    out = plain_values(s, v, e)
+    labels = group_labels(ct, "plain")
+    assert out.shape == (2, len(labels)) == (2, 4 * 23)
+    for q, f in (("avg", np.nanmean), ("std", np.nanstd), ("min", np.nanmin), ("max", np.nanmax)):
+        assert out[0, labels.index(f"{q}_pac")] == f(s[0, 0])
+        assert out[0, labels.index(f"{q}_e7")] == f(v[0, 6])
+        assert out[1, labels.index(f"{q}_tac")] == pytest.approx(f(e[1, 2]), rel=1e-12)
+        assert np.isnan(out[1, labels.index(f"{q}_pdc")])

@@ -216,3 +216,139 @@ def test_the_valid_state_of_those_cases_loads(tmp_path):
     path = tmp_path / "model.json"
     path.write_text(json.dumps(_valid_state()))
     assert load_model(path).classes == ["c0", "c1", "c2"]
+
+
+# ------------------------------------------------------------ AROW (second-order, shared covariance)
+
+
+def _arow_reference(samples, n_features, r_per_feature):
+    """AROW written from Crammer, Kulesza & Dredze (2009) with the multiclass max-loss rival, full matrices."""
+    d = n_features + 1
+    W, S, classes = {}, np.eye(d), []
+    for x, y in samples:
+        xb = np.append(x, 1.0)
+        if y not in W:
+            W[y] = np.zeros(d)
+            classes.append(y)
+        if len(classes) < 2:
+            continue
+        scores = {c: W[c] @ xb for c in classes}
+        rival = max((c for c in classes if c != y), key=lambda c: (scores[c], -classes.index(c)))
+        margin = scores[y] - scores[rival]
+        if margin >= 1.0:
+            continue
+        confidence = xb @ S @ xb * 2.0  # x' Sigma_y x + x' Sigma_r x with one shared Sigma
+        beta = 1.0 / (confidence + r_per_feature * d)
+        alpha = (1.0 - margin) * beta
+        W[y] = W[y] + alpha * S @ xb
+        W[rival] = W[rival] - alpha * S @ xb
+        S = S - beta * np.outer(S @ xb, xb @ S)
+    return np.array([W[c] for c in classes]), S, classes
+
+
+def test_arow_equals_the_algorithm_written_from_its_paper():
+    rng = np.random.default_rng(4)
+    samples = [(rng.normal(size=5) + k, f"c{k}") for k in rng.integers(0, 4, 80)]
+    pa = PassiveAggressive(5, update="arow", r_per_feature=0.3)
+    for x, y in samples:
+        pa.partial_fit(x, y)
+    W, S, classes = _arow_reference(samples, 5, 0.3)
+    assert pa.classes == classes
+    np.testing.assert_allclose(pa.weights, W, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(pa.covariance, S, rtol=1e-10, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(pa.covariance) > 0)  # stays a covariance
+
+
+def test_arow_first_update_by_hand():
+    pa = PassiveAggressive(2, update="arow", r_per_feature=1.0)
+    pa.add_class("a")
+    x = np.array([1.0, 2.0])  # with bias [1, 2, 1]: x'x = 6, Sigma = I
+    assert pa.partial_fit(x, "b") == 1.0  # scores tie at 0: margin 0, loss 1
+    beta = 1.0 / (2 * 6.0 + 3.0)  # R = 1 x 3 features with the bias
+    np.testing.assert_allclose(pa.weights[1], beta * np.array([1, 2, 1]))
+    np.testing.assert_allclose(pa.weights[0], -beta * np.array([1, 2, 1]))
+    xb = np.array([1.0, 2.0, 1.0])
+    np.testing.assert_allclose(pa.covariance, np.eye(3) - beta * np.outer(xb, xb))
+    assert pa.predict(x) == "b"
+
+
+def test_arow_is_open_ended_and_learns_separable_classes():
+    rng = np.random.default_rng(0)
+    centres = rng.normal(size=(6, 8)) * 4
+    pa = PassiveAggressive(8, update="arow")
+    for t in range(240):
+        k = t % 5 if t < 150 else t % 6  # a sixth class appears at run time
+        pa.partial_fit(centres[k] + rng.normal(size=8) * 0.3, f"class{k}")
+    correct = sum(pa.predict(centres[k] + rng.normal(size=8) * 0.3) == f"class{k}" for k in range(6) for _ in range(20))
+    assert correct >= 118 and pa.classes[-1] == "class5"
+
+
+def test_arow_model_round_trip_and_version_1_files_still_load(tmp_path):
+    rng = np.random.default_rng(2)
+    clf = OnlineClassifier(["A_x", "M_x", "C_x"], update="arow", average=True, r_per_feature=0.7)
+    for i in range(20):
+        v = rng.uniform(0.5, 3.0, 3)
+        clf.observe(v)
+        clf.learn(v, f"c{i % 4}")
+    path = tmp_path / "model.json"
+    save_model(clf, path)
+    back = load_model(path)
+    assert (back.pa.update, back.pa.r_per_feature) == ("arow", 0.7)
+    np.testing.assert_array_equal(back.pa.covariance, clf.pa.covariance)  # exact: float64 bytes
+    assert json.dumps(back.state()) == json.dumps(clf.state())
+    v1 = OnlineClassifier(["A_x"], update="max_loss")
+    v1.learn(np.array([1.0]), "a")
+    old = v1.state() | {"format_version": 1}  # a PA-I file of the previous format
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert load_model(tmp_path / "old.json").classes == ["a"]
+    (tmp_path / "future.json").write_text(json.dumps(old | {"format_version": 3}))
+    with pytest.raises(ModelError, match="v3, expected .* v1 or v2"):
+        load_model(tmp_path / "future.json")
+
+
+def _arow_state() -> dict:
+    clf = OnlineClassifier(["A_x", "M_x"], update="arow")
+    for i, v in enumerate(([1.0, 2.0], [2.0, 0.5], [0.3, 1.0])):
+        clf.observe(np.array(v))
+        clf.learn(np.array(v), f"c{i}")
+    return json.loads(json.dumps(clf.state()))
+
+
+@pytest.mark.parametrize("mutate, match", [
+    (lambda s: s["pa"].pop("covariance"), "pa.covariance' is missing"),
+    (lambda s: s["pa"]["covariance"].update(shape=[2, 2]), r"pa.covariance.*shape \[2, 2\], expected \[3, 3\]"),
+    (lambda s: s["pa"]["covariance"].update(float64_le_base64="AAAA"), "holds 3 bytes, expected 72"),
+    (lambda s: s["pa"]["covariance"].update(float64_le_base64="not base64!"), "not valid base64"),
+    (lambda s: s["pa"]["covariance"].update(
+        float64_le_base64=__import__("base64").b64encode(np.full(9, np.nan).tobytes()).decode()), "9 non-finite"),
+    (lambda s: s["pa"].update(r_per_feature=0.0), "r_per_feature' must be positive"),
+    (lambda s: s["pa"].update(update="max_loss"), "covariance' given for the 'max_loss' update"),
+])
+def test_corrupt_arow_state_is_refused_naming_the_key(tmp_path, mutate, match):
+    state = _arow_state()
+    mutate(state)
+    path = tmp_path / "model.json"
+    path.write_text(json.dumps(state))
+    with pytest.raises(ModelError, match=match):
+        load_model(path)
+
+
+def _learn_some(clf: OnlineClassifier, store, n: int, rng, classes: int = 5) -> None:
+    for i in range(n):
+        v = rng.uniform(0.5, 3.0, len(clf.labels))
+        clf.observe(v)
+        clf.learn(v, f"c{i % classes}")
+        store.record(clf)
+
+
+def test_arow_journal_replays_to_the_same_bits(tmp_path):
+    from tactile_descriptors_ros.core.model_store import ModelStore, journal_path
+
+    path = tmp_path / "model.json"
+    clf = OnlineClassifier(["A_x", "M_x", "C_x"], update="arow", average=True)
+    store = ModelStore(path)
+    _learn_some(clf, store, 40, np.random.default_rng(7), classes=6)
+    assert journal_path(path).exists() and store.compactions == 0
+    back = load_model(path)
+    np.testing.assert_array_equal(back.pa.covariance, clf.pa.covariance)
+    assert json.dumps(back.state()) == json.dumps(clf.state())

@@ -33,7 +33,10 @@ class _Node:
 
     def __init__(self, ns: str, model_path: Path, env: dict[str, str], log: Path) -> None:
         cmd = [sys.executable, "-m", "tactile_descriptors_ros.nodes.classifier_node", "--ros-args",
-               "-r", f"__ns:=/{ns}", "-p", f"model_path:={model_path}", "-p", "diagnostics_period_s:=5.0"]
+               "-r", f"__ns:=/{ns}", "-p", f"model_path:={model_path}", "-p", "diagnostics_period_s:=5.0",
+               # the journal's sizes below are a first-order learner's (two weight rows an entry; AROW adds
+               # a covariance step to each entry and an n x n matrix to the file)
+               "-p", "pa_update:=max_loss", "-p", "pa_average:=true"]
         self.log = log
         self._fh = open(log, "w")
         self.proc = subprocess.Popen(cmd, stdout=self._fh, stderr=subprocess.STDOUT, env=env, cwd=_REPO)

@@ -68,6 +68,7 @@ from tactile_descriptors_ros.core.groups import (
     check_groups,
     feedable_groups,
     parse_group,
+    rocket_parameters,
     selection_labels,
 )
 from tactile_descriptors_ros.core.robot import VIBRATION_GROUPS, BodyPart, Cell, RobotDescription, load_robot
@@ -123,6 +124,9 @@ DESCRIPTOR_MODES: dict[str, tuple[str, ...]] = {
     "baseline": ("statistics",),
     "combined": ("per_channel", "bands", "levels", "statistics"),
     "combined_subwindows": ("per_channel", "bands", "levels", "statistics", "subwindows"),
+    "plain": ("plain",),
+    "rocket": ("rocket",),
+    "combined_rocket": ("per_channel", "bands", "levels", "statistics", "rocket"),
 }
 
 #: The mode ``tactile evaluate`` uses unless told otherwise (the paper's own
@@ -304,7 +308,27 @@ def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, st
 def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
     """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.groups.selection_labels`)."""
     ct = cell_type or biotac_cell_type()
-    return {g: selection_labels(ct, (g,)) for g in GROUPS}
+    return {g: selection_labels(ct, (g,)) if _fitted(ct, g) else () for g in GROUPS}
+
+
+def _rocket_too_short(cell_type: CellType, window) -> bool:
+    """True when a window is shorter than a fitted rocket transform's largest kernel (the group is then not computed)."""
+    if not _fitted(cell_type, "rocket"):
+        return False
+    params = rocket_parameters(cell_type)
+    n_fast = window.pac.size if isinstance(window, BiotacRecording) else np.shape(window.vibration)[-1]
+    return n_fast < params["vibration"].min_samples or window.n_frames < params["slow"].min_samples
+
+
+def _fitted(cell_type: CellType, group: str) -> bool:
+    """False for ``rocket`` on a cell type without fitted transforms (its bank columns are then none)."""
+    if group != "rocket":
+        return True
+    try:
+        rocket_parameters(cell_type)
+    except ConfigError:
+        return False
+    return True
 
 
 @dataclass
@@ -375,9 +399,11 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
     present, _ = recording_channels(rec, cell_type)
     feedable = {parse_group(g)[0] for g in feedable_groups(cell_type, present)}
     feedable &= set(cell_type_groups(cell_type)[0])
+    short = _rocket_too_short(cell_type, w)
     for g in GROUPS:
-        if g not in feedable:  # a group reading a channel the recording lacks (or its cell type cannot feed)
-            groups[g] = np.full(len(selection_labels(cell_type, (g,))), np.nan)
+        if g not in feedable or (g == "rocket" and short):  # a group reading a channel the recording lacks (or
+            # its cell type cannot feed, or a window shorter than the rocket transforms' largest kernel)
+            groups[g] = np.full(len(selection_labels(cell_type, (g,))) if _fitted(cell_type, g) else 0, np.nan)
             seconds[g] = 0.0
             continue
         t0 = time.perf_counter()
@@ -400,11 +426,20 @@ def _cache_path(cache_dir: Path, n_frames: int, force_threshold_n: float, n_per_
                 cell_type: CellType, present: Sequence[tuple[str, ...]] = ()) -> Path:
     key = json.dumps({"v": _BANK_VERSION, "n_frames": n_frames, "ft": force_threshold_n, "npc": n_per_count,
                       "bands": PAC_BANDS_HZ, "ebands": ELECTRODE_BANDS_HZ, "ppf": PAC_PER_FRAME,
-                      "cell_type": repr(cell_type)}
+                      "cell_type": repr(cell_type), "rocket": _rocket_digest(cell_type)}
                      | ({"present": [list(p) for p in present]}
                         if any(p != cell_type.channels for p in present) else {}))
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return cache_dir / f"bank_{n_frames}f_{digest}.npz"
+
+
+def _rocket_digest(cell_type: CellType) -> str:
+    """SHA-1 of the cell type's fitted rocket transforms (refitting them recomputes the banks); "" without."""
+    try:
+        params = rocket_parameters(cell_type)
+    except ConfigError:
+        return ""
+    return hashlib.sha1(json.dumps({k: v.state() for k, v in sorted(params.items())}).encode()).hexdigest()
 
 
 def _load_cache(path: Path) -> dict[tuple, tuple]:
@@ -640,12 +675,16 @@ def select_features(bank: FeatureBank, mode: str, *, gate: bool = True,
     if missing:
         raise ConfigError(f"mode {mode!r} needs the {missing} group(s): compute the bank with subwindows=True")
     parts = [_group_columns(bank, g) for g in groups]
+    empty = [g for g, p in zip(groups, parts) if p[0].shape[1] == 0]
+    if empty:
+        raise ConfigError(f"feature group {empty[0]!r} of mode {mode!r} was not computed: the cell type has no "
+                          "fitted transform for it (tactile fit-rocket)", key="channels")
     X = np.concatenate([p[0] for p in parts], axis=1)
     labels = tuple(lab for p in parts for lab in p[1])
     if np.isnan(X).all(axis=0).any():
         g = groups[int(np.flatnonzero([np.isnan(p[0]).all(axis=0).any() for p in parts])[0])]
         raise ConfigError(f"feature group {g!r} of mode {mode!r} was not computed: the recordings lack a channel "
-                          "it reads", key="channels")
+                          "it reads, or (rocket) the windows are shorter than its largest kernel", key="channels")
     keep = drop_quantities(labels, drop)
     if not keep.any():
         raise ConfigError(f"dropping {sorted(drop)} leaves no feature of mode {mode!r}")

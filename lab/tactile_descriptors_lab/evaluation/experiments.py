@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,8 @@ from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S", "evaluate", "evaluate_many",
-           "trial_folds", "trial_cv", "descriptor_seconds", "draw_spec_windows", "describe_windows"]
+           "trial_folds", "trial_cv", "descriptor_seconds", "draw_spec_windows", "describe_windows",
+           "select_mode", "evaluate_selected", "SELECTION_FOLDS"]
 
 
 #: Learners of ``tactile evaluate --classifier``.
@@ -127,6 +128,7 @@ class EvalConfig:
     jobs: int = 2
     cache_dir: str | None = "build/cache"
     progress: bool = False
+    c_grid: tuple[float, ...] = C_GRID
 
 
 def descriptor_seconds(bank, mode: str) -> float:
@@ -335,7 +337,8 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     svm = pa = gmm = None
     if "svm" in classifiers:
         svm = fit_svm(X_tr, y_tr, b_train.groups_id, labels, scaling=cfg.scaling, folds=cfg.cv_folds,
-                      repeats=cfg.cv_repeats, seed=cfg.seed, jobs=cfg.jobs, progress=cfg.progress)
+                      repeats=cfg.cv_repeats, seed=cfg.seed, jobs=cfg.jobs, progress=cfg.progress,
+                      c_grid=cfg.c_grid)
         svm_pred = svm.predict(X_all)
     if "pa" in classifiers:
         pa = pa_curve(X_tr, y_tr, b_train.trials, X_all, y_all, labels, n_max=cfg.pa_max, orders=cfg.pa_orders,
@@ -385,7 +388,8 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
                 "accuracy": float(np.mean(pred == y_te)),
                 "confusion": confusion_matrix(y_te, pred, labels=classes).tolist(),
                 "best_c": svm.best_c, "cv_accuracy": svm.cv_accuracy, "cv_scores": svm.cv_scores,
-                "c_grid": list(C_GRID), "c_grid_text": C_GRID_TEXT,
+                "c_grid": list(cfg.c_grid), "c_grid_text": C_GRID_TEXT if tuple(cfg.c_grid) == C_GRID else
+                ", ".join(f"{c:g}" for c in cfg.c_grid),
                 "cv": f"{cfg.cv_folds}-fold x {cfg.cv_repeats} repeats",
                 "fit_s": svm.fit_s, "select_s": svm.select_s,
                 "update_s": svm.fit_s, "predict_s": float(np.median(per_pred)),
@@ -450,3 +454,63 @@ def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int 
         return {"folds": [[int(min(b)), int(max(b))] for b in blocks],
                 "by_test_window": {spec: summary(spec) for spec in specs}}
     return summary(specs[0])
+
+
+#: Folds of the selection's cross-validation inside the training trials (contiguous blocks of trials).
+SELECTION_FOLDS: int = 3
+
+
+def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Sequence[str],
+                folds: int = SELECTION_FOLDS) -> dict:
+    """Choose a descriptor mode by cross-validation by trial *inside the training trials only*.
+
+    The training trials are cut into ``folds`` contiguous blocks
+    (:func:`trial_folds`); each candidate is trained on the other blocks and
+    scored on each block in turn, with ``cfg``'s first classifier and window
+    (windows drawn as :func:`evaluate` draws them).  The candidate with the
+    best mean accuracy is chosen; ties go to the one listed first (list the
+    cheaper ones first).  No test trial is read: the test split is scored
+    once, afterwards, with the chosen mode (:func:`evaluate_selected`).
+
+    Returns
+    -------
+    dict
+        ``chosen``, ``candidates`` (per mode: ``accuracy``, ``accuracy_std``,
+        ``fold_accuracy``), ``folds`` and ``classifier``.
+    """
+    if not candidates:
+        raise ConfigError("no candidate mode to select from", key="select")
+    for c in candidates:
+        mode_groups(c)  # unknown modes are refused before any work
+    name = cfg.classifiers[0]
+    trials = sorted({r.trial for r in train})
+    blocks = trial_folds(trials, folds)
+    scores: dict[str, dict] = {}
+    for mode in dict.fromkeys(candidates):
+        accs = []
+        for block in blocks:
+            inner_test = [r for r in train if r.trial in block]
+            inner_train = [r for r in train if r.trial not in block]
+            res = evaluate(inner_train, inner_test, replace(cfg, mode=mode, classifiers=(name,), test_window=None))
+            accs.append(res["classifiers"][name]["accuracy"])
+        scores[mode] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
+                        "fold_accuracy": [float(a) for a in accs]}
+    best = max(v["accuracy"] for v in scores.values())
+    chosen = next(m for m, v in scores.items() if v["accuracy"] >= best - 1e-12)
+    return {"chosen": chosen, "candidates": scores, "classifier": name,
+            "folds": [[int(min(b)), int(max(b))] for b in blocks]}
+
+
+def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
+                      candidates: Sequence[str], folds: int = SELECTION_FOLDS) -> dict:
+    """:func:`select_mode` on the training trials, then :func:`evaluate` once with the chosen mode.
+
+    Returns
+    -------
+    dict
+        :func:`evaluate`'s result with the selection under ``selection``.
+    """
+    selection = select_mode(train, cfg, candidates, folds)
+    out = evaluate(train, test, replace(cfg, mode=selection["chosen"]))
+    out["selection"] = selection
+    return out

@@ -229,16 +229,24 @@ def register(subparsers) -> None:
                    help="descriptor mode: averaged/paper = eq. 17 (8 values), per_channel (98), "
                    "multiband (per_channel + Hjorth of 6 PAC bands), multiband_levels, baseline, "
                    "combined (all of them, 261 values), combined_subwindows (+ mean and sd over 4 successive "
-                   "pieces, 493), or feature groups joined by '+' (levels, per_channel+levels, "
+                   "pieces, 493), plain (mean, sd, min, max of every channel), rocket (random convolutions), "
+                   "combined_rocket, or feature groups joined by '+' (levels, per_channel+levels, "
                    f"levels:pdc,tdc,tac); default {DEFAULT_MODE}")
+    p.add_argument("--select", default=None, metavar="MODE,MODE,...",
+                   help="choose the mode among these by cross-validation by trial inside the training trials "
+                   "(3 blocks; ties to the first listed), then score the test once with it (replaces --channels)")
+    p.add_argument("--c-grid", default=None, metavar="C,C,...",
+                   help="the SVM's candidate C values (default: the paper's 15)")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
     p.add_argument("--gate", action=argparse.BooleanOptionalAction, default=False,
                    help="contact gate (eq. 16; off by default: recorded slides are all in contact and the "
                    "tared PDC misfires on soft materials, see lab/docs/evaluation.md)")
     p.add_argument("--pa-update", default=RECOMMENDED_PA_UPDATE, choices=list(PA_UPDATES),
-                   help="PA-I update: max_loss (default) or prediction (the paper's eq. 30-32)")
+                   help="online update: arow (default; second-order), max_loss, or prediction (the paper's "
+                   "eq. 30-32)")
     p.add_argument("--pa-average", action=argparse.BooleanOptionalAction, default=RECOMMENDED_PA_AVERAGE,
-                   help="predict with averaged PA weights (default on; --no-pa-average is the paper's PA-I)")
+                   help="predict with averaged weights (default off; --pa-update prediction --no-pa-average "
+                   "is the paper's PA-I)")
     p.add_argument("--drop", default="", help="quantities to leave out, e.g. L,N (ablation)")
     p.add_argument("--train-windows", type=int, default=None,
                    help="random windows per training trial (default: at least 8, and 16 s of windows per trial: "
@@ -273,9 +281,20 @@ def run(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.evaluation.sampling import load_split
     from tactile_descriptors_lab.verbs.cmd_import import parse_classes
 
+    candidates = [m.strip() for m in args.select.split(",") if m.strip()] if args.select else []
+    if candidates:
+        args.channels = candidates[0]
     asked = args.channels is not None
-    if asked:
-        mode_groups(args.channels)  # an unknown mode is refused before any data is read
+    for mode in candidates or ([args.channels] if asked else []):
+        mode_groups(mode)  # an unknown mode is refused before any data is read
+    c_grid = None
+    if args.c_grid:
+        try:
+            c_grid = tuple(float(c) for c in args.c_grid.split(","))
+        except ValueError:
+            raise ConfigError(f"--c-grid takes numbers joined by ',', got {args.c_grid!r}", key="c-grid") from None
+        if not c_grid or not all(np.isfinite(c) and c > 0 for c in c_grid):
+            raise ConfigError(f"--c-grid values must be positive, got {args.c_grid!r}", key="c-grid")
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     if (args.train_windows is not None and args.train_windows < 1) or args.test_windows < 1 or args.cv_repeats < 1:
@@ -302,7 +321,8 @@ def run(args: argparse.Namespace) -> int:
     train, test = align_classes(train, test)
     check_classes(train, test, args.train, args.test, every)
     args.channels = resolve_mode(list(train) + list(test), args.channels)
-    check_recordings(list(train) + list(test), args.channels)
+    for mode in candidates or [args.channels]:
+        check_recordings(list(train) + list(test), mode)
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)
@@ -315,8 +335,14 @@ def run(args: argparse.Namespace) -> int:
                      cv_repeats=args.cv_repeats, windows=args.windows, jobs=args.jobs,
                      cache_dir=args.cache or None,
                      block_s=args.block or None, block_hop_s=args.block_hop if args.block else None,
-                     progress=True)
-    result = evaluate(train, test, cfg)
+                     progress=True, **({"c_grid": c_grid} if c_grid else {}))
+    if candidates:
+        from ..evaluation.experiments import evaluate_selected
+
+        result = evaluate_selected(train, test, cfg, candidates)
+        args.channels = result["selection"]["chosen"]
+    else:
+        result = evaluate(train, test, cfg)
     if args.json:
         out = dict(result)
         if args.classifier != "all":  # with all, each classifier's object carries its accuracy
@@ -324,6 +350,12 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(out))
         return 0
     blocks = f"mean over {args.block:g} s blocks" if args.block else "one descriptor per window"
+    if candidates:
+        sel = result["selection"]
+        print(f"selection by trial cross-validation inside the training trials ({sel['classifier']}, blocks "
+              + ", ".join(f"{a}-{b}" for a, b in sel["folds"]) + "): "
+              + "; ".join(f"{m} {100 * v['accuracy']:.1f} +- {100 * v['accuracy_std']:.1f} %"
+                          for m, v in sel["candidates"].items()) + f" -> {sel['chosen']}")
     print(f"descriptor mode {args.channels} ({result['n_features']} values, {blocks}), window {args.window} s "
           f"(test {args.test_window or args.window}), crop {result['common_length_s']:.2f} s; "
           f"{result['n_train']} training and {result['n_test']} test windows ({args.windows} positions); "

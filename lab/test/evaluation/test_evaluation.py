@@ -255,7 +255,7 @@ def test_cli_scores_a_separate_folder_whose_trial_numbers_collide(biotac_data_di
     assert out["test_trials"] == [1, 2] and out["train_trials"] == [1, 2, 3, 4, 5]
     assert out["n_features"] == 261 and out["config"]["mode"] == "combined"
     assert out["config"]["gate"] is False
-    assert (out["config"]["pa_update"], out["config"]["pa_average"]) == ("max_loss", True)
+    assert (out["config"]["pa_update"], out["config"]["pa_average"]) == ("arow", False)
     assert out["n_test"] == 3 * 2 and 0.0 <= out["accuracy"] <= 1.0
     # the test split's windows come from the test folder's files: the same windows described from the
     # original files (trials 21, 22 renamed 1, 2) give the same descriptors
