@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SignalError
+from ..markers import INVALID_ACCEL, INVALID_COUNT
 from .geometry import Taxels
 
 __all__ = ["CellReduction", "reduce_chunk", "RunReductions", "reduce_skin_runs", "ContactEstimate", "ContactWindow", "locate_contact",
@@ -127,8 +128,8 @@ def _sum_runs(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 def reduce_skin_runs(cell_ids: np.ndarray, force: np.ndarray, force_count: np.ndarray, force_offset_ns: np.ndarray,
                      force_tare: np.ndarray, force_n_per_count: float, accel: np.ndarray, accel_count: np.ndarray,
-                     accel_si_per_count: float, stamp_ns: int, *, invalid_count: int = 65535,
-                     invalid_accel: int = -32768) -> RunReductions:
+                     accel_si_per_count: float, stamp_ns: int, *, invalid_count: int = INVALID_COUNT,
+                     invalid_accel: int = INVALID_ACCEL) -> RunReductions:
     """Reduce every cell run of a skin body part's message at once (``SkinPartFrames``' arrays, vectorised).
 
     Parameters

@@ -42,27 +42,17 @@ from ..core.colormap import force_colours
 from ..core.contact import ContactWindow, reduce_chunk, reduce_skin_runs
 from ..core.display import PartDisplay, PredictionHistory
 from ..core.geometry import Taxels, layout_2d
-from ..core.robot import BodyPart, load_robot
+from ..core.robot import BodyPart, load_robot, select_body_parts
 from ..core.tactile_image import ImageLayout, image_layout, render
 from ..errors import ConfigError, SignalError
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node, steady_clock
 from .contact_msgs import MarkerStyle, contact_to_msg, image_to_msg, part_markers, wrench_to_msg
-from .conversions import biotac_msg_to_chunk, stamp_to_ns
+from ..topics import (CONTACT_TOPIC, CONTACTS_TOPIC, DESCRIPTOR_TOPIC, FRAMES_TOPIC, IMAGE_TOPIC, MARKERS_TOPIC,
+                      PREDICTION_TOPIC, WRENCH_TOPIC)
+from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .qos import QosDefaults, declare_qos
-from .window_node import FRAMES_TOPIC, message_kind, select_body_parts
 
-__all__ = ["ContactNode", "CONTACT_TOPIC", "WRENCH_TOPIC", "MARKERS_TOPIC", "IMAGE_TOPIC", "CONTACTS_TOPIC", "main"]
-
-#: Per body part, at the frame rate.
-CONTACT_TOPIC = "tactile/{body_part}/contact"
-WRENCH_TOPIC = "tactile/{body_part}/wrench"
-#: Per body part, at the display rate.
-MARKERS_TOPIC = "tactile/{body_part}/markers"
-IMAGE_TOPIC = "tactile/{body_part}/image"
-#: Every body part, at the display rate.
-CONTACTS_TOPIC = "tactile/contacts"
-PREDICTION_TOPIC = "tactile/prediction"
-DESCRIPTOR_TOPIC = "tactile/descriptor"
+__all__ = ["ContactNode", "main"]
 
 
 @dataclass

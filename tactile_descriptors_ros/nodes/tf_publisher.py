@@ -20,13 +20,11 @@ from rclpy.node import Node
 
 from ..core.robot import load_robot
 from ..errors import ConfigError
+from ..topics import TF_STATIC_TOPIC
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
 from .contact_msgs import frames_to_tf_message
 
-__all__ = ["TfPublisher", "TF_STATIC_TOPIC", "main"]
-
-#: The static TF topic (absolute, as tf2 has it: a namespace does not move it).
-TF_STATIC_TOPIC = "/tf_static"
+__all__ = ["TfPublisher", "static_tf_qos", "main"]
 
 
 def static_tf_qos():

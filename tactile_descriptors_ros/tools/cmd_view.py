@@ -92,6 +92,8 @@ def _snapshot(args: argparse.Namespace, config: dict, frame: dict) -> int:
 
 
 def _live_snapshot(args: argparse.Namespace, live) -> int:
+    from ..topics import CONTACTS_TOPIC
+
     deadline = time.monotonic() + args.wait
     frame = None
     while time.monotonic() < deadline:
@@ -105,7 +107,7 @@ def _live_snapshot(args: argparse.Namespace, live) -> int:
             if any(p.get("in_contact") for p in frame["parts"]):
                 break
     if frame is None:
-        _say(f"tactile view: error: nothing on {live.node.resolve_topic_name('tactile/contacts')} within "
+        _say(f"tactile view: error: nothing on {live.node.resolve_topic_name(CONTACTS_TOPIC)} within "
              f"{args.wait:g} s (is the contact node running, in this ROS_DOMAIN_ID?)")
         return 2
     if not any(p.get("in_contact") for p in frame["parts"]):

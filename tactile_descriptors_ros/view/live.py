@@ -17,11 +17,10 @@ from typing import Any
 
 from ..core.robot import load_robot
 from ..errors import ConfigError
+from ..topics import CONTACTS_TOPIC, DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
 from .model import ViewModel
 
-__all__ = ["LiveView", "CONTACTS_TOPIC"]
-
-CONTACTS_TOPIC = "tactile/contacts"
+__all__ = ["LiveView"]
 
 
 class LiveView:
@@ -56,9 +55,9 @@ class LiveView:
                                       start_parameter_services=False)
         best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
         self.node.create_subscription(ContactArray, CONTACTS_TOPIC, self._on_contacts, best_effort)
-        self.node.create_subscription(Prediction, "tactile/prediction", self._on_prediction, 50)
-        self.node.create_subscription(Descriptor, "tactile/descriptor", self._on_descriptor, 50)
-        self.node.create_subscription(Label, "tactile/label", self._on_label, 100)
+        self.node.create_subscription(Prediction, PREDICTION_TOPIC, self._on_prediction, 50)
+        self.node.create_subscription(Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, 50)
+        self.node.create_subscription(Label, LABEL_TOPIC, self._on_label, 100)
         self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self._thread: threading.Thread | None = None
