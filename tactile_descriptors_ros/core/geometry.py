@@ -108,8 +108,12 @@ class Pose:
 
     @property
     def rpy(self) -> tuple[float, float, float]:
-        """Roll, pitch, yaw as URDF writes them."""
-        return tuple(float(v) for v in self.rotation.as_euler("xyz"))
+        """Roll, pitch, yaw as URDF writes them (at pitch +-90 deg scipy's choice of roll and yaw, the same rotation)."""
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "gimbal lock": the angles still give the rotation
+            return tuple(float(v) for v in self.rotation.as_euler("xyz"))
 
     @property
     def normal(self) -> np.ndarray:

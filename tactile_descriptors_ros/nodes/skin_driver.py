@@ -102,6 +102,9 @@ class SkinDriver(DriverBase):
         self.frame_ids = {c.id: str(c.extra.get("frame_id", f"skin_cell_{c.id}")) for p in self.robot.body_parts
                           for c in p.cells}
         self.known = set(self.full_robot.cell_index())
+        # header.frame_id of a body part's messages: its link when the robot has a geometry, else its name
+        geo = self.robot.geometry
+        self.part_frames = {p.name: geo.part_links[p.name] if geo is not None else p.name for p in self.robot.body_parts}
         self.decoder = None
         self.stream: SkinStream | None = None
         self._rates: dict[int, RateMeter] = {}
@@ -186,7 +189,8 @@ class SkinDriver(DriverBase):
             self.stream.resume()
 
     def _publish(self, part: str, runs: list[SkinRun]) -> None:
-        msg = skin_part_to_msg(pack_skin_part(part, runs, accel_mps2_per_count=self.accel_scale,
+        msg = skin_part_to_msg(pack_skin_part(part, runs, frame_id=self.part_frames[part],
+                                              accel_mps2_per_count=self.accel_scale,
                                               force_n_per_count=self.force_n_per_count))
         self.part_publishers[part].publish(msg)
         self.part_messages[part] += 1
