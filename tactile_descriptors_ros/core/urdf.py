@@ -60,8 +60,9 @@ def urdf_text(robot: RobotDescription, *, xacro: bool = False, sites: bool = Tru
     if geo is None:
         raise ConfigError(f"robot {robot.name!r} has no geometry section: nothing to write as URDF",
                           key="geometry", source=robot.source)
-    head = (f" Frames of {robot.name}'s cells, written by `tactile urdf {robot.name}"
-            f"{' --xacro' if xacro else ''}` from {Path(robot.source).name or 'its robot description'}. ")
+    # (an XML comment may not hold a double hyphen: the option is named in words)
+    head = (f" Frames of {robot.name}'s cells, written by tactile urdf {robot.name}"
+            f"{' (xacro macro)' if xacro else ''} from {Path(robot.source).name or 'its robot description'}. ")
     if xacro:
         ET.register_namespace("xacro", XACRO_NS)
         root = ET.Element("robot", {"name": f"{robot.name}_tactile"})
