@@ -47,6 +47,8 @@ def _frames_topics(reader: BagReader) -> dict[str, str]:
 
 
 def _first_messages(reader: BagReader, topics: list[str], per_topic: int = 5) -> Iterator[tuple[BagMessage, Any]]:
+    if not topics:
+        return  # (an empty selection would read every topic)
     seen: dict[str, int] = {}
     for m in reader.messages(topics):
         if seen.get(m.topic, 0) >= per_topic:
