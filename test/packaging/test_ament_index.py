@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 PKG = "tactile_descriptors_ros"
-NODES = ("biotac_driver", "classifier_node", "skin_driver", "window_node")
+NODES = ("biotac_driver", "classifier_node", "contact_node", "skin_driver", "tf_publisher", "window_node")
 PREFIX = Path(sys.prefix)
 
 
