@@ -46,7 +46,7 @@ from ..core.robot import BodyPart, load_robot, select_body_parts
 from ..core.tactile_image import ImageLayout, image_layout, render
 from ..errors import ConfigError, SignalError
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node, steady_clock
-from .contact_msgs import MarkerStyle, contact_to_msg, image_to_msg, part_markers, wrench_to_msg
+from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from ..topics import (CONTACT_TOPIC, CONTACTS_TOPIC, DESCRIPTOR_TOPIC, FRAMES_TOPIC, IMAGE_TOPIC, MARKERS_TOPIC,
                       PREDICTION_TOPIC, WRENCH_TOPIC)
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
@@ -68,7 +68,7 @@ class _Part:
     vibration_scale: float
     vibration_unit: str
     display: PartDisplay
-    style: MarkerStyle
+    markers: PartMarkers
     image: ImageLayout
     pubs: dict
     messages: int = 0
@@ -147,7 +147,7 @@ class ContactNode(Node):
                 ct.vibration.si_per_count, ct.vibration.unit,
                 PartDisplay(taxels, ids, len(ct.deformation.channels), threshold_n=self.threshold_n,
                             floor_n=self.floor_n, stale_s=stale_s),
-                MarkerStyle.of(taxels), img, pubs)
+                PartMarkers(taxels, MarkerStyle.of(taxels), [geo.cell_poses[c.id] for c in part.cells]), img, pubs)
             mtype, handler = (BioTacFrameBatch, self._on_biotac) if kind == "biotac" else \
                 (SkinPartFrames, self._on_skin_part)
             sub = self.create_subscription(mtype, topic_fmt.format(body_part=part.name), self._on_frames, qos_frames)
@@ -155,7 +155,6 @@ class ContactNode(Node):
             self._handlers[sub] = handler
         self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
         self._sensor_cell = {(p.name, c.name): c.id for p in self.robot.body_parts for c in p.cells}
-        self._cell_poses = {p.name: [geo.cell_poses[c.id] for c in p.cells] for p in self.robot.body_parts}
         self.history = PredictionHistory()
         self.contacts_pub = self.create_publisher(ContactArray, CONTACTS_TOPIC, qos_view) if self.rate_hz > 0 else None
         self.create_subscription(Prediction, PREDICTION_TOPIC, self._on_prediction, qos_pred)
@@ -306,9 +305,8 @@ class ContactNode(Node):
             if latest is not None and latest.has_model and name in latest.body_parts:
                 text = f"{latest.class_name} {100 * latest.confidence:.0f}%"
             if "markers" in p.pubs:
-                p.pubs["markers"].publish(part_markers(frame, p.taxels, p.style, stamp_ns=stamp,
-                                                       force_max_n=self.force_max_n,
-                                                       cell_poses=self._cell_poses[name], text=text))
+                p.pubs["markers"].publish(p.markers.update(frame, stamp_ns=stamp, force_max_n=self.force_max_n,
+                                                           text=text))
             if "image" in p.pubs:
                 rgb = force_colours(np.where(frame.taxel_stale, np.nan, frame.contact.taxel_force_n),
                                     self.force_max_n)
