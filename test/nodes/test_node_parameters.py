@@ -348,6 +348,7 @@ def test_docs_list_exactly_the_parameters_each_node_lets_change_at_run_time(ros_
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
 
     monkeypatch.setenv("ROS_HOME", str(tmp_path))
@@ -357,7 +358,8 @@ def test_docs_list_exactly_the_parameters_each_node_lets_change_at_run_time(ros_
                  Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
                  Parameter("transport", value="loopback")]),
              "skin_driver": SkinDriver(context=ros_context, parameter_overrides=[
-                 Parameter("robot", value="nao"), Parameter("transport", value="loopback")])}
+                 Parameter("robot", value="nao"), Parameter("transport", value="loopback")]),
+             "contact_node": ContactNode(context=ros_context, parameter_overrides=[Parameter("robot", value="nao")])}
     try:
         running = {}
         for name, node in nodes.items():
