@@ -1,4 +1,4 @@
-"""The views' CPU cost on the NAO graph at full rate (docs/view.md): ``python -m tactile_descriptors_ros.perf.view_overhead``.
+"""The views' CPU cost on the NAO graph at full rate (docs/view.md): ``python -m tactile_descriptors_lab.bench.view_overhead``.
 
 Two runs of the simulated NAO graph (``touch_nao``, every body part's frames
 at 10 ms batches, real time), measured with psutil over the same stretch:
@@ -127,7 +127,7 @@ def measure(seconds: float = 20.0, warm_s: float = 10.0) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m tactile_descriptors_ros.perf.view_overhead", description=__doc__,
+    p = argparse.ArgumentParser(prog="python -m tactile_descriptors_lab.bench.view_overhead", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--seconds", type=float, default=20.0, help="measured stretch of each run")
     p.add_argument("--warm", type=float, default=10.0, help="start-up left out of each run [s]")
