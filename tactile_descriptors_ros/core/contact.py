@@ -35,8 +35,8 @@ from ..errors import SignalError
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 from .geometry import Taxels
 
-__all__ = ["CellReduction", "reduce_chunk", "RunReductions", "reduce_skin_runs", "ContactEstimate", "ContactWindow", "locate_contact",
-           "site_weights", "contact_wrench"]
+__all__ = ["CellReduction", "reduce_chunk", "RunReductions", "reduce_skin_runs", "ContactEstimate", "ContactWindow",
+           "locate_contact", "site_weights", "contact_wrench"]
 
 
 @dataclass(frozen=True)

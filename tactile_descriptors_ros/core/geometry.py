@@ -36,18 +36,19 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..errors import ConfigError
+from .cell_types import CellType
 from .yamlreader import YamlReader
 
-if TYPE_CHECKING:  # pragma: no cover - types only
-    from .robot import BodyPart, CellType, RobotDescription
-
 __all__ = [
+    "CellLike",
+    "BodyPartLike",
+    "RobotLike",
     "MIN_SEPARATION_M",
     "POSE_KEYS",
     "Pose",
@@ -60,6 +61,47 @@ __all__ = [
     "parse_sites",
     "layout_2d",
 ]
+
+
+# The geometry sits below the robot description (robot.py builds a
+# RobotGeometry while it parses the file), so it names what it reads of a
+# robot by these protocols instead of importing robot.py.
+
+
+class CellLike(Protocol):
+    """What the geometry reads of a cell (:class:`~.robot.Cell`)."""
+
+    @property
+    def id(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def extra(self) -> Mapping[str, Any]: ...
+
+
+class BodyPartLike(Protocol):
+    """What the geometry reads of a body part (:class:`~.robot.BodyPart`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def cell_type(self) -> str: ...
+    @property
+    def cells(self) -> Sequence[CellLike]: ...
+
+
+class RobotLike(Protocol):
+    """What the geometry reads of a robot description (:class:`~.robot.RobotDescription`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def body_parts(self) -> Sequence[BodyPartLike]: ...
+    @property
+    def cell_types(self) -> Mapping[str, CellType]: ...
+
+    def body_part(self, name: str) -> BodyPartLike: ...
+
 
 #: Closest two cells (or two sites of a cell) of one link may be [m]: closer is "one spot twice".
 MIN_SEPARATION_M = 1e-3
@@ -232,7 +274,7 @@ class RobotGeometry:
         """TF frame of ``site`` on cell ``cell_id``."""
         return f"{self.cell_frames[cell_id]}_{site.name}"
 
-    def frames(self, robot: RobotDescription, *, links: bool = True, sites: bool = True) -> list[Frame]:
+    def frames(self, robot: RobotLike, *, links: bool = True, sites: bool = True) -> list[Frame]:
         """The TF tree's edges: links' rest poses (when ``links``), cells, then sites (when ``sites``)."""
         out = [Frame(lp.name, lp.parent, lp.pose) for lp in self.links] if links else []
         for part in robot.body_parts:
@@ -245,11 +287,11 @@ class RobotGeometry:
                         out.append(Frame(self.site_frame(cell.id, site), self.cell_frames[cell.id], site.pose))
         return out
 
-    def frame_names(self, robot: RobotDescription) -> set[str]:
+    def frame_names(self, robot: RobotLike) -> set[str]:
         """Every frame of the tree, the root included."""
         return {self.root_frame} | {f.child for f in self.frames(robot)}
 
-    def rest_pose(self, frame: str, robot: RobotDescription) -> Pose:
+    def rest_pose(self, frame: str, robot: RobotLike) -> Pose:
         """``frame``'s pose in the root frame with every link at its rest pose.
 
         Raises
@@ -269,7 +311,7 @@ class RobotGeometry:
             seen += 1
         return pose
 
-    def taxels(self, robot: RobotDescription, part_name: str) -> Taxels:
+    def taxels(self, robot: RobotLike, part_name: str) -> Taxels:
         """The sensing points of body part ``part_name`` in its link's frame (see :class:`Taxels`)."""
         part = robot.body_part(part_name)
         ct = robot.cell_types[part.cell_type]
@@ -382,7 +424,7 @@ def parse_sites(raw: Any, cell_type: CellType, key: str, source: str) -> tuple[S
     return tuple(sites)
 
 
-def parse_geometry(data: Mapping[str, Any], body_parts: Sequence[BodyPart], cell_types: Mapping[str, CellType],
+def parse_geometry(data: Mapping[str, Any], body_parts: Sequence[BodyPartLike], cell_types: Mapping[str, CellType],
                    source: str) -> RobotGeometry | None:
     """The ``geometry`` section and the poses of every cell, or None when the file gives no geometry.
 

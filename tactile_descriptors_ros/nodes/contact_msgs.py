@@ -105,7 +105,10 @@ def contact_from_msg(msg) -> dict:
 
 
 def wrench_to_msg(est: ContactEstimate, *, frame_id: str, stamp_ns: int):
-    """The contact as a ``geometry_msgs/WrenchStamped`` at the body part frame's origin (:func:`~..core.contact.contact_wrench`)."""
+    """The contact as a ``geometry_msgs/WrenchStamped`` at the body part frame's origin.
+
+    The force and moment are :func:`~..core.contact.contact_wrench`'s.
+    """
     from geometry_msgs.msg import WrenchStamped
 
     f, tau = contact_wrench(est)

@@ -45,10 +45,18 @@ from ..core.geometry import Taxels, layout_2d
 from ..core.robot import BodyPart, load_robot, select_body_parts
 from ..core.tactile_image import ImageLayout, image_layout, render
 from ..errors import ConfigError, SignalError
+from ..topics import (
+    CONTACT_TOPIC,
+    CONTACTS_TOPIC,
+    DESCRIPTOR_TOPIC,
+    FRAMES_TOPIC,
+    IMAGE_TOPIC,
+    MARKERS_TOPIC,
+    PREDICTION_TOPIC,
+    WRENCH_TOPIC,
+)
 from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node, steady_clock
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
-from ..topics import (CONTACT_TOPIC, CONTACTS_TOPIC, DESCRIPTOR_TOPIC, FRAMES_TOPIC, IMAGE_TOPIC, MARKERS_TOPIC,
-                      PREDICTION_TOPIC, WRENCH_TOPIC)
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .qos import QosDefaults, declare_qos
 
@@ -81,9 +89,16 @@ class ContactNode(Node):
         super().__init__(node_name, **kwargs)
         from geometry_msgs.msg import WrenchStamped
         from sensor_msgs.msg import Image
-        from tactile_descriptors_msgs.msg import (BioTacFrameBatch, Contact, ContactArray, Descriptor, Prediction,
-                                                  SkinPartFrames)
         from visualization_msgs.msg import MarkerArray
+
+        from tactile_descriptors_msgs.msg import (
+            BioTacFrameBatch,
+            Contact,
+            ContactArray,
+            Descriptor,
+            Prediction,
+            SkinPartFrames,
+        )
 
         robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
         if not robot_arg:

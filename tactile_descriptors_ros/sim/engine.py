@@ -714,7 +714,7 @@ def effect_electrode_deformation(ctx: SimContext, p: Mapping[str, Any]) -> None:
         else:
             rate = g.rates["force"]
             n_per = g.cell_type.force.n_per_count
-            for j, timing, _part, idx, force, sliding in _contacts(ctx, g):
+            for j, timing, part, idx, force, sliding in _contacts(ctx, g):
                 if not sliding:
                     continue
                 g0, g1 = _sample_range(ctx, timing, rate, g.n_total["force"])
@@ -821,7 +821,7 @@ def effect_contact_patch(ctx: SimContext, p: Mapping[str, Any]) -> None:
     radius = float(p["biotac_radius_m"])
     ramp = _ramp(ctx)
     for g in ctx.groups:
-        for j, timing, part, idx, force, sliding in _contacts(ctx, g):
+        for j, timing, part, idx, force, _sliding in _contacts(ctx, g):
             ctx.contact_point(j, part)
             if g.kind != "biotac":
                 continue

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -199,10 +200,8 @@ class BagPlayer:
     def play_until(self, t_s: float | None = None) -> dict:
         """Play (as fast as possible, on this thread) up to ``t_s`` seconds from the start, or the end; the last frame."""
         stop = self.end_ns + 1 if t_s is None else self.start_ns + int(t_s * 1e9)
-        frame = None
-        for frame in self._frames(self.start_ns, stop, paced=False):
-            pass
-        return frame if frame is not None else self._emit(self.start_ns, final=True)
+        last = deque(self._frames(self.start_ns, stop, paced=False), maxlen=1)
+        return last[0] if last else self._emit(self.start_ns, final=True)
 
     def _run(self) -> None:
         begin = self.start_ns

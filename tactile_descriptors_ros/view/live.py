@@ -44,6 +44,7 @@ class LiveView:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
+
         from tactile_descriptors_msgs.msg import ContactArray, Descriptor, Label, Prediction
 
         self.publish = publish

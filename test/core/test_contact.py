@@ -7,8 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile_descriptors_ros.core.contact import (ContactWindow, contact_wrench, locate_contact, reduce_chunk,
-                                                  reduce_skin_runs, site_weights)
+from tactile_descriptors_ros.core.contact import (
+    ContactWindow,
+    contact_wrench,
+    locate_contact,
+    reduce_chunk,
+    reduce_skin_runs,
+    site_weights,
+)
 from tactile_descriptors_ros.core.display import PartDisplay, PredictionHistory, softmax_confidence
 from tactile_descriptors_ros.core.geometry import Taxels
 from tactile_descriptors_ros.core.robot import load_robot

@@ -6,11 +6,10 @@ import time
 
 import numpy as np
 import pytest
+from node_helpers import BiotacStream, spin_until
 
 from tactile_descriptors_ros.core.colormap import STALE_RGB, force_colours
 from tactile_descriptors_ros.core.robot import load_robot
-
-from helpers import BiotacStream, spin_until
 
 pytestmark = pytest.mark.ros
 
@@ -64,9 +63,9 @@ def graph(ros_context):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import Image
-    from tactile_descriptors_msgs.msg import Contact, ContactArray, SkinPartFrames
     from visualization_msgs.msg import MarkerArray
 
+    from tactile_descriptors_msgs.msg import Contact, ContactArray, SkinPartFrames
     from tactile_descriptors_ros.nodes.contact_node import ContactNode
 
     node = ContactNode(context=ros_context, parameter_overrides=[
@@ -160,8 +159,9 @@ def test_markers_and_image_show_known_forces_in_viridis(graph):
 
 def test_prediction_text_stands_at_the_body_part_that_touched(graph):
     node, io, ex, pub, got = graph
-    from tactile_descriptors_msgs.msg import Descriptor, Prediction
     from visualization_msgs.msg import Marker
+
+    from tactile_descriptors_msgs.msg import Descriptor, Prediction
 
     dpub = io.create_publisher(Descriptor, "tactile/descriptor", 10)
     ppub = io.create_publisher(Prediction, "tactile/prediction", 10)
@@ -191,8 +191,8 @@ def test_biotac_electrodes_share_the_force_and_locate_it(ros_context):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Contact
 
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Contact
     from tactile_descriptors_ros.nodes.contact_node import ContactNode
 
     node = ContactNode(context=ros_context, parameter_overrides=[

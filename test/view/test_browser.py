@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import pytest
-
 from chromium import CHROMIUM, Chromium
 from graph import launched
 
@@ -41,8 +40,8 @@ CONTACT_JS = """(() => {
 def test_page_shows_contact_coloured_and_the_predicted_class(robot, ros_context, tmp_path):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from tactile_descriptors_msgs.msg import Label, Prediction
 
+    from tactile_descriptors_msgs.msg import Label, Prediction
     from tactile_descriptors_ros.core.colormap import force_colours
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.sim.scene import load_scene

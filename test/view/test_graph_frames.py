@@ -8,7 +8,6 @@ import time
 
 import numpy as np
 import pytest
-
 from graph import launched
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
