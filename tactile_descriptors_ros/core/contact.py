@@ -325,6 +325,9 @@ class ContactWindow:
     def __init__(self, cell_ids, n_deformation: int) -> None:
         self.cell_ids = np.asarray(cell_ids, dtype=np.int64)
         self._index = {int(c): k for k, c in enumerate(self.cell_ids)}
+        # the cells sorted, for a vectorised lookup of a message's runs (add_runs)
+        self._order = np.argsort(self.cell_ids, kind="stable")
+        self._sorted = self.cell_ids[self._order]
         self.n_deformation = int(n_deformation)
         self.newest_ns = np.full(self.cell_ids.size, -1, dtype=np.int64)
         self.reset()
@@ -340,6 +343,7 @@ class ContactWindow:
         self.vibration_count = 0
         self.start_ns = -1
         self.end_ns = -1
+        self.added = 0  # cell reductions or runs of this body part since the reset
 
     def _span(self, oldest: int, newest: int) -> None:
         if newest >= 0:
@@ -352,6 +356,7 @@ class ContactWindow:
         k = self._index.get(int(cell_id))
         if k is None:
             return False
+        self.added += 1
         self.force_sum[k] += r.force_sum_n
         self.force_count[k] += r.force_count
         if r.deformation_count and r.deformation_sum.size == self.n_deformation:
@@ -366,9 +371,11 @@ class ContactWindow:
 
     def add_runs(self, runs: RunReductions) -> int:
         """Add several cell runs (:func:`reduce_skin_runs`); returns how many were not of this body part (left out)."""
-        k = np.array([self._index.get(int(c), -1) for c in runs.cell_ids], dtype=np.intp)
-        ok = k >= 0
-        kk = k[ok]
+        ids = np.asarray(runs.cell_ids, dtype=np.int64)
+        pos = np.minimum(np.searchsorted(self._sorted, ids), self._sorted.size - 1)
+        ok = self._sorted[pos] == ids if self._sorted.size else np.zeros(ids.size, bool)
+        kk = self._order[pos[ok]]
+        self.added += int(ok.sum())
         np.add.at(self.force_sum, kk, runs.force_sum_n[ok])
         np.add.at(self.force_count, kk, runs.force_count[ok])
         if runs.deformation_sum.shape[1:] == (self.n_deformation,):
@@ -381,6 +388,34 @@ class ContactWindow:
         if have.any():
             self._span(int(runs.oldest_ns[have].min()), int(runs.newest_ns[have].max()))
         return int((~ok).sum())
+
+    def merge(self, other: ContactWindow) -> bool:
+        """Add everything ``other`` (a window of the same cells, e.g. one message's) holds; False if it holds nothing.
+
+        Equal to adding ``other``'s reductions one by one (sums and counts
+        add, the newest stamps and the span widen), at the cost of a few array
+        additions: a display period collects its messages' windows this way.
+
+        Raises
+        ------
+        SignalError
+            For a window of other cells.
+        """
+        if other.cell_ids.shape != self.cell_ids.shape or not np.array_equal(other.cell_ids, self.cell_ids) \
+                or other.n_deformation != self.n_deformation:
+            raise SignalError("merge needs a window of the same cells and deformation channels")
+        if not other.added:
+            return False
+        self.added += other.added
+        self.force_sum += other.force_sum
+        self.force_count += other.force_count
+        self.deformation_sum += other.deformation_sum
+        self.deformation_count += other.deformation_count
+        self.vibration_sumsq += other.vibration_sumsq
+        self.vibration_count += other.vibration_count
+        np.maximum(self.newest_ns, other.newest_ns, out=self.newest_ns)
+        self._span(other.start_ns, other.end_ns)
+        return True
 
     @property
     def empty(self) -> bool:
@@ -429,4 +464,7 @@ def contact_wrench(estimate: ContactEstimate) -> tuple[np.ndarray, np.ndarray]:
     Zero without contact force.
     """
     f = -estimate.force_n * np.asarray(estimate.normal, dtype=float)
-    return f, np.cross(np.asarray(estimate.centre_of_pressure, dtype=float), f)
+    p = np.asarray(estimate.centre_of_pressure, dtype=float)
+    # p x f written out: numpy.cross costs some 20 us of axis handling for two 3-vectors, at every message
+    tau = np.array([p[1] * f[2] - p[2] * f[1], p[2] * f[0] - p[0] * f[2], p[0] * f[1] - p[1] * f[0]])
+    return f, tau

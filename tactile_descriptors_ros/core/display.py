@@ -91,6 +91,15 @@ class PartDisplay:
         if self.window.add_runs(runs) < runs.cell_ids.size:
             self.last_wall_s = wall_s
 
+    def merge(self, window: ContactWindow, wall_s: float) -> None:
+        """A window of this body part's cells already filled (one message's), received at ``wall_s``.
+
+        The same as :meth:`add` or :meth:`add_runs` of what filled it, without
+        reducing the samples twice (:meth:`~.contact.ContactWindow.merge`).
+        """
+        if self.window.merge(window):
+            self.last_wall_s = wall_s
+
     def tick(self, now_ns: int, wall_s: float) -> DisplayFrame:
         """Close the display period: the frame to show, then start the next period.
 

@@ -79,6 +79,7 @@ class _Part:
     markers: PartMarkers
     image: ImageLayout
     pubs: dict
+    window: ContactWindow  # one message's, reused
     messages: int = 0
 
 
@@ -162,7 +163,8 @@ class ContactNode(Node):
                 ct.vibration.si_per_count, ct.vibration.unit,
                 PartDisplay(taxels, ids, len(ct.deformation.channels), threshold_n=self.threshold_n,
                             floor_n=self.floor_n, stale_s=stale_s),
-                PartMarkers(taxels, MarkerStyle.of(taxels), [geo.cell_poses[c.id] for c in part.cells]), img, pubs)
+                PartMarkers(taxels, MarkerStyle.of(taxels), [geo.cell_poses[c.id] for c in part.cells]), img, pubs,
+                ContactWindow(ids, len(ct.deformation.channels)))
             mtype, handler = (BioTacFrameBatch, self._on_biotac) if kind == "biotac" else \
                 (SkinPartFrames, self._on_skin_part)
             sub = self.create_subscription(mtype, topic_fmt.format(body_part=part.name), self._on_frames, qos_frames)
@@ -178,6 +180,7 @@ class ContactNode(Node):
         self.newest_ns = -1
         self.contacts_published = 0
         self.display_ticks = 0
+        self.display_on = self.rate_hz > 0
         self.frames_taken = 0
         self._age_ms: deque[float] = deque(maxlen=5000)
         self._tick_ms: deque[float] = deque(maxlen=500)
@@ -247,9 +250,11 @@ class ContactNode(Node):
             self.get_logger().warning(f"malformed BioTacFrameBatch from {msg.sensor_name}: {exc}",
                                       throttle_duration_sec=5.0)
             return
-        window = ContactWindow(p.cell_ids, p.n_deformation)
+        window = p.window
+        window.reset()
         window.add(cid, r)
-        p.display.add(cid, r, time.monotonic())
+        if self.display_on:
+            p.display.merge(window, time.monotonic())
         self._publish_contact(p, window, now_ns)
 
     def _on_skin_part(self, msg, now_ns: int) -> None:
@@ -271,11 +276,13 @@ class ContactNode(Node):
             self.get_logger().warning(f"malformed SkinPartFrames of body part {msg.body_part!r}: {exc}",
                                       throttle_duration_sec=5.0)
             return
-        window = ContactWindow(p.cell_ids, p.n_deformation)
+        window = p.window
+        window.reset()
         foreign = window.add_runs(runs)
         if foreign:
             self.faults["unknown_cell"] += foreign
-        p.display.add_runs(runs, time.monotonic())
+        if self.display_on:
+            p.display.merge(window, time.monotonic())
         self._publish_contact(p, window, now_ns)
 
     def _publish_contact(self, p: _Part, window: ContactWindow, now_ns: int) -> None:

@@ -19,6 +19,7 @@ from tactile_descriptors_ros.core.display import PartDisplay, PredictionHistory,
 from tactile_descriptors_ros.core.geometry import Taxels
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.core.windowing import CellChunk
+from tactile_descriptors_ros.errors import SignalError
 
 #: Stated accuracy of the centre of pressure against where the simulator pressed (docs/view.md).
 BIOTAC_COP_M = 0.003
@@ -66,6 +67,19 @@ def test_wrench_pushes_inward_at_the_centre_of_pressure():
     assert np.allclose(tau, np.cross([0.01, 0.02, 0.03], [0.0, -2.0, 0.0]))
 
 
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(-0.1, 0.1), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+       st.floats(0.0, 20.0))
+def test_wrench_torque_is_numpys_cross_product(cop, normal, force_n):
+    from tactile_descriptors_ros.core.contact import ContactEstimate
+
+    est = ContactEstimate(True, force_n, np.array(cop), np.array(normal), np.zeros(0), np.zeros(0),
+                          np.zeros(0, np.int64), 0.0)
+    f, tau = contact_wrench(est)
+    assert np.allclose(f, -force_n * np.array(normal))
+    assert np.allclose(tau, np.cross(cop, f), rtol=1e-12, atol=1e-15)
+
+
 def test_biotac_electrode_that_departs_locates_the_contact():
     robot = load_robot("shadow_hand")
     tax = robot.geometry.taxels(robot, "index")
@@ -110,6 +124,42 @@ def test_vectorised_skin_runs_reduce_like_one_chunk_per_run():
         f0, a0 = f0 + fc[k], a0 + ac[k]
     w = ContactWindow([85, 86], 3)
     assert w.add_runs(runs) == 0 and w.force_count.tolist() == [runs.force_count[[0, 2]].sum(), runs.force_count[1]]
+    # cells of another body part are left out and counted, whatever their id's place among this part's
+    for foreign in ([86, 90], [84, 86], [1, 2]):
+        w = ContactWindow(foreign, 3)
+        assert w.add_runs(runs) == int(np.isin(ids, foreign, invert=True).sum())
+        assert w.force_count.tolist() == [int(runs.force_count[ids == c].sum()) for c in foreign]
+        assert w.added == int(np.isin(ids, foreign).sum())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 6), st.integers(0, 2**32 - 1))
+def test_merging_message_windows_equals_adding_their_runs_in_one_window(messages, seed):
+    """The display period's window (merged per message) holds what one window given every run would."""
+    rng = np.random.default_rng(seed)
+    cells = [40, 7, 19, 3]
+    direct, merged = ContactWindow(cells, 3), ContactWindow(cells, 3)
+    one = ContactWindow(cells, 3)
+    for m in range(messages):
+        ids = rng.choice(cells + [99], size=int(rng.integers(1, 6)))  # 99: not of this body part
+        fc, ac = rng.integers(0, 4, ids.size), rng.integers(0, 6, ids.size)
+        force = rng.integers(20, 900, (fc.sum(), 3)).astype(np.uint16)
+        force[rng.random(fc.sum()) < 0.2, 0] = 65535
+        accel = rng.integers(-300, 300, (3, ac.sum())).astype(np.int16)
+        runs = reduce_skin_runs(ids, force, fc, np.arange(fc.sum(), dtype=np.int64) * 4_000_000,
+                                rng.uniform(15, 25, (ids.size, 3)), 0.002442, accel, ac, 0.0383,
+                                (m + 1) * 1_000_000_000)
+        direct.add_runs(runs)
+        one.reset()
+        one.add_runs(runs)
+        assert merged.merge(one) == bool(np.isin(ids, cells).any())
+    for name in ("force_sum", "force_count", "deformation_sum", "deformation_count", "newest_ns"):
+        assert np.allclose(getattr(merged, name), getattr(direct, name)), name
+    assert merged.vibration_sumsq == pytest.approx(direct.vibration_sumsq)
+    assert (merged.vibration_count, merged.start_ns, merged.end_ns, merged.added) == \
+        (direct.vibration_count, direct.start_ns, direct.end_ns, direct.added)
+    with pytest.raises(SignalError, match="same cells"):
+        merged.merge(ContactWindow(cells[::-1], 3))
 
 
 def test_display_keeps_a_cells_last_force_and_greys_stale_ones():
