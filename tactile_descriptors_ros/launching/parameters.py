@@ -84,8 +84,9 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
     "contact_node": {
         "robot": "string", "body_parts": "string_array", "contact.force_threshold_n": "double",
         "contact.floor_n": "double", "view.rate_hz": "double", "view.force_max_n": "double",
-        "view.stale_s": "double", "view.image_size_px": "integer", "view.markers": "bool", "view.images": "bool",
-        "frames_topic": "string", "frames.drain_max": "integer", "diagnostics_period_s": "double",
+        "view.stale_s": "double", "view.image_size_px": "integer", "view.refresh_s": "double",
+        "view.markers": "bool", "view.images": "bool", "frames_topic": "string", "frames.drain_max": "integer",
+        "diagnostics_period_s": "double",
         **_qos("frames", "contact", "view", "prediction"),
     },
     "tf_publisher": {

@@ -174,9 +174,14 @@ class PartMarkers:
 
     Every marker is in the body part's link frame (``taxels.frame_id``).  The
     markers' poses do not change: they are built once, and :meth:`update`
-    only sets the colours, the contact and the text (building 116 markers
-    with their orientations every display period cost the NAO's contact node
-    about a tenth of a core).
+    only sets the colours, the contact and the text.  rviz2 keeps a marker
+    until it is replaced or deleted, so :meth:`update` returns only the
+    markers that changed since the last array it returned (a cell's colour,
+    the contact, the text), every marker when asked for a ``full`` array (a
+    viewer that subscribed later gets the whole body part from it), and None
+    when nothing changed: most of a skin is untouched most of the time, and
+    converting its unchanged markers for every display period was most of
+    the contact node's display cost.
     """
 
     def __init__(self, taxels: Taxels, style: MarkerStyle, cell_poses: Sequence[Pose] = ()) -> None:
@@ -227,37 +232,63 @@ class PartMarkers:
                                                                                                  style.label_at)
         self.label.scale.z = style.text_m
         self.label.color = _colour((1.0, 1.0, 1.0))
+        # what the last returned array showed: 8-bit colours per marker (-1: never sent), contact, text
+        self._rgb = {"cells": np.full((len(self.cells), 3), -1), "sites": np.full((len(self.sites), 3), -1)}
+        self._contact: tuple | None = None
+        self._text: str | None = None
 
-    def update(self, frame: DisplayFrame, *, stamp_ns: int, force_max_n: float, text: str = ""):
-        """The markers of one display frame (the same message object, updated)."""
+    def update(self, frame: DisplayFrame, *, stamp_ns: int, force_max_n: float, text: str = "",
+               full: bool = False):
+        """The markers of one display frame that changed, every marker when ``full``; None when none changed.
+
+        Returns
+        -------
+        visualization_msgs.msg.MarkerArray or None
+            Holding the markers themselves (updated in place, stamped
+            ``stamp_ns``); :attr:`msg` holds all of them.
+        """
         from geometry_msgs.msg import Point
-        from visualization_msgs.msg import Marker
+        from visualization_msgs.msg import Marker, MarkerArray
 
-        stamp = ns_to_stamp(max(stamp_ns, 0))
-        for m in self.msg.markers:
-            m.header.stamp = stamp
+        changed: list = []
         est = frame.contact
-        taxel_rgb = force_colours(np.where(frame.taxel_stale, np.nan, est.taxel_force_n), force_max_n) / 255.0
+        taxel_rgb = force_colours(np.where(frame.taxel_stale, np.nan, est.taxel_force_n), force_max_n)
         if self.taxels.kind == "sites":
-            cell_rgb = force_colours(np.where(frame.cell_stale, np.nan, est.cell_force_n), force_max_n) / 255.0
-            for m, rgb in zip(self.cells, cell_rgb):
-                m.color = _colour(rgb, 0.25)
-            for m, rgb in zip(self.sites, taxel_rgb):
-                m.color = _colour(rgb)
+            cell_rgb = force_colours(np.where(frame.cell_stale, np.nan, est.cell_force_n), force_max_n)
+            groups = (("cells", self.cells, cell_rgb, 0.25), ("sites", self.sites, taxel_rgb, 1.0))
         else:
-            for m, rgb in zip(self.cells, taxel_rgb):
-                m.color = _colour(rgb)
-        touching = est.in_contact and est.force_n > 0
-        self.point.action = self.arrow.action = Marker.ADD if touching else Marker.DELETE
-        if touching:
-            cop = [float(v) for v in est.centre_of_pressure]
-            self.point.pose.position.x, self.point.pose.position.y, self.point.pose.position.z = cop
-            tip = np.asarray(cop) + np.asarray(est.normal) * (0.01 + 0.01 * est.force_n)
-            self.arrow.points = [Point(x=cop[0], y=cop[1], z=cop[2]),
-                                 Point(x=float(tip[0]), y=float(tip[1]), z=float(tip[2]))]
-        self.label.action = Marker.ADD if text else Marker.DELETE
-        self.label.text = text
-        return self.msg
+            groups = (("cells", self.cells, taxel_rgb, 1.0),)
+        for name, markers, rgb, alpha in groups:
+            last = self._rgb[name]
+            new = np.flatnonzero(np.any(last != rgb, axis=1))
+            for k in new:
+                markers[k].color = _colour(rgb[k] / 255.0, alpha)
+            last[new] = rgb[new]
+            changed += markers if full else [markers[k] for k in new]
+        touching = bool(est.in_contact and est.force_n > 0)
+        contact = (touching, *(np.round(est.centre_of_pressure, 6) if touching else ()),
+                   *(np.round(est.normal, 6) if touching else ()), round(float(est.force_n), 4) if touching else 0)
+        if full or contact != self._contact:
+            self.point.action = self.arrow.action = Marker.ADD if touching else Marker.DELETE
+            if touching:
+                cop = [float(v) for v in est.centre_of_pressure]
+                self.point.pose.position.x, self.point.pose.position.y, self.point.pose.position.z = cop
+                tip = np.asarray(cop) + np.asarray(est.normal) * (0.01 + 0.01 * est.force_n)
+                self.arrow.points = [Point(x=cop[0], y=cop[1], z=cop[2]),
+                                     Point(x=float(tip[0]), y=float(tip[1]), z=float(tip[2]))]
+            self._contact = contact
+            changed += [self.point, self.arrow]
+        if full or text != self._text:
+            self.label.action = Marker.ADD if text else Marker.DELETE
+            self.label.text = text
+            self._text = text
+            changed.append(self.label)
+        if not changed:
+            return None
+        stamp = ns_to_stamp(max(stamp_ns, 0))
+        for m in changed:
+            m.header.stamp = stamp
+        return MarkerArray(markers=changed)
 
 
 def image_to_msg(rgb: np.ndarray, *, frame_id: str, stamp_ns: int):

@@ -15,9 +15,11 @@ Once per display period (``view.rate_hz``; :mod:`~..core.display`):
 
 * ``tactile/<body part>/markers`` (``visualization_msgs/MarkerArray``): each
   cell (and site) coloured by force, grey when stale, the contact point and
-  normal, the latest prediction and its confidence as text;
+  normal, the latest prediction and its confidence as text; only the markers
+  that changed, and every marker once per ``view.refresh_s``;
 * ``tactile/<body part>/image`` (``sensor_msgs/Image``, rgb8): the "tactile
-  image", the body part's cells on their flat layout;
+  image", the body part's cells on their flat layout; when a colour changed,
+  and once per ``view.refresh_s``;
 * ``tactile/contacts`` (``ContactArray``): every body part's contact of the
   period, what ``tactile view`` draws.
 
@@ -81,6 +83,7 @@ class _Part:
     pubs: dict
     window: ContactWindow  # one message's, reused
     messages: int = 0
+    image_rgb: np.ndarray | None = None  # the taxel colours of the last image published
 
 
 class ContactNode(Node):
@@ -126,6 +129,8 @@ class ContactNode(Node):
                           minimum=1e-3)
         size_px = declare(self, "view.image_size_px", 96, "width and height of the tactile images", minimum=16,
                           maximum=1024)
+        refresh_s = declare(self, "view.refresh_s", 1.0, "every marker and image is sent at least this often "
+                            "(in between only what changed) [s]", minimum=0.0)
         self.markers_on = declare(self, "view.markers", True, "publish tactile/<body part>/markers")
         self.images_on = declare(self, "view.images", True, "publish tactile/<body part>/image")
         topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
@@ -180,7 +185,11 @@ class ContactNode(Node):
         self.newest_ns = -1
         self.contacts_published = 0
         self.display_ticks = 0
+        self.markers_published = 0
+        self.images_published = 0
         self.display_on = self.rate_hz > 0
+        # ticks between full marker arrays and images (every tick when refresh_s is shorter than a period)
+        self.refresh_ticks = max(1, round(refresh_s * self.rate_hz)) if self.display_on else 1
         self.frames_taken = 0
         self._age_ms: deque[float] = deque(maxlen=5000)
         self._tick_ms: deque[float] = deque(maxlen=500)
@@ -319,6 +328,7 @@ class ContactNode(Node):
         arr.robot = self.robot.name
         arr.header.frame_id = self.robot.geometry.root_frame
         end = -1
+        full = self.display_ticks % self.refresh_ticks == 0
         for name, p in self.parts.items():
             frame = p.display.tick(self.newest_ns, wall)
             stamp = frame.end_ns if frame.end_ns >= 0 else self.newest_ns
@@ -327,12 +337,19 @@ class ContactNode(Node):
             if latest is not None and latest.has_model and name in latest.body_parts:
                 text = f"{latest.class_name} {100 * latest.confidence:.0f}%"
             if "markers" in p.pubs:
-                p.pubs["markers"].publish(p.markers.update(frame, stamp_ns=stamp, force_max_n=self.force_max_n,
-                                                           text=text))
+                changed = p.markers.update(frame, stamp_ns=stamp, force_max_n=self.force_max_n, text=text,
+                                           full=full)
+                if changed is not None:
+                    p.pubs["markers"].publish(changed)
+                    self.markers_published += len(changed.markers)
             if "image" in p.pubs:
                 rgb = force_colours(np.where(frame.taxel_stale, np.nan, frame.contact.taxel_force_n),
                                     self.force_max_n)
-                p.pubs["image"].publish(image_to_msg(render(p.image, rgb), frame_id=p.frame_id, stamp_ns=stamp))
+                if full or p.image_rgb is None or not np.array_equal(rgb, p.image_rgb):
+                    p.pubs["image"].publish(image_to_msg(render(p.image, rgb), frame_id=p.frame_id,
+                                                         stamp_ns=stamp))
+                    p.image_rgb = rgb
+                    self.images_published += 1
             arr.contacts.append(contact_to_msg(
                 frame.contact, body_part=name, frame_id=p.frame_id, cell_ids=p.cell_ids,
                 start_ns=frame.start_ns if frame.start_ns >= 0 else stamp, end_ns=stamp,
@@ -350,6 +367,7 @@ class ContactNode(Node):
 
     def _status(self) -> Status:
         values: dict = {"contacts_published": self.contacts_published, "display_ticks": self.display_ticks,
+                        "markers_published": self.markers_published, "images_published": self.images_published,
                         "frames_messages_taken": self.frames_taken}
         for name, samples in (("contact_age", self._age_ms), ("display_tick", self._tick_ms)):
             if samples:
