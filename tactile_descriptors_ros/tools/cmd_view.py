@@ -1,7 +1,8 @@
 """``tactile view``: the skin in a browser, live from the running graph or from a bag (docs/view.md).
 
-Serves a page (``http://127.0.0.1:8765/`` by default; any browser, nothing to
-install on the viewing machine) that shows every body part's cells laid out
+Serves a page (``http://127.0.0.1:8765/`` by default, the port from
+``TACTILE_VIEW_PORT`` when set; any browser, nothing to install on the
+viewing machine) that shows every body part's cells laid out
 by the robot description's geometry, coloured by force, the contact, each
 body part's vibration trace, and the predictions with their confidence and
 the label history; from a bag with a progress bar to click through it.
@@ -12,10 +13,34 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 
-__all__ = ["register", "run"]
+from ..errors import ConfigError
+
+__all__ = ["DEFAULT_PORT", "PORT_ENV", "register", "run"]
+
+#: The port served when neither ``--port`` nor :data:`PORT_ENV` says another.
+DEFAULT_PORT = 8765
+#: Environment variable naming the default port (two checkouts or users on one machine: one port each).
+PORT_ENV = "TACTILE_VIEW_PORT"
+
+
+def _port(arg: int | None) -> int:
+    """``--port``, else ``$TACTILE_VIEW_PORT``, else :data:`DEFAULT_PORT`."""
+    if arg is not None:
+        return arg
+    raw = os.environ.get(PORT_ENV, "")
+    if not raw:
+        return DEFAULT_PORT
+    try:
+        port = int(raw)
+    except ValueError:
+        port = -1
+    if not 0 <= port <= 65535:
+        raise ConfigError(f"{raw!r} is not a port (0 to 65535)", key=PORT_ENV, source="environment")
+    return port
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,7 +49,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--robot", default=None, help="robot name or YAML path (default: the one the graph or bag names)")
     p.add_argument("--bag", default=None, help="play this bag instead of the live graph")
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (0.0.0.0: every interface)")
-    p.add_argument("--port", type=int, default=8765, help="port (0: any free one; the URL is printed)")
+    p.add_argument("--port", type=int, default=None,
+                   help=f"port (default {DEFAULT_PORT}, or ${PORT_ENV} when set; 0: any free one; the URL is printed)")
     p.add_argument("--speed", type=float, default=1.0, help="bag: recorded seconds per wall second")
     p.add_argument("--namespace", default="", help="live: namespace of the graph's topics")
     p.add_argument("--snapshot", default=None, metavar="PNG",
@@ -43,6 +69,7 @@ def _say(text: str) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..view.server import Hub
 
+    args.port = _port(args.port)  # a bad $TACTILE_VIEW_PORT is reported before anything starts
     hub = Hub()
     if args.bag:
         from ..view.bag import BagPlayer

@@ -19,9 +19,6 @@ SKIP: dict[tuple[str, str], str] = {
     ("README.md", "mkdir -p ~/ws/src && cd ~/ws/src && git clone <this repository> tactile_descriptors_ros"):
         "needs rosdep and a clone URL; test/packaging/test_colcon.py builds the same two packages "
         "with the same colcon command and launches from install/",
-    ("README.md", "tactile view   # serves http://127.0.0.1:8765/ until Ctrl-C (--host 0.0.0.0 for other machines)"):
-        "serves until Ctrl-C; test/view/test_browser.py runs tactile view against the launched graph and asserts "
-        "the page in headless Chromium",
     ("README.md", 'rviz2 -d "$(ros2 pkg prefix tactile_descriptors_ros)/share/tactile_descriptors_ros/config/rviz/'
                   'shadow_hand.rviz"'):
         "rviz2 is not installable from PyPI; test/core/test_urdf_rviz.py checks that file (topics, QoS, fixed "

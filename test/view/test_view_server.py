@@ -159,8 +159,9 @@ def test_view_command_snapshots_a_bag_and_serves_it(tmp_path):
                           timeout=300)
     assert snap.returncode == 0, snap.stderr
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and json.loads(snap.stdout)["in_contact"] == ["index"]
-    proc = subprocess.Popen(cli + ["--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+    # the port from TACTILE_VIEW_PORT when --port is not given (0: any free one)
+    proc = subprocess.Popen(cli, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "TACTILE_VIEW_PORT": "0"})
     try:
         line = proc.stdout.readline()
         url = re.search(r"http://\S+/", line).group(0)
@@ -173,3 +174,12 @@ def test_view_command_snapshots_a_bag_and_serves_it(tmp_path):
         os.killpg(proc.pid, signal.SIGINT)
         out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0 and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize("value", ["http", "-1", "65536"])
+def test_a_bad_port_in_the_environment_is_named(tmp_path, value):
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "view", "--bag",
+                          str(tmp_path / "none")], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "TACTILE_VIEW_PORT": value})
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert f"'TACTILE_VIEW_PORT': {value!r} is not a port (0 to 65535)" in out.stderr, out.stderr
