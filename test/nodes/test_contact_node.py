@@ -349,3 +349,23 @@ def test_unchanged_parts_are_sent_again_once_per_refresh(ros_context):
         ex.shutdown()
         node.destroy_node()
         io.destroy_node()
+
+
+def test_a_flood_of_frames_does_not_hold_off_the_display(ros_context):
+    """The frames callback closes a display period when one is due: no executor spins the timer here."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+    node = ContactNode(context=ros_context, parameter_overrides=[
+        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=20.0)])
+    try:
+        t, seq, deadline = 5_000_000_000, 0, time.monotonic() + 30.0
+        while node.display_ticks < 3 and time.monotonic() < deadline:
+            node._on_frames(_chest_frames(t, seq))  # as the executor would call it, back to back
+            t, seq = t + 10_000_000, seq + 1
+        assert node.display_ticks >= 3 and node.contacts_published == seq
+        # a period apart at most ~20 Hz: ticks come from due periods, not from every message
+        assert node.display_ticks <= 1 + (time.monotonic() - (deadline - 30.0)) / (0.9 / 20.0)
+    finally:
+        node.destroy_node()
