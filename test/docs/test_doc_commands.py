@@ -23,8 +23,9 @@ SKIP: dict[tuple[str, str], str] = {
                   'shadow_hand.rviz"'):
         "rviz2 is not installable from PyPI; test/core/test_urdf_rviz.py checks that file (topics, QoS, fixed "
         "frame) and test/packaging/test_ament_index.py that the share directory holds it",
-    ("docs/view.md", "python -m tactile_descriptors_lab.bench.view_overhead --seconds 25"):
-        "two runs of the NAO graph for minutes; the lab's view_overhead bench test runs a short one",
+    ("docs/view.md", "tactile bench --view-overhead --rounds 2 --seconds 30"):
+        "four runs of the NAO's contact node at full rate, minutes; lab/test/bench/test_view_overhead.py runs "
+        "the same command with one short round",
     ("docs/simulator.md", "tactile fit-textures ../shared/data/biotac_slide_20_50 -o texture_models   "
                           "# fit the texture models (default ./texture_models)"):
         "a lab verb that fits all 20 materials of the real recordings (minutes) and rewrites the shipped models; "
