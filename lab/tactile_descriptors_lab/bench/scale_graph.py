@@ -43,6 +43,7 @@ part of the result.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import random
@@ -56,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_descriptors_lab.bench.multi_host import MultiHostResult
 from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.sim.synthetic import (
     WINDOW_HOP_S,
@@ -80,6 +82,8 @@ __all__ = [
 CELLS_PER_PART = 500
 #: A driver keeps up when it decodes at least this share of its cells' samples per wall second.
 DRIVER_RTF_MIN = 0.98
+#: The window node's descriptor queue depth (``qos.descriptor.depth``) when the robot does not set it.
+WINDOW_DESCRIPTOR_DEPTH = 10
 #: Longest wait for every node's diagnostics at the start and the end of the measurement [s]; a node
 #: that is later than this (an overloaded machine) is reported in ``stale_diagnostics``.
 DIAGNOSTICS_WAIT_S = 30.0
@@ -89,11 +93,11 @@ LATE_KEYS = ("fault_windower_gap", "fault_windower_out_of_order", "fault_windowe
              "fault_windower_clock_jump", "fault_windower_unsorted_stamps")
 
 
-def scale_graph_specs(robot_path: str | os.PathLike[str]) -> list:
-    """The node specs of a scale robot: its drivers and one window node per body part (no classifier)."""
+def scale_graph_specs(robot_path: str | os.PathLike[str], model_path: str | None = None) -> list:
+    """The node specs of a scale robot: its drivers, one window node per body part, its classifier if it has one."""
     from tactile_descriptors_ros.launching.graph import build_graph
 
-    return build_graph(robot_path, split_window_nodes=True)
+    return build_graph(robot_path, split_window_nodes=True, model_path=model_path)
 
 
 # ------------------------------------------------------------------ results
@@ -174,10 +178,25 @@ class ScaleGraphReport:
     silent_at_start: list[str] = field(default_factory=list)
     #: statuses whose last counters are older than the end of the measurement
     stale_diagnostics: list[str] = field(default_factory=list)
+    #: across hosts (``hosts`` >= 1): placement, traffic, discovery, predictions, the link drop
+    multi_host: MultiHostResult | None = None
 
     @property
     def kept_up(self) -> bool:
         return bool(self.parts) and all(p.kept_up for p in self.parts)
+
+    def _hosts_kept_up(self) -> bool:
+        """Across hosts: every frame path kept up, and every body part whose host's link stayed up kept up too,
+        lost no descriptor on the way to the classifier, and got every prediction back."""
+        mh = self.multi_host
+        if mh is None or not self.parts:
+            return False
+        dropped = mh.link_drop.host if mh.link_drop is not None else None
+        frames_ok = all(p.lost_frames == 0 and p.driver_realtime_factor is not None
+                        and p.driver_realtime_factor >= DRIVER_RTF_MIN for p in self.parts)
+        linked = [p for p in self.parts if mh.placement_of_part(p.name) != dropped]
+        return (frames_ok and all(p.kept_up and mh.descriptor_gaps.get(p.name, 1) == 0 for p in linked)
+                and all(v["missing"] == 0 and v["sent"] > 0 for h, v in mh.predictions.items() if h != dropped))
 
     @property
     def lost_frames(self) -> int:
@@ -209,7 +228,47 @@ class ScaleGraphReport:
             "windows_expected": round(sum(p.windows_expected for p in self.parts), 1),
             "realtime_factor_min": min(rtf) if len(rtf) == len(self.parts) and rtf else None,
             "cpu_percent_total": sum(p.cpu_percent or 0.0 for p in self.processes),
-            "met": self.kept_up}}
+            "met": self.kept_up}} if self.multi_host is None else self._host_targets()
+
+    def _host_targets(self) -> dict[str, dict[str, Any]]:
+        mh = self.multi_host
+        assert mh is not None
+        rtf = [p.realtime_factor for p in self.parts if p.realtime_factor is not None]
+        out: dict[str, dict[str, Any]] = {f"skin_{self.n_cells}_graph_{mh.hosts}_hosts": {
+            "target": f"{self.n_cells} skin cells, each body part's driver and window node on one of {mh.hosts} "
+                      "hosts, the classifier on another, in real time: zero lost frames, every descriptor at the "
+                      "classifier, every prediction back on every body-part host (a host whose link was dropped "
+                      "is judged by the link drop target)",
+            "cells": self.n_cells, "hosts": mh.hosts, "processes": len(self.processes),
+            "lost_frames": self.lost_frames, "descriptors_lost": mh.descriptors_lost,
+            "predictions_missing": mh.predictions_missing,
+            "windows": sum(p.windows for p in self.parts),
+            "windows_expected": round(sum(p.windows_expected for p in self.parts), 1),
+            "realtime_factor_min": min(rtf) if len(rtf) == len(self.parts) and rtf else None,
+            "cross_host_bytes_per_cell_s": mh.to_dict()["cross_host_bytes_per_cell_s"],
+            "met": self._hosts_kept_up()},
+            "discovery": {
+                "target": f"a participant joining on the classifier's host sees every node and descriptor publisher "
+                          f"of the graph within one window ({WINDOW_LENGTH_S:g} s)",
+                "discovery_s": None if mh.discovery_s is None else round(mh.discovery_s, 3),
+                "met": mh.discovery_s is not None and mh.discovery_s <= WINDOW_LENGTH_S}}
+        drop = mh.link_drop
+        if drop is not None:
+            backlog = max(drop.backlog.values(), default=0)
+            out["link_drop_recovery"] = {
+                "target": f"a body-part host's link down for {drop.down_s:.1f} s: descriptors and predictions lost "
+                          f"are counted, the backlog delivered afterwards is at most the descriptor queue depth "
+                          f"({drop.queue_depth}), descriptors arrive with their usual lag again within one window "
+                          f"({WINDOW_LENGTH_S:g} s) of the link's return",
+                "host": drop.host, "down_s": round(drop.down_s, 3),
+                "descriptors_missing": sum(drop.descriptors_missing.values()),
+                "predictions_missing": drop.predictions_missing, "backlog_max": backlog,
+                "recovered_after_s_max": max((t for t in drop.recovered_after_s.values() if t is not None),
+                                             default=None),
+                "missing_after_recovery": sum(drop.missing_after_recovery.values()),
+                "met": drop.recovered_within(WINDOW_LENGTH_S) and backlog <= drop.queue_depth
+                and not any(drop.missing_after_recovery.values())}
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -235,6 +294,7 @@ class ScaleGraphReport:
             "cpus": self.cpus, "load_avg_start": list(self.load_avg_start), "load_avg_end": list(self.load_avg_end),
             "exit_codes": self.exit_codes, "silent_at_start": self.silent_at_start,
             "stale_diagnostics": self.stale_diagnostics,
+            "multi_host": None if self.multi_host is None else self.multi_host.to_dict(),
         }
 
 
@@ -318,6 +378,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
                     groups: Sequence[str] = ("paper",), batch_s: float | None = None,
                     read_period_s: float | None = None, one_driver: bool = False,
                     warm_up_timeout_s: float = 180.0, window_parameters: dict[str, Any] | None = None,
+                    hosts: int = 0, link_drop_s: float | None = None, link_drop_host: int = 0,
                     progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> ScaleGraphReport:
     """Run the scale graph (module docstring) and measure it for ``seconds`` after the warm-up.
 
@@ -339,6 +400,14 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         measurement starts then anyway (``silent_at_start`` names the body
         parts still without one: a graph too large for the machine still
         gets its per-process figures).
+    hosts : int
+        0: every process on this machine's own network, discovery on
+        localhost.  ``H`` >= 1: ``H`` body-part hosts and a classifier host,
+        network namespaces joined by veth links (:mod:`.multi_host`), with a
+        classifier node; the report gains ``multi_host``.
+    link_drop_s : float, optional
+        With ``hosts``: pull body-part host ``link_drop_host``'s cable for
+        this long, a third of the way into the measurement.
     progress : callable, optional
         Called with the seconds measured so far and a short status line.
     verbose : bool
@@ -353,40 +422,85 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     """
     import psutil
 
+    from . import multi_host as mh
+
     if not seconds > 0:
         raise ConfigError(f"the measurement needs a positive time, got {seconds}", key="seconds")
     parts = parts if parts is not None else max(1, math.ceil(n_cells / CELLS_PER_PART))
+    if hosts < 0 or (hosts and hosts > parts):
+        raise ConfigError(f"{parts} body parts cannot be placed on {hosts} hosts", key="hosts")
+    if hosts > 1 and one_driver:
+        raise ConfigError("one driver for every body part cannot be split over several hosts", key="hosts")
+    if link_drop_s is not None:
+        if not hosts:
+            raise ConfigError("a link drop needs hosts", key="link_drop_s")
+        if not 0 <= link_drop_host < hosts:
+            raise ConfigError(f"no body-part host {link_drop_host} (0 to {hosts - 1})", key="link_drop_host")
+        if not link_drop_s > 0 or seconds < link_drop_s + 3 * WINDOW_LENGTH_S:
+            raise ConfigError(f"a {link_drop_s} s link drop needs a positive time and a measurement of at least "
+                              f"{3 * WINDOW_LENGTH_S:g} s more", key="link_drop_s")
     say = progress or (lambda measured_s, text: None)
+    # outside the hosts (this process, and every node without hosts) discovery stays on this machine
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
     from tactile_descriptors_ros.launching.processes import GraphProcesses, localhost_environment
 
-    tmp = tempfile.TemporaryDirectory(prefix="tactile_scale_")
-    robot_path = scale_robot_files(n_cells, parts, tmp.name, groups=groups, batch_s=batch_s,
+    stack = contextlib.ExitStack()
+    tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="tactile_scale_"))
+    robot_path = scale_robot_files(n_cells, parts, tmp, groups=groups, batch_s=batch_s,
                                    read_period_s=read_period_s, one_driver=one_driver,
-                                   window_parameters=window_parameters)
-    specs = scale_graph_specs(robot_path)
+                                   window_parameters=window_parameters, classifier=bool(hosts))
+    specs = scale_graph_specs(robot_path, model_path=os.path.join(tmp, "classifier_model.json") if hosts else None)
     runs = dict(zip((part_name(k, parts) for k in range(parts)), split_cells(n_cells, parts)))
     cells_of = {s.name: sum(len(runs[p]) for p in s.parameters.get("body_parts", [])) for s in specs}
-    procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node("tactile_scale_graph", context=context)
-    monitor = _Monitor(node)
-    monitor.expected_parts = set(runs)
-    ex = SingleThreadedExecutor(context=context)
-    ex.add_node(node)
-    spin = threading.Thread(target=ex.spin, daemon=True, name="scale-graph-spin")
+    # what bounds a host's backlog of descriptors while its link is down: the window nodes' queue
+    descriptor_depth = max(int(s.parameters.get("qos.descriptor.depth", WINDOW_DESCRIPTOR_DEPTH))
+                           for s in specs if s.executable == "window_node")
+    net = None
+    placement: dict[str, str] = {}
+    part_host: dict[str, str] = {}
+    proc_args: dict[str, Any] = {}
+    if hosts:
+        from .netns import VirtualHosts
+
+        part_host = mh.assign_parts(list(runs), hosts)
+        placement = mh.node_hosts(specs, part_host)
+        net = VirtualHosts(mh.host_names(hosts))
+        # inside the hosts SUBNET discovery: their only links are the bench's own veth pairs
+        proc_args = {"prefix": {n: net.exec_prefix(h) for n, h in placement.items()},
+                     "node_env": {n: {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"} for n in placement}}
+    procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None, **proc_args)
+    ros_threads: list[mh.RosThread] = []
     load_start = os.getloadavg()
     loads: list[ProcessLoad] = []
     cpu0: dict[int, float] = {}
     silent: list[str] = []
     stale: list[str] = []
+    extra = MultiHostResult(hosts=hosts, placement=placement, part_hosts=part_host) if hosts else None
     try:
-        spin.start()
+        if net is not None:
+            stack.enter_context(net)  # removed last of all, after every process on it has stopped
+            say(0.0, f"made {hosts + 1} hosts")
+        monitor_ns = net.namespace(mh.CLASSIFIER_HOST) if net is not None else None
+        observer = mh.RosThread("tactile_scale_graph", _Monitor, monitor_ns)
+        ros_threads.append(observer)
+        observer.start()
+        monitor: _Monitor = observer.value
+        monitor.expected_parts = set(runs)
+        listeners: dict[str, mh.PredictionLog] = {}
+        if net is not None:
+            classifier_log = mh.RosThread("tactile_predictions_classifier",
+                                          lambda node: mh.PredictionLog().subscribe(node), monitor_ns)
+            ros_threads.append(classifier_log)
+            classifier_log.start()
+            listeners[mh.CLASSIFIER_HOST] = classifier_log.value
+            env = {**localhost_environment(), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+            for h in mh.host_names(hosts)[:-1]:
+                listener = mh.PredictionListener(net.exec_prefix(h), env)
+                stack.callback(listener.stop)
+                listener.wait_ready()
+                listeners[h] = listener.log
         say(0.0, f"starting {len(specs)} processes")
         procs.start()
         handles = {}
@@ -409,6 +523,11 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             say(0.0, "settling")
             time.sleep(min(0.5, max(0.0, settle_end - time.monotonic())))
         warm_up_s = time.monotonic() - t_start
+        if extra is not None:
+            say(0.0, "timing discovery")
+            extra.discovery_s = mh.discovery_time(monitor_ns, [s.name for s in specs],
+                                                  sum(s.executable == "window_node" for s in specs))
+            extra.start_up_traffic = {h: net.counters(h).to_dict() for h in net.hosts}
         # the counters at the start of the measurement: the warm-up's faults (cells starting at different
         # times, the kernel loading) are not the graph's steady state
         t_mark = time.monotonic()
@@ -418,12 +537,30 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         for p in loads:
             c = handles[p.pid].cpu_times()
             cpu0[p.pid] = c.user + c.system
+        links0 = {h: net.counters(h) for h in net.hosts} if net is not None else {}
         deadline = t0 + float(seconds)
+        drop_at = t0 + (float(seconds) - float(link_drop_s)) / 3.0 if link_drop_s else None
+        drop = None
         while time.monotonic() < deadline:
             _check_alive(procs, t_start)
-            time.sleep(min(0.5, max(0.0, deadline - time.monotonic())))
+            now = time.monotonic()
+            if drop_at is not None and drop is None and now >= drop_at:
+                host = mh.host_names(hosts)[link_drop_host]
+                net.set_link(host, False)
+                drop = mh.LinkDrop(host, time.monotonic(), math.inf, queue_depth=descriptor_depth)
+                say(now - t0, f"link of {host} down")
+            if drop is not None and drop.up_at == math.inf and now >= drop.down_at + float(link_drop_s):
+                net.set_link(drop.host, True)
+                drop.up_at = time.monotonic()
+            wake = [deadline, now + 0.5]
+            if drop_at is not None and drop is None:
+                wake.append(drop_at)
+            if drop is not None and drop.up_at == math.inf:
+                wake.append(drop.down_at + float(link_drop_s))
+            time.sleep(max(0.0, min(wake) - time.monotonic()))
             say(time.monotonic() - t0, "measuring")
         t1 = time.monotonic()
+        links1 = {h: net.counters(h) for h in net.hosts} if net is not None else {}
         for p in loads:
             h = handles[p.pid]
             c = h.cpu_times()
@@ -434,13 +571,20 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             stale = monitor.stale_since(t1)
         after = monitor.snapshot()
         load_end = os.getloadavg()
+        if extra is not None:
+            # predictions the classifier's host got up to a second before the end must have reached every host
+            extra.traffic = {h: (links1[h] - links0[h]).to_dict() for h in net.hosts}
+            sent = listeners[mh.CLASSIFIER_HOST].ends(until=t1 - 1.0)
+            extra.predictions = {h: {"sent": int(sum(sent.values())),
+                                     "received": int(sum(log.ends().values())),
+                                     "missing": mh.missing_predictions(sent, log.ends())}
+                                 for h, log in listeners.items() if h != mh.CLASSIFIER_HOST}
+            extra.link_drop = drop
     finally:
         codes = procs.stop()
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
-        spin.join(timeout=5.0)
-        tmp.cleanup()
+        for t in reversed(ros_threads):
+            t.stop()
+        stack.close()
     results = _parts(monitor, before, after, runs, t0, t1)
     by_part = {r.name: r for r in results}
     for p in loads:
@@ -448,8 +592,40 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
                for b in p.body_parts if b in by_part]
         if rtf and all(x is not None for x in rtf):
             p.data_realtime_factor = round(float(np.mean(rtf)), 4)
+    if extra is not None:
+        _multi_host_results(extra, monitor, before, after, part_host, runs, t0, t1, n_cells)
     return ScaleGraphReport(n_cells, results, loads, float(seconds), round(warm_up_s, 2), tuple(groups), one_driver,
-                            load_start, load_end, os.cpu_count() or 1, codes, silent, stale)
+                            load_start, load_end, os.cpu_count() or 1, codes, silent, stale, extra)
+
+
+def _multi_host_results(extra: MultiHostResult, monitor: _Monitor, before: dict[str, dict[str, str]],
+                        after: dict[str, dict[str, str]], part_host: dict[str, str], runs: dict[str, range],
+                        t0: float, t1: float, n_cells: int) -> None:
+    """Descriptors lost on the way, the classifier's counters, the link drop's account."""
+    from . import multi_host as mh
+
+    hop_ns = int(round(WINDOW_HOP_S * 1e9))
+    with monitor.lock:
+        rows = {p: [(t, e) for t, e, _ in monitor.windows.get(p, []) if t0 <= t <= t1] for p in runs}
+    extra.descriptor_gaps = {p: mh.descriptor_gaps([e for _, e in r], hop_ns) for p, r in rows.items()}
+    extra.cells_per_host = {h: sum(len(runs[p]) for p, hp in part_host.items() if hp == h)
+                            for h in dict.fromkeys(part_host.values())}
+    extra.seconds = t1 - t0
+    extra.n_cells = n_cells
+    cls_before = next((v for k, v in before.items() if k.startswith("classifier_node")), {})
+    cls_after = next((v for k, v in after.items() if k.startswith("classifier_node")), {})
+    for key in ("descriptors", "predictions"):
+        end = _int(cls_after, key)
+        extra.classifier[key] = None if end is None else end - (_int(cls_before, key) or 0)
+    drop = extra.link_drop
+    if drop is not None:
+        for p, hp in part_host.items():
+            if hp != drop.host:
+                continue
+            drop.descriptors_missing[p] = extra.descriptor_gaps[p]
+            drop.backlog[p], drop.recovered_after_s[p], drop.missing_after_recovery[p] = mh.link_drop_recovery(
+                rows[p], drop.down_at, drop.up_at, WINDOW_HOP_S, WINDOW_LENGTH_S)
+        drop.predictions_missing = extra.predictions.get(drop.host, {}).get("missing")
 
 
 def _check_alive(procs: Any, t_start: float) -> None:
@@ -530,6 +706,26 @@ def format_scale_graph(report: ScaleGraphReport) -> str:
                      f"{p['windows_expected']:>9.1f} "
                      f"{f(p['realtime_factor'], '6.3f')} {f(p['lag_growth_s'], '7.2f')} "
                      f"{'yes' if p['kept_up'] else 'NO'}")
-    t = next(iter(d["targets"].values()))
-    lines.append(f"target: {t['target']}: {'met' if t['met'] else 'NOT met'}")
+    mh = d["multi_host"]
+    if mh is not None:
+        per_host = ", ".join(f"{h} {c} cells" for h, c in mh["cells_per_host"].items())
+        lines.append(f"hosts: {mh['hosts']} body-part hosts ({per_host}) "
+                     f"and the classifier's; discovery {mh['discovery']}: a joining participant saw the graph in "
+                     f"{f(mh['discovery_s'], '.3f')} s")
+        lines.append(f"cross-host traffic: {f(mh['cross_host_bytes_per_s'], '.0f')} B/s, "
+                     f"{f(mh['cross_host_bytes_per_cell_s'], '.2f')} B/s per cell, "
+                     f"{f(mh['cross_host_bytes_per_part_s'], '.0f')} B/s per body part; per host (tx/rx B/s): "
+                     + ", ".join(f"{h} {v['tx']:.0f}/{v['rx']:.0f}" for h, v in mh["traffic_per_host_bytes_per_s"].items()))
+        lines.append(f"descriptors lost between hosts: {mh['descriptors_lost']}; predictions back: "
+                     + ", ".join(f"{h} {v['received']} received, {v['missing']} missing of {v['sent']}"
+                                 for h, v in mh["predictions"].items())
+                     + f"; classifier took {mh['classifier'].get('descriptors')} descriptors and published "
+                       f"{mh['classifier'].get('predictions')} predictions")
+        if mh["link_drop"] is not None:
+            ld = mh["link_drop"]
+            lines.append(f"link drop: {ld['host']} down {ld['down_s']:.1f} s; descriptors missing "
+                         f"{ld['descriptors_missing']}, backlog {ld['backlog']} (queue depth {ld['queue_depth']}), "
+                         f"recovered after {ld['recovered_after_s']} s, predictions missing {ld['predictions_missing']}")
+    for t in d["targets"].values():
+        lines.append(f"target: {t['target']}: {'met' if t['met'] else 'NOT met'}")
     return "\n".join(lines)
