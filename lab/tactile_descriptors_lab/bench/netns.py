@@ -49,6 +49,7 @@ __all__ = [
     "LinkCounters",
     "VirtualHosts",
     "namespaces_unavailable",
+    "remove_stale_namespaces",
     "enter_namespace",
     "in_namespace",
     "NamespaceError",
@@ -121,6 +122,22 @@ class LinkCounters:
                         self.astuple()))
 
 
+def remove_stale_namespaces() -> list[str]:
+    """Remove the namespaces a killed bench left: ``tactile-<pid>-*`` whose process ``pid`` no longer runs.
+
+    A bench ended by SIGKILL cannot remove its hosts; the next one does.
+    Namespaces of running processes, and any other namespace, are left alone.
+    """
+    out = _ip("-j", "netns", "list", check=False)
+    removed = []
+    for entry in json.loads(out.stdout or "[]") if out.returncode == 0 else []:
+        m = re.match(r"^tactile-(\d+)-", entry.get("name", ""))
+        if m and not os.path.exists(f"/proc/{m.group(1)}"):
+            _ip("netns", "del", entry["name"], check=False)
+            removed.append(entry["name"])
+    return removed
+
+
 def _cleanup(names: list[str]) -> None:
     for name in reversed(names):
         _ip("netns", "del", name, check=False)
@@ -186,6 +203,7 @@ class VirtualHosts:
         """Make the switch, the hosts and their links (removing all of it again if any step fails)."""
         if self._made:
             raise RuntimeError("the hosts exist already")
+        remove_stale_namespaces()
         try:
             self._add_namespace(self.switch)
             _ip("-n", self.switch, "link", "add", "br0", "type", "bridge", "mcast_snooping", "0")

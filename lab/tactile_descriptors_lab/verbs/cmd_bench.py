@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 
 __all__ = ["register", "run"]
@@ -242,6 +243,11 @@ def _scale_graph(args: argparse.Namespace) -> int:
         return 2
     groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
     bar, progress = _seconds_bar(args.seconds, "scale graph")
+
+    def on_term(signum, frame):  # SIGTERM stops the graph like Ctrl-C: its processes and hosts are removed
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_term)
     try:
         report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
                                  groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
