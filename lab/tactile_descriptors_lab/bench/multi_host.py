@@ -200,16 +200,26 @@ class PredictionLog:
 
     rows: list[tuple[float, int]] = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    #: serialized bytes of the predictions received (counted by :meth:`subscribe`'s callback)
+    bytes_received: int = 0
+
+    def payload_bytes(self) -> int:
+        with self.lock:
+            return self.bytes_received
 
     def subscribe(self, node: Any) -> PredictionLog:
+        from rclpy.serialization import serialize_message
+
         from tactile_descriptors_msgs.msg import Prediction
         from tactile_descriptors_ros.nodes.qos import qos_profile
         from tactile_descriptors_ros.topics import PREDICTION_TOPIC, absolute
 
         def on_prediction(msg: Any) -> None:
             end = msg.window_end.sec * 1_000_000_000 + msg.window_end.nanosec
+            size = len(serialize_message(msg))
             with self.lock:
                 self.rows.append((time.monotonic(), end))
+                self.bytes_received += size
 
         node.create_subscription(Prediction, absolute(PREDICTION_TOPIC), on_prediction,
                                  qos_profile("reliable", "volatile", 50, "prediction"))
@@ -447,6 +457,9 @@ class MultiHostResult:
     descriptor_gaps: dict[str, int] = field(default_factory=dict)
     #: body-part host -> predictions sent (seen on the classifier's host), received there, missing
     predictions: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: serialized bytes over the measurement: descriptors and diagnostics that reached the classifier's host from
+    #: the body-part hosts, and predictions (one copy; each body-part host gets one)
+    payload: dict[str, int] = field(default_factory=dict)
     #: the classifier's counters over the measurement: descriptors taken, predictions published
     classifier: dict[str, int | None] = field(default_factory=dict)
     link_drop: LinkDrop | None = None
@@ -495,6 +508,8 @@ class MultiHostResult:
             "descriptor_gaps": self.descriptor_gaps, "descriptors_lost": self.descriptors_lost,
             "predictions": self.predictions, "predictions_missing": self.predictions_missing,
             "classifier": self.classifier,
+            "payload_bytes_per_part_s": {k: round(v / self.seconds / max(1, len(self.part_hosts)), 1)
+                                         for k, v in self.payload.items()} if self.seconds else {},
             "link_drop": None if self.link_drop is None else self.link_drop.to_dict(),
         }
 

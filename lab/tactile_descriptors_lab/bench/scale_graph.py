@@ -51,6 +51,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -304,9 +305,11 @@ class _Monitor:
 
     def __init__(self, node: Any) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.serialization import serialize_message
 
         from tactile_descriptors_msgs.msg import Descriptor
 
+        self._serialize = serialize_message
         self.lock = threading.Lock()
         self.updated = threading.Condition(self.lock)
         self.windows: dict[str, list[tuple[float, int, int]]] = {}
@@ -315,6 +318,10 @@ class _Monitor:
         self.task_failures: dict[str, str] = {}
         self.first_window = threading.Event()
         self.expected_parts: set[str] = set()
+        #: serialized bytes received per kind: ``descriptor``, ``diagnostics`` (of nodes whose name does not
+        #: start with one of :attr:`local_nodes`), ``diagnostics_local``
+        self.payload: Counter[str] = Counter()
+        self.local_nodes: tuple[str, ...] = ()
         node.create_subscription(Descriptor, "/tactile/descriptor", self._on_descriptor, 100)
         node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 100)
 
@@ -323,14 +330,19 @@ class _Monitor:
         end_ns = msg.window_end.sec * 1_000_000_000 + msg.window_end.nanosec
         part = ",".join(msg.body_parts)
         contact = int(sum(msg.cells_in_contact))
+        size = len(self._serialize(msg))
         with self.lock:
+            self.payload["descriptor"] += size
             self.windows.setdefault(part, []).append((now, end_ns, contact))
             if self.expected_parts and self.expected_parts <= set(self.windows):
                 self.first_window.set()
 
     def _on_diagnostics(self, msg: Any) -> None:
         now = time.monotonic()
+        size = len(self._serialize(msg))
+        local = bool(msg.status) and msg.status[0].name.startswith(self.local_nodes) if self.local_nodes else False
         with self.updated:
+            self.payload["diagnostics_local" if local else "diagnostics"] += size
             for st in msg.status:
                 if st.message.startswith("diagnostic task failed"):  # no counters: keep the last ones
                     self.task_failures[st.name] = st.message
@@ -338,6 +350,11 @@ class _Monitor:
                 self.diagnostics[st.name] = {kv.key: kv.value for kv in st.values}
                 self.diagnostics_at[st.name] = now
             self.updated.notify_all()
+
+    def payload_bytes(self) -> Counter[str]:
+        """A copy of :attr:`payload`."""
+        with self.lock:
+            return Counter(self.payload)
 
     def snapshot(self) -> dict[str, dict[str, str]]:
         """The newest diagnostics of every node (a copy)."""
@@ -488,6 +505,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         observer.start()
         monitor: _Monitor = observer.value
         monitor.expected_parts = set(runs)
+        monitor.local_nodes = tuple(n for n, h in placement.items() if h == mh.CLASSIFIER_HOST)
         listeners: dict[str, mh.PredictionLog] = {}
         if net is not None:
             classifier_log = mh.RosThread("tactile_predictions_classifier",
@@ -538,6 +556,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             c = handles[p.pid].cpu_times()
             cpu0[p.pid] = c.user + c.system
         links0 = {h: net.counters(h) for h in net.hosts} if net is not None else {}
+        payload0 = monitor.payload_bytes()
+        predictions0 = listeners[mh.CLASSIFIER_HOST].payload_bytes() if net is not None else 0
         deadline = t0 + float(seconds)
         drop_at = t0 + (float(seconds) - float(link_drop_s)) / 3.0 if link_drop_s else None
         drop = None
@@ -561,6 +581,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             say(time.monotonic() - t0, "measuring")
         t1 = time.monotonic()
         links1 = {h: net.counters(h) for h in net.hosts} if net is not None else {}
+        payload1 = monitor.payload_bytes()
+        predictions1 = listeners[mh.CLASSIFIER_HOST].payload_bytes() if net is not None else 0
         for p in loads:
             h = handles[p.pid]
             c = h.cpu_times()
@@ -574,6 +596,10 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         if extra is not None:
             # predictions the classifier's host got up to a second before the end must have reached every host
             extra.traffic = {h: (links1[h] - links0[h]).to_dict() for h in net.hosts}
+            # what the messages themselves weigh (serialized), beside what the links carried
+            extra.payload = {"descriptors": payload1["descriptor"] - payload0["descriptor"],
+                             "diagnostics": payload1["diagnostics"] - payload0["diagnostics"],
+                             "predictions_per_host": predictions1 - predictions0}
             sent = listeners[mh.CLASSIFIER_HOST].ends(until=t1 - 1.0)
             extra.predictions = {h: {"sent": int(sum(sent.values())),
                                      "received": int(sum(log.ends().values())),
