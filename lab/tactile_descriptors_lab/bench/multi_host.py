@@ -61,6 +61,9 @@ __all__ = [
     "discovery_time",
     "PredictionLog",
     "MultiHostResult",
+    "DiscoveryServer",
+    "DISCOVERY_MODES",
+    "discovery_env",
 ]
 
 #: Name of the classifier's host.
@@ -68,6 +71,66 @@ CLASSIFIER_HOST = "classifier"
 #: Longest wait for an observer's rclpy context to come up [s].
 ROS_THREAD_START_S = 60.0
 _RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+_SERVER = "ROS_DISCOVERY_SERVER"
+#: Discovery modes across hosts: DDS's simple discovery (multicast), or a Fast DDS discovery server.
+DISCOVERY_MODES = ("subnet", "server")
+#: UDP port of the discovery server (Fast DDS's default).
+DISCOVERY_SERVER_PORT = 11811
+
+
+def discovery_env(mode: str, server_address: str | None = None) -> dict[str, str]:
+    """The environment of every participant on the hosts for a discovery ``mode`` of :data:`DISCOVERY_MODES`."""
+    if mode not in DISCOVERY_MODES:
+        raise ValueError(f"discovery must be one of {DISCOVERY_MODES}, got {mode!r}")
+    env = {_RANGE: "SUBNET"}
+    if mode == "server":
+        if not server_address:
+            raise ValueError("a discovery server needs its address")
+        env[_SERVER] = f"{server_address}:{DISCOVERY_SERVER_PORT}"
+    return env
+
+
+class DiscoveryServer:
+    """Fast DDS's discovery server (``fast-discovery-server``, shipped in the wheels) on a host.
+
+    Participants started with ``ROS_DISCOVERY_SERVER=<address>:11811`` are its
+    clients: each announces itself to the server only, and the server
+    forwards what each needs (those sharing a topic), so the traffic and the
+    state grow with the participants, not with their square.
+    """
+
+    def __init__(self, prefix: Sequence[str], address: str, env: dict[str, str]) -> None:
+        import shutil
+        import subprocess
+        import sys
+
+        exe = shutil.which("fast-discovery-server", path=os.path.join(sys.prefix, "bin")) \
+            or shutil.which("fast-discovery-server")
+        if exe is None:
+            raise RuntimeError("fast-discovery-server not found (it ships in the ros-fastdds wheel)")
+        # 42: the tool's "plain server" command, as `fastdds discovery -l ADDRESS -p PORT` runs it
+        self.process = subprocess.Popen([*prefix, exe, "42", "-i", "0", "-l", address, "-p",
+                                         str(DISCOVERY_SERVER_PORT)], env=env, text=True, bufsize=1,
+                                        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                        start_new_session=True)
+        first = self.process.stdout.readline() if self.process.stdout else ""
+        if "started" not in first.lower():
+            self.stop()
+            raise RuntimeError(f"the discovery server did not start: {first.strip()!r}")
+
+    def stop(self) -> None:
+        import signal
+        import subprocess
+
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.communicate(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.communicate()
+        elif self.process.stdout is not None:
+            self.process.stdout.close()
 _INIT_LOCK = threading.Lock()
 
 
@@ -116,14 +179,19 @@ class RosThread:
     The thread enters ``namespace`` first (so the DDS participant and its
     threads live on that host), creates the node, calls ``setup(node)``
     (create subscriptions there; its result is :attr:`value`) and spins
-    until :meth:`stop`.  In a namespace the context discovers with
-    ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET`` (its host's only link is the
-    bench's own), elsewhere with ``LOCALHOST``: rcl reads the variable when
-    the context is initialised, so it is set for that call only, under a
-    lock that every :class:`RosThread` takes.
+    until :meth:`stop`.  In a namespace the context discovers as ``env``
+    says (default: ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``, since its
+    host's only link is the bench's own), elsewhere with ``LOCALHOST``: rcl
+    and Fast DDS read these variables when the context and its participant
+    are made, so they are set for those calls only, under a lock that every
+    :class:`RosThread` takes.
     """
 
-    def __init__(self, name: str, setup: Callable[[Any], Any], namespace: str | None = None) -> None:
+    def __init__(self, name: str, setup: Callable[[Any], Any], namespace: str | None = None,
+                 env: dict[str, str] | None = None) -> None:
+        if namespace is None and env:
+            raise ValueError("discovery settings apply only inside a host's namespace")
+        self.env = dict(env or {_RANGE: "SUBNET"}) if namespace is not None else {_RANGE: "LOCALHOST"}
         self.name = name
         self.namespace = namespace
         self._setup = setup
@@ -154,16 +222,18 @@ class RosThread:
                 enter_namespace(self.namespace)
             context = rclpy.Context()
             with _INIT_LOCK:
-                before = os.environ.get(_RANGE)
-                os.environ[_RANGE] = "SUBNET" if self.namespace is not None else "LOCALHOST"
+                before = {k: os.environ.get(k) for k in (*self.env, _SERVER)}
+                os.environ.pop(_SERVER, None)
+                os.environ.update(self.env)
                 try:
                     rclpy.init(context=context)
+                    self.node = rclpy.create_node(self.name, context=context)
                 finally:
-                    if before is None:
-                        del os.environ[_RANGE]
-                    else:
-                        os.environ[_RANGE] = before
-            self.node = rclpy.create_node(self.name, context=context)
+                    for k, v in before.items():
+                        if v is None:
+                            os.environ.pop(k, None)
+                        else:
+                            os.environ[k] = v
             self.value = self._setup(self.node)
             ex = SingleThreadedExecutor(context=context)
             ex.add_node(self.node)
@@ -323,19 +393,23 @@ def missing_predictions(sent: Counter[int], received: Counter[int]) -> int:
 
 # ----------------------------------------------------------------- discovery
 def discovery_time(namespace: str | None, nodes: Sequence[str], descriptor_publishers: int,
-                   timeout_s: float = 40.0) -> float | None:
+                   timeout_s: float = 40.0, env: dict[str, str] | None = None) -> float | None:
     """Seconds a new participant on ``namespace`` takes to see every node and descriptor publisher of the graph.
 
     From the creation of its node (its DDS participant already up) until
     ``get_node_names`` lists every name of ``nodes`` and the descriptor topic
     has ``descriptor_publishers`` publishers; ``None`` after ``timeout_s``.
+    The probe subscribes to the descriptors, as the classifier does (a
+    discovery server tells a client only of the endpoints on its topics).
     """
+    from tactile_descriptors_msgs.msg import Descriptor
     from tactile_descriptors_ros.topics import DESCRIPTOR_TOPIC, absolute
 
     found: dict[str, float | None] = {}
 
     def setup(node: Any) -> None:
         t0 = time.monotonic()
+        node.create_subscription(Descriptor, absolute(DESCRIPTOR_TOPIC), lambda msg: None, 10)
         want = set(nodes)
         while time.monotonic() - t0 < timeout_s:
             if want <= set(node.get_node_names()) and \
@@ -345,7 +419,8 @@ def discovery_time(namespace: str | None, nodes: Sequence[str], descriptor_publi
             time.sleep(0.005)
         found["s"] = None
 
-    probe = RosThread(f"tactile_discovery_probe_{int(time.monotonic() * 1000) % 100000}", setup, namespace)
+    probe = RosThread(f"tactile_discovery_probe_{int(time.monotonic() * 1000) % 100000}", setup, namespace,
+                      env=env)
     try:
         probe.start()  # setup() runs inside start's wait: the probe polls the graph before it spins
     finally:
@@ -440,6 +515,8 @@ class MultiHostResult:
     """What the scale graph measured across hosts (``multi_host`` of its report)."""
 
     hosts: int
+    #: how the participants find each other: a mode of :data:`DISCOVERY_MODES`
+    discovery: str = "subnet"
     #: node name -> host
     placement: dict[str, str] = field(default_factory=dict)
     #: body part -> host
@@ -495,7 +572,10 @@ class MultiHostResult:
         per_cell = self.cross_host_bytes_per_cell_s
         return {
             "hosts": self.hosts, "placement": self.placement, "cells_per_host": self.cells_per_host,
-            "discovery": "SUBNET (multicast on the hosts' links)",
+            "discovery": self.discovery,
+            "discovery_how": "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, multicast on the hosts' links"
+            if self.discovery == "subnet" else "a Fast DDS discovery server on the classifier's host "
+                                               "(ROS_DISCOVERY_SERVER)",
             "discovery_s": None if self.discovery_s is None else round(self.discovery_s, 3),
             "start_up_traffic": self.start_up_traffic, "traffic": self.traffic,
             "cross_host_bytes_per_s": None if per_s is None else round(per_s, 1),

@@ -396,7 +396,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
                     read_period_s: float | None = None, one_driver: bool = False,
                     warm_up_timeout_s: float = 180.0, window_parameters: dict[str, Any] | None = None,
                     hosts: int = 0, link_drop_s: float | None = None, link_drop_host: int = 0,
-                    progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> ScaleGraphReport:
+                    discovery: str = "subnet", progress: Callable[[float, str], None] | None = None,
+                    verbose: bool = False) -> ScaleGraphReport:
     """Run the scale graph (module docstring) and measure it for ``seconds`` after the warm-up.
 
     Parameters
@@ -425,6 +426,10 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     link_drop_s : float, optional
         With ``hosts``: pull body-part host ``link_drop_host``'s cable for
         this long, a third of the way into the measurement.
+    discovery : str
+        With ``hosts``: ``subnet`` (DDS's simple discovery, multicast on the
+        hosts' links) or ``server`` (a Fast DDS discovery server on the
+        classifier's host, every participant its client).
     progress : callable, optional
         Called with the seconds measured so far and a short status line.
     verbose : bool
@@ -456,6 +461,8 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         if not link_drop_s > 0 or seconds < link_drop_s + 3 * WINDOW_LENGTH_S:
             raise ConfigError(f"a {link_drop_s} s link drop needs a positive time and a measurement of at least "
                               f"{3 * WINDOW_LENGTH_S:g} s more", key="link_drop_s")
+    if discovery not in mh.DISCOVERY_MODES:
+        raise ConfigError(f"must be one of {mh.DISCOVERY_MODES}, got {discovery!r}", key="discovery")
     say = progress or (lambda measured_s, text: None)
     # outside the hosts (this process, and every node without hosts) discovery stays on this machine
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -485,8 +492,9 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         placement = mh.node_hosts(specs, part_host)
         net = VirtualHosts(mh.host_names(hosts))
         # inside the hosts SUBNET discovery: their only links are the bench's own veth pairs
+        host_env = mh.discovery_env(discovery, net.address(mh.CLASSIFIER_HOST))
         proc_args = {"prefix": {n: net.exec_prefix(h) for n, h in placement.items()},
-                     "node_env": {n: {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"} for n in placement}}
+                     "node_env": {n: host_env for n in placement}}
     procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None, **proc_args)
     ros_threads: list[mh.RosThread] = []
     load_start = os.getloadavg()
@@ -494,13 +502,19 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     cpu0: dict[int, float] = {}
     silent: list[str] = []
     stale: list[str] = []
-    extra = MultiHostResult(hosts=hosts, placement=placement, part_hosts=part_host) if hosts else None
+    extra = MultiHostResult(hosts=hosts, discovery=discovery, placement=placement,
+                            part_hosts=part_host) if hosts else None
     try:
         if net is not None:
             stack.enter_context(net)  # removed last of all, after every process on it has stopped
             say(0.0, f"made {hosts + 1} hosts")
+            if discovery == "server":
+                server = mh.DiscoveryServer(net.exec_prefix(mh.CLASSIFIER_HOST), net.address(mh.CLASSIFIER_HOST),
+                                            localhost_environment())
+                stack.callback(server.stop)
         monitor_ns = net.namespace(mh.CLASSIFIER_HOST) if net is not None else None
-        observer = mh.RosThread("tactile_scale_graph", _Monitor, monitor_ns)
+        ros_env = host_env if net is not None else None
+        observer = mh.RosThread("tactile_scale_graph", _Monitor, monitor_ns, env=ros_env)
         ros_threads.append(observer)
         observer.start()
         monitor: _Monitor = observer.value
@@ -509,11 +523,11 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         listeners: dict[str, mh.PredictionLog] = {}
         if net is not None:
             classifier_log = mh.RosThread("tactile_predictions_classifier",
-                                          lambda node: mh.PredictionLog().subscribe(node), monitor_ns)
+                                          lambda node: mh.PredictionLog().subscribe(node), monitor_ns, env=ros_env)
             ros_threads.append(classifier_log)
             classifier_log.start()
             listeners[mh.CLASSIFIER_HOST] = classifier_log.value
-            env = {**localhost_environment(), "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}
+            env = {**localhost_environment(), **host_env}
             for h in mh.host_names(hosts)[:-1]:
                 listener = mh.PredictionListener(net.exec_prefix(h), env)
                 stack.callback(listener.stop)
@@ -544,7 +558,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         if extra is not None:
             say(0.0, "timing discovery")
             extra.discovery_s = mh.discovery_time(monitor_ns, [s.name for s in specs],
-                                                  sum(s.executable == "window_node" for s in specs))
+                                                  sum(s.executable == "window_node" for s in specs), env=ros_env)
             extra.start_up_traffic = {h: net.counters(h).to_dict() for h in net.hosts}
         # the counters at the start of the measurement: the warm-up's faults (cells starting at different
         # times, the kernel loading) are not the graph's steady state
@@ -736,7 +750,7 @@ def format_scale_graph(report: ScaleGraphReport) -> str:
     if mh is not None:
         per_host = ", ".join(f"{h} {c} cells" for h, c in mh["cells_per_host"].items())
         lines.append(f"hosts: {mh['hosts']} body-part hosts ({per_host}) "
-                     f"and the classifier's; discovery {mh['discovery']}: a joining participant saw the graph in "
+                     f"and the classifier's; discovery: {mh['discovery_how']}; a joining participant saw the graph in "
                      f"{f(mh['discovery_s'], '.3f')} s")
         lines.append(f"cross-host traffic: {f(mh['cross_host_bytes_per_s'], '.0f')} B/s, "
                      f"{f(mh['cross_host_bytes_per_cell_s'], '.2f')} B/s per cell, "

@@ -124,6 +124,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "measurement, and report what it cost and how the graph recovered")
     p.add_argument("--link-drop-host", type=int, default=0,
                    help="the body-part host whose link --link-drop-s drops (default 0)")
+    p.add_argument("--discovery", choices=("subnet", "server"), default="subnet",
+                   help="--scale-graph --hosts: how participants find each other: DDS's simple discovery over the "
+                        "hosts' links (subnet, default) or a Fast DDS discovery server on the classifier's host")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -253,6 +256,7 @@ def _scale_graph(args: argparse.Namespace) -> int:
                                  groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
                                  one_driver=args.one_driver, warm_up_timeout_s=args.warm_up_s,
                                  hosts=args.hosts, link_drop_s=args.link_drop_s, link_drop_host=args.link_drop_host,
+                                 discovery=args.discovery,
                                  progress=progress)
     except (RuntimeError, ImportError, ConfigError) as exc:
         bar.close()

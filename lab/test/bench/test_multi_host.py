@@ -202,10 +202,12 @@ def _bench(*args: str) -> dict:
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 @needs_namespaces
-def test_a_two_host_graph_brings_every_body_parts_descriptors_to_the_classifier_and_predictions_back():
+@pytest.mark.parametrize("discovery", ["subnet", "server"])
+def test_a_two_host_graph_brings_every_body_parts_descriptors_to_the_classifier_and_predictions_back(discovery):
     before = _netns()
-    d = _bench("--cells", "20", "--parts", "2", "--hosts", "2", "--seconds", "6")
+    d = _bench("--cells", "20", "--parts", "2", "--hosts", "2", "--seconds", "6", "--discovery", discovery)
     mh = d["multi_host"]
+    assert mh["discovery"] == discovery
     assert mh["placement"] == {"skin_driver_part_0": "host0", "skin_driver_part_1": "host1",
                                "window_node_part_0": "host0", "window_node_part_1": "host1",
                                "classifier_node": CLASSIFIER_HOST}
