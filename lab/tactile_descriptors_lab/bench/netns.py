@@ -32,7 +32,6 @@ anyway, and a few ``ip`` commands are all the set-up there is.
 
 from __future__ import annotations
 
-import contextlib
 import ctypes
 import ipaddress
 import json
@@ -40,10 +39,11 @@ import os
 import re
 import shutil
 import subprocess
-import threading
 import weakref
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
+
+from tactile_descriptors_ros.errors import TactileError
 
 __all__ = [
     "LinkCounters",
@@ -51,7 +51,6 @@ __all__ = [
     "namespaces_unavailable",
     "remove_stale_namespaces",
     "enter_namespace",
-    "in_namespace",
     "NamespaceError",
     "SUBNET",
 ]
@@ -67,8 +66,8 @@ _NAME = re.compile(r"^[A-Za-z0-9_.-]{1,40}$")
 _COMMAND_TIMEOUT_S = 30.0
 
 
-class NamespaceError(RuntimeError):
-    """An ``ip`` command failed (its output in the message)."""
+class NamespaceError(TactileError, RuntimeError):
+    """An ``ip`` command or ``setns`` failed (its output in the message)."""
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -272,23 +271,5 @@ def enter_namespace(path_or_name: str) -> None:
         if libc.setns(fd, _CLONE_NEWNET) != 0:
             err = ctypes.get_errno()
             raise NamespaceError(f"setns({path}): {os.strerror(err)}")
-    finally:
-        os.close(fd)
-
-
-@contextlib.contextmanager
-def in_namespace(name: str) -> Iterator[None]:
-    """Run the block's calls of this thread in network namespace ``name``, then return to the thread's own."""
-    own = f"/proc/self/task/{threading.get_native_id()}/ns/net"
-    fd = os.open(own, os.O_RDONLY | os.O_CLOEXEC)
-    try:
-        enter_namespace(name)
-        try:
-            yield
-        finally:
-            libc = ctypes.CDLL(None, use_errno=True)
-            if libc.setns(fd, _CLONE_NEWNET) != 0:
-                raise NamespaceError(f"cannot return to this thread's network namespace: "
-                                     f"{os.strerror(ctypes.get_errno())}")
     finally:
         os.close(fd)
