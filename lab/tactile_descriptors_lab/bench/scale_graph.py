@@ -85,6 +85,8 @@ CELLS_PER_PART = 500
 DRIVER_RTF_MIN = 0.98
 #: The window node's descriptor queue depth (``qos.descriptor.depth``) when the robot does not set it.
 WINDOW_DESCRIPTOR_DEPTH = 10
+#: The graph is stopped when the machine has less memory available than this [GB] (it is shared).
+MEMORY_FLOOR_GB = 3.0
 #: Longest wait for every node's diagnostics at the start and the end of the measurement [s]; a node
 #: that is later than this (an overloaded machine) is reported in ``stale_diagnostics``.
 DIAGNOSTICS_WAIT_S = 30.0
@@ -669,11 +671,26 @@ def _multi_host_results(extra: MultiHostResult, monitor: _Monitor, before: dict[
 
 
 def _check_alive(procs: Any, t_start: float) -> None:
+    """Raise when a node has exited, or when the machine is about to run out of memory (the graph is stopped
+    before the kernel kills a process of its own or of anyone else's: a measured bound, reported)."""
+    import psutil
+
     dead = [r for r in procs.nodes if r.returncode is not None]
     if dead:
         lines = "\n".join(dead[0].lines[-20:])
         raise RuntimeError(f"node {dead[0].spec.name} exited with {dead[0].returncode} after "
                            f"{time.monotonic() - t_start:.0f} s:\n{lines}")
+    available = psutil.virtual_memory().available
+    if available < MEMORY_FLOOR_GB * 2**30:
+        rss = 0
+        for r in procs.nodes:
+            try:
+                rss += psutil.Process(r.process.pid).memory_info().rss
+            except psutil.Error:
+                pass
+        raise RuntimeError(f"stopped after {time.monotonic() - t_start:.0f} s: the machine has "
+                           f"{available / 2**30:.1f} GB of memory left (floor {MEMORY_FLOOR_GB:g} GB) and the "
+                           f"graph's {len(procs.nodes)} processes hold {rss / 2**30:.1f} GB")
 
 
 def _parts(monitor: _Monitor, before: dict[str, dict[str, str]], after: dict[str, dict[str, str]],
