@@ -191,6 +191,21 @@ def test_namespaces_left_by_a_killed_bench_are_removed_and_no_others():
 
 
 # ------------------------------------------------------------------- the graph
+@pytest.mark.parametrize(("args", "says"), [
+    (["--link-drop-s", "5"], "a link drop needs hosts"),
+    pytest.param(["--hosts", "3", "--parts", "2"], "2 body parts cannot be placed on 3 hosts",
+                 marks=needs_namespaces),
+    pytest.param(["--hosts", "2", "--parts", "2", "--one-driver"], "one driver for every body part cannot be split",
+                 marks=needs_namespaces),
+    pytest.param(["--hosts", "1", "--link-drop-s", "5", "--seconds", "8"], "a 5.0 s link drop needs",
+                 marks=needs_namespaces),
+])
+def test_impossible_host_layouts_are_refused_before_anything_starts(args, says):
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--scale-graph",
+                          "--cells", "4", *args], capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and says in out.stderr, out.stderr[-2000:]
+
+
 def _bench(*args: str) -> dict:
     out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--scale-graph",
                           *args, "--json"], capture_output=True, text=True, timeout=600)
