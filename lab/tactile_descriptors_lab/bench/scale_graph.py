@@ -493,7 +493,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         part_host = mh.assign_parts(list(runs), hosts)
         placement = mh.node_hosts(specs, part_host)
         net = VirtualHosts(mh.host_names(hosts))
-        # inside the hosts SUBNET discovery: their only links are the bench's own veth pairs
+        # inside the hosts discovery goes over SUBNET (or to the server): their only links are the bench's own
         host_env = mh.discovery_env(discovery, net.address(mh.CLASSIFIER_HOST))
         proc_args = {"prefix": {n: net.exec_prefix(h) for n, h in placement.items()},
                      "node_env": {n: host_env for n in placement}}
@@ -610,12 +610,12 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         after = monitor.snapshot()
         load_end = os.getloadavg()
         if extra is not None:
-            # predictions the classifier's host got up to a second before the end must have reached every host
             extra.traffic = {h: (links1[h] - links0[h]).to_dict() for h in net.hosts}
             # what the messages themselves weigh (serialized), beside what the links carried
             extra.payload = {"descriptors": payload1["descriptor"] - payload0["descriptor"],
                              "diagnostics": payload1["diagnostics"] - payload0["diagnostics"],
                              "predictions_per_host": predictions1 - predictions0}
+            # predictions the classifier's host got up to a second before the end must have reached every host
             sent = listeners[mh.CLASSIFIER_HOST].ends(until=t1 - 1.0)
             extra.predictions = {h: {"sent": int(sum(sent.values())),
                                      "received": int(sum(log.ends().values())),
