@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from tactile_descriptors_lab.bench.multi_host import MultiHostResult
+from tactile_descriptors_lab.bench.netns import LinkCounters
 from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.sim.synthetic import (
     WINDOW_HOP_S,
@@ -183,16 +184,18 @@ class ScaleGraphReport:
     stale_diagnostics: list[str] = field(default_factory=list)
     #: across hosts (``hosts`` >= 1): placement, traffic, discovery, predictions, the link drop
     multi_host: MultiHostResult | None = None
+    #: why the graph was stopped before the end of the measurement (the machine's memory), if it was
+    stopped: str | None = None
 
     @property
     def kept_up(self) -> bool:
-        return bool(self.parts) and all(p.kept_up for p in self.parts)
+        return not self.stopped and bool(self.parts) and all(p.kept_up for p in self.parts)
 
     def _hosts_kept_up(self) -> bool:
         """Across hosts: every frame path kept up, and every body part whose host's link stayed up kept up too,
         lost no descriptor on the way to the classifier, and got every prediction back."""
         mh = self.multi_host
-        if mh is None or not self.parts:
+        if mh is None or not self.parts or self.stopped:
             return False
         dropped = mh.link_drop.host if mh.link_drop is not None else None
         frames_ok = all(p.lost_frames == 0 and p.driver_realtime_factor is not None
@@ -298,6 +301,7 @@ class ScaleGraphReport:
             "exit_codes": self.exit_codes, "silent_at_start": self.silent_at_start,
             "stale_diagnostics": self.stale_diagnostics,
             "multi_host": None if self.multi_host is None else self.multi_host.to_dict(),
+            "stopped": self.stopped,
         }
 
 
@@ -504,6 +508,7 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
     cpu0: dict[int, float] = {}
     silent: list[str] = []
     stale: list[str] = []
+    stopped: str | None = None
     extra = MultiHostResult(hosts=hosts, discovery=discovery, placement=placement,
                             part_hosts=part_host) if hosts else None
     try:
@@ -545,6 +550,11 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
         t_start = time.monotonic()
         while not monitor.first_window.wait(0.5):
             _check_alive(procs, t_start)
+            stopped = _memory_short(procs, t_start)
+            if stopped:
+                with monitor.lock:
+                    silent = sorted(set(runs) - set(monitor.windows))
+                break
             waited = time.monotonic() - t_start
             if waited > warm_up_timeout_s:  # measure anyway: the processes' load is the result then
                 with monitor.lock:
@@ -552,33 +562,38 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
                 break
             say(0.0, f"warming up ({waited:.0f} s)")
         settle_end = time.monotonic() + float(settle_s)
-        while time.monotonic() < settle_end:
+        while time.monotonic() < settle_end and not stopped:
             _check_alive(procs, t_start)
+            stopped = _memory_short(procs, t_start)
             say(0.0, "settling")
             time.sleep(min(0.5, max(0.0, settle_end - time.monotonic())))
         warm_up_s = time.monotonic() - t_start
         if extra is not None:
             say(0.0, "timing discovery")
-            extra.discovery_s = mh.discovery_time(monitor_ns, [s.name for s in specs],
+            extra.discovery_s = None if stopped else mh.discovery_time(monitor_ns, [s.name for s in specs],
                                                   sum(s.executable == "window_node" for s in specs), env=ros_env)
             extra.start_up_traffic = {h: net.counters(h).to_dict() for h in net.hosts}
         # the counters at the start of the measurement: the warm-up's faults (cells starting at different
-        # times, the kernel loading) are not the graph's steady state
-        t_mark = time.monotonic()
-        monitor.wait_diagnostics_after(t_mark, timeout_s=DIAGNOSTICS_WAIT_S)  # an overloaded node may be late
-        before = monitor.snapshot()
-        t0 = time.monotonic()
+        # times, the kernel loading) are not the graph's steady state; a graph stopped before it is measured
+        # from its start
+        if not stopped:
+            t_mark = time.monotonic()
+            monitor.wait_diagnostics_after(t_mark, timeout_s=DIAGNOSTICS_WAIT_S)  # an overloaded node may be late
+        before = monitor.snapshot() if not stopped else {}
+        t0 = time.monotonic() if not stopped else t_start
         for p in loads:
             c = handles[p.pid].cpu_times()
-            cpu0[p.pid] = c.user + c.system
-        links0 = {h: net.counters(h) for h in net.hosts} if net is not None else {}
-        payload0 = monitor.payload_bytes()
-        predictions0 = listeners[mh.CLASSIFIER_HOST].payload_bytes() if net is not None else 0
+            cpu0[p.pid] = c.user + c.system if not stopped else 0.0
+        links0 = {h: net.counters(h) if not stopped else LinkCounters(0, 0, 0, 0, 0, 0) for h in net.hosts} \
+            if net is not None else {}
+        payload0 = monitor.payload_bytes() if not stopped else Counter()
+        predictions0 = listeners[mh.CLASSIFIER_HOST].payload_bytes() if net is not None and not stopped else 0
         deadline = t0 + float(seconds)
         drop_at = t0 + (float(seconds) - float(link_drop_s)) / 3.0 if link_drop_s else None
         drop = None
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not stopped:
             _check_alive(procs, t_start)
+            stopped = _memory_short(procs, t_start)
             now = time.monotonic()
             if drop_at is not None and drop is None and now >= drop_at:
                 host = mh.host_names(hosts)[link_drop_host]
@@ -636,8 +651,9 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             p.data_realtime_factor = round(float(np.mean(rtf)), 4)
     if extra is not None:
         _multi_host_results(extra, monitor, before, after, part_host, runs, t0, t1, n_cells)
-    return ScaleGraphReport(n_cells, results, loads, float(seconds), round(warm_up_s, 2), tuple(groups), one_driver,
-                            load_start, load_end, os.cpu_count() or 1, codes, silent, stale, extra)
+    return ScaleGraphReport(n_cells, results, loads, round(t1 - t0, 2) if stopped else float(seconds),
+                            round(warm_up_s, 2), tuple(groups), one_driver, load_start, load_end, os.cpu_count() or 1,
+                            codes, silent, stale, extra, stopped)
 
 
 def _multi_host_results(extra: MultiHostResult, monitor: _Monitor, before: dict[str, dict[str, str]],
@@ -671,26 +687,34 @@ def _multi_host_results(extra: MultiHostResult, monitor: _Monitor, before: dict[
 
 
 def _check_alive(procs: Any, t_start: float) -> None:
-    """Raise when a node has exited, or when the machine is about to run out of memory (the graph is stopped
-    before the kernel kills a process of its own or of anyone else's: a measured bound, reported)."""
-    import psutil
-
+    """Raise when a node has exited (its last lines in the message)."""
     dead = [r for r in procs.nodes if r.returncode is not None]
     if dead:
         lines = "\n".join(dead[0].lines[-20:])
         raise RuntimeError(f"node {dead[0].spec.name} exited with {dead[0].returncode} after "
                            f"{time.monotonic() - t_start:.0f} s:\n{lines}")
+
+
+def _memory_short(procs: Any, t_start: float) -> str | None:
+    """Why the graph must stop now, when the machine is about to run out of memory (``None`` while it is not).
+
+    The graph is stopped before the kernel kills a process, its own or anyone else's on a shared machine;
+    the reason, with what the graph held, is the measured bound.
+    """
+    import psutil
+
     available = psutil.virtual_memory().available
-    if available < MEMORY_FLOOR_GB * 2**30:
-        rss = 0
-        for r in procs.nodes:
-            try:
-                rss += psutil.Process(r.process.pid).memory_info().rss
-            except psutil.Error:
-                pass
-        raise RuntimeError(f"stopped after {time.monotonic() - t_start:.0f} s: the machine has "
-                           f"{available / 2**30:.1f} GB of memory left (floor {MEMORY_FLOOR_GB:g} GB) and the "
-                           f"graph's {len(procs.nodes)} processes hold {rss / 2**30:.1f} GB")
+    if available >= MEMORY_FLOOR_GB * 2**30:
+        return None
+    rss = 0
+    for r in procs.nodes:
+        try:
+            rss += psutil.Process(r.process.pid).memory_info().rss
+        except psutil.Error:
+            pass
+    return (f"stopped after {time.monotonic() - t_start:.0f} s: the machine had {available / 2**30:.1f} GB of "
+            f"memory left (floor {MEMORY_FLOOR_GB:g} GB) and the graph's {len(procs.nodes)} processes held "
+            f"{rss / 2**30:.1f} GB")
 
 
 def _parts(monitor: _Monitor, before: dict[str, dict[str, str]], after: dict[str, dict[str, str]],
@@ -783,6 +807,8 @@ def format_scale_graph(report: ScaleGraphReport) -> str:
             lines.append(f"link drop: {ld['host']} down {ld['down_s']:.1f} s; descriptors missing "
                          f"{ld['descriptors_missing']}, backlog {ld['backlog']} (queue depth {ld['queue_depth']}), "
                          f"recovered after {ld['recovered_after_s']} s, predictions missing {ld['predictions_missing']}")
+    if report.stopped:
+        lines.append(f"the graph was {report.stopped}")
     for t in d["targets"].values():
         lines.append(f"target: {t['target']}: {'met' if t['met'] else 'NOT met'}")
     return "\n".join(lines)
