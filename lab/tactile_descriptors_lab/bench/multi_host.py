@@ -480,10 +480,10 @@ def link_drop_recovery(rows: Sequence[tuple[float, int]], down_at: float, up_at:
     ``rows`` are (arrival monotonic time, window end stamp [ns]).  The usual
     lag (arrival minus end, whatever the clocks' offset) is the median over
     the descriptors that arrived before the drop; a window is *due* at its
-    end plus the usual lag.  After ``up_at`` a descriptor more than one hop
-    later than its due time is backlog (what the writer kept while the link
-    was down), and the part has recovered at the arrival of the first one
-    within a hop of it.  The third figure counts the windows missing
+    end plus the usual lag.  A descriptor due before ``up_at`` that arrived
+    after it, more than a hop late, is backlog (what the writer kept while
+    the link was down; at most its queue depth), and the part has recovered
+    at the arrival of the first descriptor within a hop of its due time.  The third figure counts the windows missing
     (gaps in the end stamps) that were due ``grace_s`` or more after the
     link returned: a graph that recovers within ``grace_s`` loses none.
     """
@@ -495,9 +495,10 @@ def link_drop_recovery(rows: Sequence[tuple[float, int]], down_at: float, up_at:
     for t, e in sorted(rows, key=lambda r: r[0]):
         if t < up_at:
             continue
-        if t - e * 1e-9 > usual + hop_s:
+        due = e * 1e-9 + usual
+        if due < up_at and t - due > hop_s:  # due while the link was down, delivered after it returned
             backlog += 1
-        elif recovered is None:
+        elif t - due <= hop_s and recovered is None:
             recovered = round(t - up_at, 3)
     ends = np.unique(np.asarray([e for _, e in rows], dtype=np.int64))
     hop_ns = int(round(hop_s * 1e9))

@@ -206,11 +206,23 @@ def test_impossible_host_layouts_are_refused_before_anything_starts(args, says):
     assert out.returncode != 0 and says in out.stderr, out.stderr[-2000:]
 
 
-def _bench(*args: str) -> dict:
-    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--scale-graph",
-                          *args, "--json"], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-3000:]
-    return json.loads(out.stdout)
+def _bench(*args: str, timeout_s: float = 600.0) -> dict:
+    """``tactile bench --scale-graph ARGS --json``; past ``timeout_s`` it gets SIGTERM (it then stops its nodes
+    and removes its hosts) before anything harder, so a hung run leaves nothing behind."""
+    proc = subprocess.Popen([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--scale-graph",
+                             *args, "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.terminate()
+        try:
+            out, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        pytest.fail(f"the bench ran past {timeout_s:g} s: {err[-3000:]}")
+    assert proc.returncode == 0, err[-3000:]
+    return json.loads(out)
 
 
 @pytest.mark.ros
