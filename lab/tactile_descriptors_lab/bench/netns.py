@@ -248,6 +248,12 @@ class VirtualHosts:
         """Plug ``host``'s cable in (``up``) or pull it out at the switch (its port down)."""
         _ip("-n", self.switch, "link", "set", self.port(host), "up" if up else "down")
 
+    def has_carrier(self, host: str) -> bool:
+        """Whether ``host``'s link sees its switch port (``LOWER_UP``): the kernel reports a carrier change a
+        moment after the port changes."""
+        out = _ip("-n", self.namespace(host), "-j", "link", "show", LINK)
+        return "LOWER_UP" in json.loads(out.stdout)[0].get("flags", [])
+
     def counters(self, host: str) -> LinkCounters:
         """The counters of ``host``'s link, read inside its namespace."""
         out = _ip("-n", self.namespace(host), "-s", "-j", "link", "show", LINK)

@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from collections import Counter
 
 import pytest
@@ -131,6 +132,13 @@ def _own_links() -> list[tuple[str, str | None]]:
     return sorted((d["ifname"], a.get("local")) for d in json.loads(out) for a in d.get("addr_info", []) or [{}])
 
 
+def _wait_for(condition, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, "condition not reached"
+        time.sleep(0.05)
+
+
 def _udp(net: VirtualHosts, src: str, dst: str, count: int) -> int:
     """Datagrams ``dst`` received of ``count`` that ``src`` sent to it (a receiver on ``dst``, a sender on ``src``)."""
     recv = ("import socket,sys;s=socket.socket(socket.AF_INET,socket.SOCK_DGRAM);s.bind(('0.0.0.0',47111));"
@@ -162,6 +170,7 @@ def test_hosts_talk_over_their_links_only_and_are_removed_with_everything_on_the
         net.set_link("a", False)  # the cable pulled at the switch
         assert _udp(net, "a", "b", 20) == 0
         net.set_link("a", True)
+        _wait_for(lambda: net.has_carrier("a"))  # the kernel reports the carrier a moment later
         assert _udp(net, "a", "b", 20) == 20  # routes kept: the host is reachable again without set-up
     assert _netns() == before_ns and _own_links() == before_links
 
