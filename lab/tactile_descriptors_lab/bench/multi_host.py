@@ -6,17 +6,20 @@ a network namespace of :class:`~.netns.VirtualHosts`: every body part's
 driver and window node on the host its body part is placed on (body parts
 split into ``H`` consecutive runs), the classifier on its own host, the
 bench's observers on the classifier's host (descriptors, diagnostics,
-predictions) and on every body-part host (the predictions that come back).
+predictions) and a listener process on every body-part host (the
+predictions that come back: :class:`PredictionListener`).
 
 Discovery is DDS's simple discovery with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``
 and a multicast route on each host's link: the namespaces' only links are
 the bench's own, so announcements cannot leave the machine, and no process
-has to be started first or be told any address (a discovery server would be
-one more process to place and keep alive, and static peers a list of
-addresses per host).  The bench process itself stays in this machine's
-namespace: each observer is an rclpy context created by a thread that
-entered its host's namespace (:func:`~.netns.enter_namespace`), so its DDS
-participant and threads live on that host.
+has to be started first or be told any address (static peers would be a
+list of addresses per host).  ``discovery="server"`` runs Fast DDS's
+discovery server on the classifier's host instead (:class:`DiscoveryServer`),
+whose traffic grows with the participants rather than faster.  The bench
+process itself stays in this machine's namespace: each observer on the
+classifier's host is an rclpy context created by a thread that entered the
+host's namespace (:func:`~.netns.enter_namespace`), so its DDS participant
+and threads live on that host.
 
 What this module measures beside the scale graph's figures:
 
@@ -60,6 +63,8 @@ __all__ = [
     "link_drop_recovery",
     "discovery_time",
     "PredictionLog",
+    "PredictionListener",
+    "listen_predictions",
     "MultiHostResult",
     "DiscoveryServer",
     "DISCOVERY_MODES",
