@@ -93,13 +93,28 @@ class GraphProcesses:
     workdir : path, optional
         Where the parameters file is written (default: a temporary folder
         removed by :meth:`stop`).
+    prefix : mapping, optional
+        Node name -> command words put before its command line: where the
+        node runs, e.g. ``["ip", "netns", "exec", "host1"]`` starts it in a
+        network namespace (the prefix must exec the command, so the process
+        id stays the node's and signals reach it).
+    node_env : mapping, optional
+        Node name -> environment variables set for that node only (over ``env``).
     """
 
     def __init__(self, specs: Sequence[NodeSpec], *, env: Mapping[str, str] | None = None,
                  output: IO[str] | None = sys.stdout, keep_lines: int = 200,
-                 workdir: str | os.PathLike[str] | None = None) -> None:
+                 workdir: str | os.PathLike[str] | None = None,
+                 prefix: Mapping[str, Sequence[str]] | None = None,
+                 node_env: Mapping[str, Mapping[str, str]] | None = None) -> None:
         if not specs:
             raise ConfigError("no nodes to start")
+        names = {s.name for s in specs}
+        unknown = sorted((set(prefix or {}) | set(node_env or {})) - names)
+        if unknown:
+            raise ConfigError(f"no node named {unknown[0]!r} to place (nodes: {', '.join(sorted(names))})")
+        self.prefix = {k: list(v) for k, v in (prefix or {}).items()}
+        self.node_env = {k: dict(v) for k, v in (node_env or {}).items()}
         self.specs = list(specs)
         self.env = dict(os.environ if env is None else env)
         self.env.setdefault("PYTHONUNBUFFERED", "1")
@@ -121,7 +136,9 @@ class GraphProcesses:
         write_parameters_file(self.specs, self.params_file)
         width = max(len(s.name) for s in self.specs)
         for spec in self.specs:
-            proc = subprocess.Popen(node_command(spec, self.params_file), env=self.env, stdout=subprocess.PIPE,
+            cmd = [*self.prefix.get(spec.name, []), *node_command(spec, self.params_file)]
+            env = {**self.env, **self.node_env.get(spec.name, {})}
+            proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE,
                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, bufsize=1,
                                     start_new_session=True)
             node = RunningNode(spec, proc)

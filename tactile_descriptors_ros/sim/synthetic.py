@@ -200,7 +200,7 @@ def _scene(robot_path: Path, name: str, seed: int) -> dict[str, Any]:
 def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str], *,
                       groups: Sequence[str] = ("paper",), batch_s: float | None = None,
                       read_period_s: float | None = None, one_driver: bool = False,
-                      window_parameters: dict[str, Any] | None = None) -> Path:
+                      window_parameters: dict[str, Any] | None = None, classifier: bool = False) -> Path:
     """Write the synthetic robot description (with its ``nodes:`` graph) and the drivers' scenes.
 
     Parameters
@@ -220,6 +220,8 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
         One skin driver for all body parts (one bus) instead of one per body part.
     window_parameters : dict, optional
         Parameters of the window node merged over the NAO graph's (nested names).
+    classifier : bool
+        Add the NAO graph's classifier node (one for every body part's descriptors).
 
     Returns
     -------
@@ -274,6 +276,10 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
         else:
             window[key] = value
     nodes["window_node"] = {"executable": "window_node", "parameters": window}
+    if classifier:
+        nodes["classifier_node"] = {"executable": "classifier_node",
+                                    "parameters": copy.deepcopy(shipped.get("classifier_node", {}).get("parameters")
+                                                                or {})}
     doc = {**base, "body_parts": body_parts, "nodes": nodes}
     path = out / f"{name}.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))

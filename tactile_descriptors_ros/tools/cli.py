@@ -30,7 +30,7 @@ __all__ = ["build_parser", "main", "VERBS_GROUP", "LAB_VERBS", "LAB_INSTALL"]
 #: Entry-point group through which other packages add ``tactile`` subcommands.
 VERBS_GROUP = "tactile_descriptors_ros.verbs"
 #: The verbs of the lab package, named even when it is not installed.
-LAB_VERBS = ("bench", "evaluate", "fit-textures", "fuzz", "import", "protocols", "report")
+LAB_VERBS = ("bench", "evaluate", "fit-rocket", "fit-textures", "fuzz", "import", "protocols", "report")
 #: How to install the lab package.
 LAB_INSTALL = "pip install ./lab (from the repository; make setup does it)"
 

@@ -597,6 +597,11 @@ def targets(report: BenchReport) -> dict:
         "target": "10000 skin cells through drivers and one window node per body part in real time (2 s windows, "
                   "0.5 s hop), zero lost frames (tactile bench --scale-graph --cells 10000)",
         "met": None}
+    out["skin_10000_graph_2_hosts"] = {
+        "target": "10000 skin cells, each body part's driver and window node on one of 2 hosts, the classifier on "
+                  "another, in real time: zero lost frames, every descriptor at the classifier, every prediction "
+                  "back (tactile bench --scale-graph --cells 10000 --hosts 2)",
+        "met": None}
     # the views against the graph without them: runs of the whole NAO graph, measured on their own (docs/view.md)
     out["view_overhead"] = {
         "target": "the views (rviz2 markers and images, tactile view with one page) on the NAO graph at full rate "

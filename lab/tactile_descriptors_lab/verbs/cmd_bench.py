@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 
 __all__ = ["register", "run"]
@@ -126,6 +127,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "due)")
     p.add_argument("--one-driver", action="store_true",
                    help="--scale-graph with one skin driver for all body parts instead of one per body part")
+    p.add_argument("--hosts", type=int, default=0,
+                   help="--scale-graph across hosts: this many body-part hosts and one classifier host, network "
+                        "namespaces joined by veth links (needs root and ip); 0: one machine (default)")
+    p.add_argument("--link-drop-s", type=float, default=None,
+                   help="--scale-graph --hosts: take one body-part host's link down for this long during the "
+                        "measurement, and report what it cost and how the graph recovered")
+    p.add_argument("--link-drop-host", type=int, default=0,
+                   help="the body-part host whose link --link-drop-s drops (default 0)")
+    p.add_argument("--discovery", choices=("subnet", "server"), default="subnet",
+                   help="--scale-graph --hosts: how participants find each other: DDS's simple discovery over the "
+                        "hosts' links (subnet, default) or a Fast DDS discovery server on the classifier's host")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=run)
 
@@ -232,6 +244,13 @@ def _scale_graph(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.bench.scale_graph import format_scale_graph, run_scale_graph
     from tactile_descriptors_ros.errors import ConfigError
 
+    if args.hosts:
+        from tactile_descriptors_lab.bench.netns import namespaces_unavailable
+
+        why = namespaces_unavailable()
+        if why:
+            print(f"tactile bench: error: --hosts needs network namespaces: {why}", file=sys.stderr)
+            return 2
     if args.cells < 1 or (args.parts is not None and args.parts < 1) or not args.seconds > 0 \
             or not args.settle_s >= 0 or (args.batch_s is not None and not args.batch_s > 0) \
             or (args.read_period_s is not None and not args.read_period_s >= 0) or not args.warm_up_s > 0:
@@ -240,10 +259,17 @@ def _scale_graph(args: argparse.Namespace) -> int:
         return 2
     groups = tuple(g.strip() for g in args.groups.split(",") if g.strip())
     bar, progress = _seconds_bar(args.seconds, "scale graph")
+
+    def on_term(signum, frame):  # SIGTERM stops the graph like Ctrl-C: its processes and hosts are removed
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, on_term)
     try:
         report = run_scale_graph(args.cells, parts=args.parts, seconds=args.seconds, settle_s=args.settle_s,
                                  groups=groups, batch_s=args.batch_s, read_period_s=args.read_period_s,
                                  one_driver=args.one_driver, warm_up_timeout_s=args.warm_up_s,
+                                 hosts=args.hosts, link_drop_s=args.link_drop_s, link_drop_host=args.link_drop_host,
+                                 discovery=args.discovery,
                                  progress=progress)
     except (RuntimeError, ImportError, ConfigError) as exc:
         bar.close()

@@ -85,6 +85,24 @@ def test_a_body_part_keeps_up_only_without_lost_frames_missing_windows_or_a_grow
     assert _part(windows=19).kept_up  # a window on either side of the measurement's edges
 
 
+def test_the_graph_is_stopped_when_the_machine_runs_short_of_memory(monkeypatch):
+    import os
+    from types import SimpleNamespace
+
+    from tactile_descriptors_lab.bench import scale_graph
+
+    me = SimpleNamespace(nodes=[SimpleNamespace(process=SimpleNamespace(pid=os.getpid()))])
+    monkeypatch.setattr(scale_graph, "MEMORY_FLOOR_GB", 0.0)
+    assert scale_graph._memory_short(me, 0.0) is None
+    monkeypatch.setattr(scale_graph, "MEMORY_FLOOR_GB", 1e9)  # more than any machine has
+    why = scale_graph._memory_short(me, 0.0)
+    assert why.startswith("stopped after") and "1 processes held" in why
+    report = scale_graph.ScaleGraphReport(4, [_part()], [], 1.0, 1.0, ("paper",), False, (0, 0, 0), (0, 0, 0), 2,
+                                          stopped=why)
+    assert not report.kept_up and report.targets()["skin_4_graph"]["met"] is False
+    assert report.to_dict()["stopped"] == why
+
+
 def test_a_process_that_fell_behind_is_charged_for_the_data_it_handled_not_the_wall_time():
     p = ProcessLoad("skin_driver_part_0", "skin_driver", 1, cells=100, cpu_percent=50.0, data_realtime_factor=0.5)
     assert p.cpu_ms_per_cell_s == pytest.approx(5.0)  # half a core for 100 cells

@@ -328,7 +328,7 @@ def test_a_group_asked_for_that_the_cell_type_cannot_feed_is_named_with_the_grou
     assert len(err) == 1
     assert err[0].startswith("tactile evaluate: error: 'channels': mode 'combined': feature group 'bands' cannot "
                              "be fed by cell type 'pad_cell'")
-    assert err[0].endswith("; the groups it can feed: paper, per_channel, levels, statistics")
+    assert err[0].endswith("; the groups it can feed: paper, per_channel, levels, statistics, plain")
 
 
 # --------------------------------------------------------------------------- a pressure-only cell type (iCub pads)
@@ -364,7 +364,7 @@ def test_icub_pads_evaluate_with_the_groups_pressure_can_feed(recs, tmp_path, ca
     assert "descriptor mode levels+statistics (" in out.out
     assert main(args + ["--mode", "per_channel"]) == 2
     err = capsys.readouterr().err
-    assert err.strip().endswith("does not have (pressure only); the groups it can feed: paper, levels, statistics")
+    assert err.strip().endswith("does not have (pressure only); the groups it can feed: paper, levels, statistics, plain")
 
 
 def test_a_files_glob_that_matches_nothing_names_the_folder_the_key_and_what_it_holds(recs, tmp_path):

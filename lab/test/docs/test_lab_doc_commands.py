@@ -16,6 +16,11 @@ SKIP: dict[tuple[str, str], str] = {
     ("lab/docs/scaling.md", "tactile bench --scale-graph --cells 10000 --parts 20 --seconds 30 --json > scale_10000.json"):
         "41 processes for minutes; the page's small run above and lab/test/bench/test_scale_graph.py run the same "
         "command on a small skin",
+    ("lab/docs/scaling.md", "tactile bench --scale-graph --cells 20 --parts 2 --hosts 2 --seconds 8"):
+        "lab/test/bench/test_multi_host.py runs these two-host graphs (the same commands, shorter) and the link drop",
+    ("lab/docs/scaling.md",
+     "tactile bench --scale-graph --cells 10000 --parts 20 --hosts 2 --seconds 30 --json > hosts_10000.json"):
+        "43 processes on three hosts for minutes; lab/test/bench/test_multi_host.py runs a small two-host graph",
     ("lab/docs/performance.md", "tactile bench --model-save"):
         "a benchmark of 100 durable saves of a 1,000-class model; lab/test/bench/test_model_save_bench.py runs a "
         "small one",
