@@ -114,8 +114,9 @@ $(VENV)/setup.bash: Makefile $(VENV)/.venv-created
 	  'export ROS_DOMAIN_ID="$${ROS_DOMAIN_ID:-$(shell shuf -i 1-100 -n 1)}"' \
 	  > $@
 
-# ros2 launch / run / topic / param / service / lifecycle and launch_testing.
-$(VENV)/.ros2cli: $(VENV)/.deps
+# ros2 launch / run / topic / param / service / lifecycle and launch_testing, and the interface
+# packages not on PyPI (tf2_msgs for /tf_static): a venv set up before install.sh built one gets it.
+$(VENV)/.ros2cli: $(VENV)/.deps $(wildcard $(ROS2_CLI)/install.sh)
 	$(STEP) "setup 6/7: ros2 CLI and launch system (1-3 minutes)"
 	@if [ -x "$(ROS2_CLI)/install.sh" ]; then \
 	  echo "installing the ros2 CLI and launch system from $(ROS2_CLI) (about a minute)"; \
