@@ -9,6 +9,8 @@ import time
 import pytest
 from node_helpers import BiotacStream, spin_until
 
+from tactile_descriptors_ros.core.robot import load_robot
+
 pytestmark = pytest.mark.ros
 
 
@@ -110,13 +112,15 @@ def test_descriptors_carry_the_robot_frame(ros_context):
     ex.add_node(w)
     ex.add_node(io)
     try:
-        assert w.get_parameter("frame_id").value == "shadow_hand"
+        # the robot's root frame, the root of the TF tree tf_publisher puts on /tf_static
+        root = load_robot("shadow_hand").geometry.root_frame
+        assert w.get_parameter("frame_id").value == root == "forearm"
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and w.kernel_ready.is_set(), 60)
         for m in BiotacStream().exploration(40.0):
             pub.publish(m)
             ex.spin_once(timeout_sec=0.005)
         assert spin_until(ex, lambda: got, 10)
-        assert got[0].header.frame_id == "shadow_hand"
+        assert got[0].header.frame_id == root
     finally:
         ex.shutdown()
         w.destroy_node()
