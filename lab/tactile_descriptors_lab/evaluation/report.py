@@ -717,6 +717,7 @@ def what_to_expect(serial: dict) -> str:
     mixed = get("length", f"{DEFAULT_MODE} | 1-6")
     short = {w: get("short", f"{DEFAULT_MODE} | {w}") for w in ("0.5", "1")}
     length_min = serial.get("section_runtime_s", {}).get("length")
+    headline_min = serial.get("section_runtime_s", {}).get("headline")
 
     def svm(r: dict) -> str:
         return f"{_pct(r['classifiers']['svm']['accuracy'])} %"
@@ -747,8 +748,10 @@ def what_to_expect(serial: dict) -> str:
         + f"; trained and tested on short windows, {svm(short['0.5'])} at 0.5 s and {svm(short['1'])} at 1 s"
         + when("short") + ".",
         f"- `make report` regenerates the real-data report in about {serial['runtime_s'] / 60:.0f} minutes on 2 "
-        "cores" + (f"; `make report-length` its touch-length sections in about {length_min / 60:.0f} minutes."
-                   if length_min else "."),
+        "cores" + "".join(f"; `make report-{name}` {what} in about {minutes / 60:.0f} minutes"
+                          for name, what, minutes in (("headline", "its headline table", headline_min),
+                                                      ("length", "its touch-length sections", length_min))
+                          if minutes) + ".",
     ]
     return "\n".join([README_BEGIN, *lines, README_END])
 
