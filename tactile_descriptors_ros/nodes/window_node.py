@@ -15,7 +15,7 @@ already waiting on all the node's frames subscriptions (at most
 polls for finished windows once.  rclpy's executor costs about 0.2 ms of CPU
 per callback here, more than the conversion and the windowing together, so a
 node that has fallen behind catches up instead of paying that per message
-(``lab/docs/latency.md``).
+(``lab/docs/performance.md, section Latency``).
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
 its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a

@@ -14,10 +14,9 @@ cell and group before timing; the report ends with the targets, met or not
 ``--latency`` also measures sensor stamp -> Prediction through the ROS node
 graph; ``--scale-graph --cells N`` instead runs N skin cells through skin
 drivers and one window node per body part, each its own process
-(lab/docs/scaling.md); ``--view-overhead`` instead measures the views' CPU
+(lab/docs/performance.md, section Scale); ``--view-overhead`` instead measures the views' CPU
 on the NAO graph at full rate against the same graph without them
-(docs/view.md).
-Reading the numbers: lab/docs/performance.md.
+(docs/view.md).  Reading the numbers: lab/docs/performance.md.
 """
 
 from __future__ import annotations
@@ -98,7 +97,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scale-graph", action="store_true",
                    help="instead of timing: run a synthetic skin of --cells cells through skin drivers and one "
                         "window node per body part, each its own process, and report CPU per process, lost "
-                        "frames, windows and whether it kept up in real time (lab/docs/scaling.md)")
+                        "frames, windows and whether it kept up in real time (lab/docs/performance.md, section Scale)")
     p.add_argument("--view-overhead", action="store_true",
                    help="instead of timing: feed the NAO's contact node at full rate (700 frames messages/s) "
                         "with the views (its markers and images, tactile view with one page) and without, "
