@@ -26,7 +26,8 @@ a gap in time), re-anchored when it drifts from the node clock by more than
 ``resync_s``; ``device`` uses the bus time stamps (CAN adapters' receive
 time; the simulator's sample time).
 
-``~/tare`` zeroes the force baselines (refused while a cell reads a force at
+``~/tare`` sets the force baselines to their resting level
+(:func:`~..core.tare.resting_level`) over the last ``tare.window_s`` (refused while a cell reads a force at
 or above the contact threshold).  Lifecycle as in
 :mod:`~tactile_descriptors_ros.nodes.biotac_driver`.
 """
@@ -73,7 +74,8 @@ class SkinDriver(DriverBase):
         self.batch_s = declare(self, "batch_s", 0.05, "sample time per message (all cells of a body part) [s]",
                                minimum=0.001)
         self._declare_stamps_and_tare(self.full_robot.contact.force_threshold_n,
-                                      "force baseline from the first samples [s]", "samples averaged by ~/tare [s]")
+                                      "force baseline from the first samples [s]",
+                                      "the last force samples ~/tare takes the resting level over [s]")
         self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
         self.tp = {
             "can": {"interface": declare(self, "can.interface", "socketcan", "python-can interface"),

@@ -7,7 +7,8 @@ of one BioTac from one read with their device times and unwrapped sequence
 numbers.  :class:`BiotacStream` takes them per sensor: counts lost frames,
 stamps frames (``clock``: the device clock anchored to the host clock,
 re-anchored on drift; ``device``: as it is), holds the tare (start tare,
-``~/tare``, slow baseline tracking) and cuts batches of ``batch_frames``
+``~/tare``: the resting level of :func:`~..core.tare.resting_level` over the
+last window of frames; slow baseline tracking) and cuts batches of ``batch_frames``
 consecutive frames (:class:`~..nodes.conversions.BioTacBatch`; a gap ends a
 batch).  After the device was gone (:class:`~.link.DeviceLink`),
 :meth:`BiotacStream.resume` counts the time it was missing as lost frames.
@@ -25,7 +26,8 @@ import numpy as np
 from ..codecs.biotac_spi import BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
 from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
 from ..codecs.sequence import Unwrapper
-from ..errors import CodecError
+from ..core.tare import MIN_REST_SAMPLES, resting_level
+from ..errors import CodecError, SignalError
 from .frames import BioTacBatch
 
 __all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream"]
@@ -191,8 +193,10 @@ class SensorState:
 
     cfg: SensorConfig
     frames: list[tuple[int, int, BiotacFrames]] = field(default_factory=list)  # (seq, stamp_ns, frames)
-    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, pdc)
-    recent_el: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, electrodes)
+    # frames with a readable PDC, for ~/tare and the contact check: (stamp_ns, pdc) and, frame for frame,
+    # that frame's electrodes (float64, NaN where unreadable)
+    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=2000))
+    recent_el: deque = field(default_factory=lambda: deque(maxlen=2000))
     tare_pdc: float = 0.0
     tare_electrodes: np.ndarray | None = None
     tared: bool = False
@@ -323,10 +327,9 @@ class BiotacStream:
         for k in range(len(frames)):
             if frames.pdc_valid[k]:
                 st.recent_pdc.append((stamp, float(frames.pdc[k])))
+                st.recent_el.append(np.where(frames.electrodes_valid[k], frames.electrodes[k], np.nan))
                 if st.tared and self.track_alpha > 0:
                     self._track_baseline(st, float(frames.pdc[k]))
-            if frames.electrodes_valid[k].all():
-                st.recent_el.append((stamp, frames.electrodes[k].astype(np.float64)))
         if not st.tared and self.tare_on_start_s > 0:
             if stamp - st.first_stamp_ns >= self.tare_on_start_s * 1e9:
                 ok, why = self.tare_one(st, self.tare_on_start_s, check_contact=False)
@@ -382,20 +385,51 @@ class BiotacStream:
         return (float(np.mean(last)) - st.tare_pdc) * self.force_n_per_count
 
     def tare_one(self, st: SensorState, window_s: float, check_contact: bool,
-                 contact_threshold_n: float = float("inf")) -> tuple[bool, str]:
-        """Zero the PDC and electrode baselines over the last ``window_s`` of frames."""
+                 contact_threshold_n: float = float("inf"), *, rest_percentile: float = 100.0) -> tuple[bool, str]:
+        """Set the PDC and electrode baselines to their resting level over the last ``window_s`` of frames.
+
+        The level is :func:`~..core.tare.resting_level` of the frames with a
+        readable PDC in the window (the electrodes over the same frames), so a
+        span read offline gets the same level from the same samples.
+
+        Parameters
+        ----------
+        st : SensorState
+        window_s : float
+            Frames stamped within this long of the newest one [s].
+        check_contact : bool
+            Refuse while the force of the last frames is at or above ``contact_threshold_n``.
+        contact_threshold_n : float
+        rest_percentile : float
+            Share of the window known to rest (:func:`~..core.tare.resting_level`): 100
+            for ``~/tare`` and the start tare, which take a window without contact.
+
+        Returns
+        -------
+        (bool, str)
+            Whether the sensor was tared, and what was done or why not.  The
+            electrodes go untared (``tare_electrodes`` None) when fewer than
+            :data:`~..core.tare.MIN_REST_SAMPLES` frames of the window read all of them.
+        """
         if check_contact:
             f = self.force_now(st)
             if f is not None and f >= contact_threshold_n:
                 return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {contact_threshold_n} N)"
         if not st.recent_pdc:
             return False, f"{st.cfg.sensor_name}: no valid PDC samples yet"
-        newest = st.recent_pdc[-1][0]
-        pdc = [p for t, p in st.recent_pdc if t >= newest - window_s * 1e9]
-        el = [e for t, e in st.recent_el if t >= newest - window_s * 1e9]
-        if len(pdc) < 3:
-            return False, f"{st.cfg.sensor_name}: only {len(pdc)} valid PDC samples in the last {window_s} s"
-        st.tare_pdc = float(np.mean(pdc))
-        st.tare_electrodes = np.mean(el, axis=0) if el else None
+        stamps = np.array([t for t, _ in st.recent_pdc], dtype=np.int64)
+        take = stamps >= stamps[-1] - window_s * 1e9
+        if np.count_nonzero(take) < MIN_REST_SAMPLES:
+            return False, (f"{st.cfg.sensor_name}: only {np.count_nonzero(take)} valid PDC samples in the last "
+                           f"{window_s} s")
+        pdc = np.array([p for _, p in st.recent_pdc])[take]
+        el = np.array(st.recent_el)[take].T  # (electrodes, frames), frame for frame with the PDC
+        el_readable = np.count_nonzero(np.isfinite(el).all(axis=0)) >= MIN_REST_SAMPLES
+        try:
+            lvl = resting_level(pdc, el if el_readable else None, rest_percentile=rest_percentile)
+        except SignalError as e:
+            return False, f"{st.cfg.sensor_name}: {e}"
+        st.tare_pdc = float(lvl.reference[0])
+        st.tare_electrodes = lvl.channels if el_readable else None
         st.tared = True
-        return True, f"PDC baseline {st.tare_pdc:.1f} counts from {len(pdc)} frames"
+        return True, f"PDC baseline {st.tare_pdc:.1f} counts from {lvl.samples} frames"

@@ -15,7 +15,8 @@ modality) at once with array operations:
   nominal period), re-anchored when it drifts from the host clock by more
   than ``resync_s``; ``device`` uses the bus times (a sample without one is
   extrapolated from the nearest stamped sample of its cell and modality);
-* keeps the force baseline (start tare, ``tare``) and cuts each cell's
+* keeps the force baseline (start tare, ``~/tare``: the resting level of
+  :func:`~..core.tare.resting_level` over the last window of force samples) and cuts each cell's
   accelerometer samples into ``batch_s`` batches with the force and
   proximity samples of the same span (:class:`~..nodes.conversions.SkinFrame`).
 """
@@ -31,6 +32,9 @@ import numpy as np
 
 from ..codecs.sequence import SequenceTracker
 from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
+from ..core.tare import resting_level
+from ..errors import SignalError
+from ..markers import INVALID_COUNT
 from .frames import SkinFrame
 
 __all__ = ["SkinStream", "CellState", "RECENT_FORCE"]
@@ -367,15 +371,38 @@ class SkinStream:
         last = cell.recent_force_v[-5:].astype(np.float64)
         return float(np.mean(last - cell.tare[None, :])) * force_n_per_count
 
-    def tare_cell(self, cell: CellState, window_s: float) -> tuple[bool, str]:
-        """Zero a cell's force baseline over its last ``window_s`` of force samples."""
+    def tare_cell(self, cell: CellState, window_s: float, *, rest_percentile: float = 100.0) -> tuple[bool, str]:
+        """Set a cell's force baseline to its resting level over its last ``window_s`` of force samples.
+
+        The level is :func:`~..core.tare.resting_level` of the three force
+        sensors (``INVALID_COUNT`` samples unreadable), so a span read offline
+        gets the same level from the same samples.
+
+        Parameters
+        ----------
+        cell : CellState
+        window_s : float
+            Force samples stamped within this long of the newest one [s].
+        rest_percentile : float
+            Share of the window known to rest: 100 for ``~/tare`` and the start
+            tare, which take a window without contact.
+
+        Returns
+        -------
+        (bool, str)
+            Whether the cell was tared, and what was done or why not.
+        """
         if not cell.recent_force_t.size:
             return False, "no force samples yet"
         newest = cell.recent_force_t[-1]
         vals = cell.recent_force_v[cell.recent_force_t >= newest - window_s * 1e9]
         if len(vals) < 3:
             return False, f"only {len(vals)} force samples in the last {window_s} s"
-        cell.tare = np.mean(vals.astype(np.float64), axis=0)
+        forces = np.where(vals == INVALID_COUNT, np.nan, vals.astype(np.float64)).T  # (3, samples)
+        try:
+            lvl = resting_level(forces, rest_percentile=rest_percentile)
+        except SignalError as e:
+            return False, str(e)
+        cell.tare = lvl.reference
         cell.tared = True
         return True, "ok"
-
