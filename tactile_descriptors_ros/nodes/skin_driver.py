@@ -45,7 +45,7 @@ from ..codecs.skin import ACCEL_MPS2_PER_COUNT, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
-from ..streams.skin import CellState, SkinStream
+from ..streams.skin import CellState, SkinStream, drain_frames
 from ..streams.skin_parts import PartGatherer, SkinRun, pack_skin_part
 from ..topics import FRAMES_TOPIC
 from .common import RateMeter, Status, declare, run_node
@@ -154,8 +154,10 @@ class SkinDriver(DriverBase):
 
     # ---------------------------------------------------------------- reading
     def _read(self) -> SkinSampleBatch:
-        if self.is_can:  # every queued frame at once, decoded with array operations
-            frames = self.transport.recv_batch(65536, 0.05)
+        if self.is_can:  # every queued frame at once (the newest of a long backlog), decoded with array operations
+            frames, shed = drain_frames(self.transport, 0.05)
+            if shed:
+                self.faults["frames_shed"] += shed
             self._arrival_ns = time.time_ns()  # python-can's clock, for frames without a bus time
             return self.decoder.decode_frames(frames, self._arrival_ns)
         data = self.transport.read(1 << 20, 0.05)

@@ -10,10 +10,12 @@ modality) at once with array operations:
   longer than a wrap (256 ms at 1 kHz) comes back with a gap of the right
   length, never a shifted clock;
 * counts lost frames (jumps beyond the highest number seen);
-* stamps the samples: ``clock`` runs a sample clock per cell and modality
-  (the host clock at its first sample plus sequence number times the
-  nominal period), re-anchored when it drifts from the host clock by more
-  than ``resync_s``; ``device`` uses the bus times (a sample without one is
+* stamps the samples: ``clock`` takes each cell and modality's sequence
+  number times the nominal period as its device clock and carries it to the
+  host clock with one :class:`~.clock.DeviceClock` offset per cell and
+  modality, updated by every read (the least delay between a sample and the
+  read that returned it), so a stamp is the acquisition time and never later
+  than its read; ``device`` uses the bus times (a sample without one is
   extrapolated from the nearest stamped sample of its cell and modality);
 * keeps the force baseline (start tare, ``~/tare``: the resting level of
   :func:`~..core.tare.resting_level` over the last window of force samples) and cuts each cell's
@@ -35,9 +37,48 @@ from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from ..core.tare import resting_level
 from ..errors import SignalError
 from ..markers import INVALID_COUNT
+from .clock import DeviceClock
 from .frames import SkinFrame
 
-__all__ = ["SkinStream", "CellState", "RECENT_FORCE"]
+__all__ = ["SkinStream", "CellState", "RECENT_FORCE", "drain_frames", "READ_FRAMES", "MAX_READ_FRAMES"]
+
+#: Frames asked of a message transport per ``recv_batch`` call.
+READ_FRAMES = 65536
+#: Most frames one read keeps (1.5 s of a 116-cell skin): a driver further behind sheds the oldest, counted.
+MAX_READ_FRAMES = 262144
+
+
+def drain_frames(transport, timeout_s: float, chunk: int = READ_FRAMES,
+                 limit: int = MAX_READ_FRAMES) -> tuple[np.ndarray, int]:
+    """Every frame queued on a message transport, the newest ``limit`` of them, and how many were shed.
+
+    Waits up to ``timeout_s`` for the first frame, then takes what is queued
+    without waiting, ``chunk`` frames per call, until a call returns fewer.
+    A read must end with the newest frame the transport holds: its arrival
+    times the device clocks (:class:`~.clock.DeviceClock`), and a read that
+    stopped at ``chunk`` frames of a backlog would anchor them late.  A
+    backlog beyond ``limit`` frames (a driver stopped or starved for
+    seconds) keeps only its newest ``limit``: the older ones are shed (the
+    sequence numbers count them as lost) so that the work of one read and
+    the messages it makes stay bounded.
+    """
+    parts: list[np.ndarray] = []
+    total = shed = 0
+    frames = transport.recv_batch(chunk, timeout_s)
+    while True:
+        parts.append(frames)
+        total += len(frames)
+        while len(parts) > 1 and total - len(parts[0]) >= limit:
+            total -= len(parts[0])
+            shed += len(parts.pop(0))
+        if len(frames) < chunk:
+            break
+        frames = transport.recv_batch(chunk, 0.0)
+    out = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    if len(out) > limit:
+        shed += len(out) - limit
+        out = out[len(out) - limit:]
+    return out, shed
 
 
 class _Stream:
@@ -115,7 +156,7 @@ class SkinStream:
         Sample time per batch and cell [s].
     stamp_source : {"clock", "device"}
     resync_s : float
-        Re-anchor ``clock`` stamps beyond this drift [s] (0 = never).
+        Re-anchor a ``clock`` offset after a device clock jump of more than this [s] (0 = never).
     tare_on_start_s : float
         Force baseline from the first samples [s] (nothing is emitted before); 0 = off.
     now_ns : callable() -> int
@@ -144,8 +185,12 @@ class SkinStream:
         for i, cell in enumerate(self._cell_list):
             self._cell_index[cell.cell_id] = i
         k = 4 * len(self._cell_list)
-        self._clk = {"anchored": np.zeros(k, bool), "anchor": np.zeros(k, np.int64), "first": np.zeros(k, np.int64),
-                     "last": np.zeros(k, np.int64), "have": np.zeros(k, bool)}
+        # per cell and modality: the highest sequence number seen (lost frames), the device clock's offset
+        # (clock stamps), the last bus time and its sequence number (device stamps without a bus time)
+        self._clk = {"last": np.zeros(k, np.int64), "have": np.zeros(k, bool),
+                     "bus_t": np.zeros(k, np.int64), "bus_seq": np.zeros(k, np.int64), "bus_have": np.zeros(k, bool),
+                     "st_t": np.zeros(k, np.int64), "st_seq": np.zeros(k, np.int64), "st_have": np.zeros(k, bool)}
+        self.clock = DeviceClock(k, jump_ns=int(round(self.resync_s * 1e9)))
         self._period_ns = 1e9 / np.array([self.accel_rate_hz, self.force_rate_hz, self.force_rate_hz,
                                           NOMINAL_RATE_HZ[Modality.TEMPERATURE]])
         # duplicates were dropped by the codec: no duplicate memory, only unwrapping
@@ -157,8 +202,10 @@ class SkinStream:
         return {Modality(m + 1): 1e9 / p for m, p in enumerate(self._period_ns)}
 
     def resume(self) -> None:
-        """The device was reopened: ``clock`` sample clocks are anchored again at their next sample."""
-        self._clk["anchored"][:] = False
+        """The device was reopened: ``clock`` offsets are estimated afresh from the next read."""
+        self.clock.reset()
+        self._clk["bus_have"][:] = False
+        self._clk["st_have"][:] = False  # a new offset may place the new samples anywhere after the absence
 
     def add(self, batch: SkinSampleBatch, arrival_ns: int | None = None) -> list[tuple[CellState, SkinFrame]]:
         """Take the samples of one read; return the batches completed, per cell.
@@ -210,28 +257,34 @@ class SkinStream:
         clk["have"][gk] = True
         clk["last"][gk] = np.maximum(highest[ends - 1], useq[ends - 1])
         # sample times
-        t = np.empty(n, np.int64)
-        need = np.ones(n, bool)
-        if self.stamp_source == "device":
-            stamp = batch.stamp_ns[order]
-            need = stamp == NO_STAMP
-            t[~need] = stamp[~need]
+        keep = None
+        if self.stamp_source == "clock":
+            t = self._clock_times(ks, useq, starts)
+            keep = self._monotonic(ks, useq, t, gk, starts)
+        else:
+            t = batch.stamp_ns[order].copy()
+            need = t == NO_STAMP
             if need.any():
                 self.faults["no_device_time"] += int(need.sum())
-        if need.any():
-            group = np.repeat(np.arange(gk.size), lens)
-            if self.stamp_source == "device":
+                group = np.repeat(np.arange(gk.size), lens)
                 need = self._extrapolate_device_times(t, need, useq, gk, group, starts, ends)
-            if need.any():
-                t[need] = self._clock_times(gk, group[need], useq[need])
-            if self.stamp_source == "device":  # missing bus times later on extrapolate from the last known one
-                stamped = np.flatnonzero(~need)
-                if stamped.size:
-                    last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
-                    ok = (last >= starts) & (last >= 0)
-                    self._clk["anchored"][gk[ok]] = True
-                    self._clk["anchor"][gk[ok]] = t[last[ok]]
-                    self._clk["first"][gk[ok]] = useq[last[ok]]
+            if need.any():  # nothing stamped in this read: from the key's last bus time, else the host clock
+                idx = np.flatnonzero(need)
+                k = ks[idx]
+                held = clk["bus_have"][k]
+                a = idx[held]
+                t[a] = clk["bus_t"][ks[a]] + np.rint((useq[a] - clk["bus_seq"][ks[a]])
+                                                     * self._period_ns[ks[a] % 4]).astype(np.int64)
+                b = idx[~held]
+                if b.size:
+                    t[b] = self._clock_times(ks[b], useq[b], np.flatnonzero(np.r_[True, ks[b][1:] != ks[b][:-1]]))
+            stamped = np.flatnonzero(~need)  # the last bus time of each key anchors its later samples
+            if stamped.size:
+                last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
+                ok = (last >= starts) & (last >= 0)
+                clk["bus_have"][gk[ok]] = True
+                clk["bus_t"][gk[ok]] = t[last[ok]]
+                clk["bus_seq"][gk[ok]] = useq[last[ok]]
         # into the cells' buffers
         vals = batch.values[order]
         cell_of = gk // 4
@@ -246,6 +299,10 @@ class SkinStream:
             cell.lost_since_msg += nl
             cell.samples += b - a
             cell.last_monotonic = mono
+            if keep is not None and not keep[a:b].all():
+                tt, vv = tt[keep[a:b]], vv[keep[a:b]]
+                if not tt.size:
+                    continue
             if cell.first_t_ns is None:
                 cell.first_t_ns = int(tt[0])
             if m == Modality.ACCEL:
@@ -285,32 +342,48 @@ class SkinStream:
             t[fill] = t[r] + np.rint((useq[fill] - useq[r]) * period).astype(np.int64)
         return need & ~fill
 
-    def _clock_times(self, gk: np.ndarray, group: np.ndarray, useq: np.ndarray) -> np.ndarray:
-        """Sample-clock times (``clock`` stamps, or ``device`` samples without a bus time): per cell and
-        modality the node clock at its first sample plus sequence number times the nominal period,
-        re-anchored when it drifts from the node clock by more than ``resync_s``."""
+    def _monotonic(self, ks: np.ndarray, useq: np.ndarray, t: np.ndarray, gk: np.ndarray,
+                   starts: np.ndarray) -> np.ndarray | None:
+        """Which ``clock``-stamped samples to keep so that no cell and modality's stamps step back.
+
+        When a read sees a smaller delay than any before, the offset drops and
+        the new samples are stamped earlier than the previous ones were (those
+        were late by the difference).  A sample newer in sequence than the
+        last one stamped but not later in time is dropped and counted
+        (``clock_step_back_samples``); a late, reordered frame (older in
+        sequence) is kept, as before.  Returns None when every sample stays.
+        """
         clk = self._clk
-        now = self._now()
-        keys = gk[group]
-        first_of = np.r_[True, group[1:] != group[:-1]]
-        new = first_of & ~clk["anchored"][keys]
-        clk["anchor"][keys[new]] = now
-        clk["first"][keys[new]] = useq[new]
-        clk["anchored"][keys[new]] = True
-        period = self._period_ns[keys % 4]
-        t = clk["anchor"][keys] + np.rint((useq - clk["first"][keys]) * period).astype(np.int64)
-        if self.resync_s > 0:
-            limit = self.resync_s * 1e9
-            far = np.abs(t - now) > limit
-            for k in np.unique(keys[far]).tolist():  # rare: walk that cell and modality sample by sample
-                for i in np.flatnonzero(keys == k).tolist():
-                    ti = int(clk["anchor"][k]) + int(round((int(useq[i]) - int(clk["first"][k])) * period[i]))
-                    if abs(ti - now) > limit:
-                        self.faults["clock_resync"] += 1
-                        clk["anchor"][k], clk["first"][k] = now, useq[i]
-                        ti = now
-                    t[i] = ti
-        return t
+        had = clk["st_have"][ks]
+        back = had & (useq > clk["st_seq"][ks]) & (t <= clk["st_t"][ks])
+        keep = None
+        if back.any():
+            self.faults["clock_step_back_samples"] += int(back.sum())
+            keep = ~back
+        floor = np.iinfo(np.int64).min
+        newest_t = np.maximum.reduceat(np.where(back, floor, t), starts)
+        newest_q = np.maximum.reduceat(np.where(back, floor, useq), starts)
+        upd = newest_t > floor
+        k = gk[upd]
+        clk["st_t"][k] = np.where(clk["st_have"][k], np.maximum(clk["st_t"][k], newest_t[upd]), newest_t[upd])
+        clk["st_seq"][k] = np.where(clk["st_have"][k], np.maximum(clk["st_seq"][k], newest_q[upd]), newest_q[upd])
+        clk["st_have"][k] = True
+        return keep
+
+    def _clock_times(self, keys: np.ndarray, useq: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """``clock`` stamps of samples grouped by key (``starts``: each group's first sample).
+
+        A key's device clock is its unwrapped sequence number times the
+        nominal period; each key's newest device time in this read and the
+        host (node) clock now update its :class:`~.clock.DeviceClock` offset
+        before the samples are stamped, so no stamp is later than now.
+        """
+        dev = np.rint(useq * self._period_ns[keys % 4]).astype(np.int64)
+        before = self.clock.resyncs
+        self.clock.observe(keys[starts], np.maximum.reduceat(dev, starts), self._now())
+        if self.clock.resyncs > before:
+            self.faults["clock_resync"] += self.clock.resyncs - before
+        return self.clock.to_host(keys, dev)
 
     def _cut(self, cell: CellState) -> list[tuple[CellState, SkinFrame]]:
         """Every complete ``batch_s`` of a cell's accelerometer samples, one batch each."""
