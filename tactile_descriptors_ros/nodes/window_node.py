@@ -30,8 +30,10 @@ replayed bags give the same windows.  Faults (unknown sensors, malformed
 messages, lost frames, the windower's out-of-order / duplicate / clock-jump
 counters) are counted and reported on ``/diagnostics``, with the latency
 path's timing: ``frames_age_ms_*`` (host time when a message is taken minus
-its newest sample's stamp: publishing, transport and queueing, meaningful
-when sensor stamps are host time, as the drivers' ``clock`` stamps are) and
+its newest sample's stamp: acquisition to intake, for sensor stamps on the
+host clock, as the drivers' ``clock`` stamps are; messages stamped on
+another clock, ``device`` stamps, are counted in ``frames_not_host_time``
+instead) and
 ``describe_ms_*`` (window cut to descriptor published), median, p95 and max
 over the last messages and windows.
 
@@ -66,7 +68,11 @@ from .conversions import (
 )
 from .qos import QosDefaults, declare_qos
 
-__all__ = ["WindowNode", "main"]
+__all__ = ["WindowNode", "main", "FRAMES_AGE_LIMIT_MS"]
+
+#: A frames message whose newest sample is further than this from the host clock [ms] is not stamped on
+#: it (``stamp_source: device``): it is counted (``frames_not_host_time``), not timed.
+FRAMES_AGE_LIMIT_MS = 3_600_000.0
 
 
 
@@ -176,6 +182,7 @@ class WindowNode(Node):
         self.largest_batch = 0
         # timing of the latency path (diagnostics): how old the frames are when taken, how long a window takes
         self._frames_age_ms: deque[float] = deque(maxlen=5000)
+        self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
         self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0,
@@ -255,7 +262,11 @@ class WindowNode(Node):
             items += handle(sub_msg)
             newest = _newest_sample_ns(sub_msg)
             if newest is not None:
-                self._frames_age_ms.append((now_ns - newest) / 1e6)
+                age_ms = (now_ns - newest) / 1e6
+                if abs(age_ms) < FRAMES_AGE_LIMIT_MS:
+                    self._frames_age_ms.append(age_ms)
+                else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
+                    self.frames_not_host_time += 1
         if items:
             try:
                 self.windower.add_many(items)
@@ -424,6 +435,7 @@ class WindowNode(Node):
                         "frames_messages_taken": self.frames_taken,
                         "windower_buffer_mb": round(self.windower.buffer_bytes / 2**20, 3),
                         "largest_frames_batch": self.largest_batch,
+                        "frames_not_host_time": self.frames_not_host_time,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
         for name, samples in (("frames_age", self._frames_age_ms), ("describe", self._describe_ms)):
             if samples:
