@@ -56,6 +56,10 @@ BUFFER_HEADROOM = 1.5
 #: Seconds of samples a buffer holds beyond the retained span [s].
 BUFFER_SLACK_S = 2.0
 
+#: Samples older than the kept span are dropped once the span's start has moved by this much [ns] (not at
+#: every poll: a poll then costs nothing per cell).
+TRIM_STEP_NS = 100_000_000
+
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
 GAP_PERIODS = 3.0
@@ -295,7 +299,7 @@ class _RowBuffer:
     """The samples of several streams (rows: the cells of one body part) in one set of 2-D arrays.
 
     Row ``r`` holds its samples between ``lo[r]`` and ``hi[r]`` of ``t[r]``,
-    ``v[r]`` (channels x capacity) and ``ok[r]``, as a :class:`SampleStream`
+    ``v[:, r]`` (channels x capacity) and ``ok[r]``, as a :class:`SampleStream`
     holds its own; :class:`_RowView` gives one row the :class:`SampleStream`
     interface.  :meth:`append_runs` writes a whole message -- several runs,
     one row each -- with a few array operations, whatever the number of
@@ -308,13 +312,14 @@ class _RowBuffer:
         cap = max(int(capacity), 1)
         self.n_channels = int(n_channels)
         self.t = np.empty((n_rows, cap), dtype=np.int64)
-        self.v = np.empty((n_rows, self.n_channels, cap), dtype=dtype)
+        self.v = np.empty((self.n_channels, n_rows, cap), dtype=dtype)  # channel-major: v[ch] is (rows, capacity)
         self.ok = np.empty((n_rows, cap), dtype=bool)
         if touch:
             for a in (self.t, self.v, self.ok):
                 a.fill(0)
         self.lo = np.zeros(n_rows, np.int64)
         self.hi = np.zeros(n_rows, np.int64)
+        self._plan: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last append_runs' positions
         self.last = np.zeros(n_rows, np.int64)  # newest stamp of each row (valid where ``has``)
         self.has = np.zeros(n_rows, bool)
 
@@ -334,7 +339,7 @@ class _RowBuffer:
             new = int(max(2 * cap, 2 * int(np.max(size + need))))
             n = self.t.shape[0]
             t = np.empty((n, new), np.int64)
-            v = np.empty((n, self.n_channels, new), self.v.dtype)
+            v = np.empty((self.n_channels, n, new), self.v.dtype)
             ok = np.empty((n, new), bool)
         else:  # room enough once the trimmed heads are dropped: move the rows that need it down in place
             t, v, ok = self.t, self.v, self.ok
@@ -342,7 +347,7 @@ class _RowBuffer:
         for r in full.tolist():
             lo, hi = int(self.lo[r]), int(self.hi[r])
             t[r, :hi - lo] = self.t[r, lo:hi]
-            v[r, :, :hi - lo] = self.v[r, :, lo:hi]
+            v[:, r, :hi - lo] = self.v[:, r, lo:hi]
             ok[r, :hi - lo] = self.ok[r, lo:hi]
             self.lo[r], self.hi[r] = 0, hi - lo
         self.t, self.v, self.ok = t, v, ok
@@ -360,48 +365,46 @@ class _RowBuffer:
             self._make_room(need)
         hi = int(self.hi[row])
         self.t[row, hi:hi + n] = t_ns
-        self.v[row, :, hi:hi + n] = values
+        self.v[:, row, hi:hi + n] = values
         self.ok[row, hi:hi + n] = True if valid is None else valid
         self.hi[row] = hi + n
         self.last[row] = t_ns[n - 1]
         self.has[row] = True
 
     def append_runs(self, rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, values: np.ndarray,
-                    valid: np.ndarray | None = None) -> None:
+                    valid: np.ndarray | None = None, like: _RowBuffer | None = None) -> None:
         """Runs of samples, run ``i`` (``counts[i]`` samples, concatenated in run order) to row ``rows[i]``.
 
-        A row may take several runs, appended in run order.  ``values`` is
-        (channels, total samples).
+        Every row takes at most one run; ``values`` is (channels, total
+        samples).  ``like``: a buffer that took the same runs just before
+        with the same row ends and capacity (its sample positions are reused).
         """
         total = int(t_ns.shape[0])
         if values.shape != (self.n_channels, total):
             raise SignalError(f"expected samples of shape ({self.n_channels}, {total}), got {values.shape}")
         if total == 0:
             return
-        need = np.bincount(rows, weights=counts, minlength=self.t.shape[0]).astype(np.int64)
-        if np.any(self.hi + need > self.capacity):
-            self._make_room(need)
-        # where each run starts in its row: the row's end plus the runs of that row before it
-        order = np.argsort(rows, kind="stable")
-        c = counts[order]
-        before = np.cumsum(c) - c
-        first = np.r_[True, rows[order][1:] != rows[order][:-1]]
-        group_start = np.maximum.accumulate(np.where(first, np.arange(c.size), 0))
-        run_off = np.empty(c.size, np.int64)
-        run_off[order] = before - before[group_start]
-        start = self.hi[rows] + run_off
-        sample_row = np.repeat(rows, counts)
-        run_first = np.cumsum(counts) - counts
-        dest = np.repeat(start - run_first, counts) + np.arange(total)
-        self.t[sample_row, dest] = t_ns
-        self.v[sample_row, :, dest] = values.T
-        self.ok[sample_row, dest] = True if valid is None else valid
+        if like is not None and like._plan is not None and like.capacity == self.capacity \
+                and np.array_equal(like._plan[2], self.hi):
+            flat, need, _ = like._plan
+        else:
+            n_rows, cap = self.t.shape
+            need = np.zeros(n_rows, np.int64)
+            need[rows] = counts
+            if np.any(self.hi + need > cap):
+                self._make_room(need)
+                cap = self.t.shape[1]
+            # one flat index per sample (row * capacity + column): a scatter, whatever the number of rows
+            flat = np.repeat(rows * cap + self.hi[rows] - (np.cumsum(counts) - counts), counts) + np.arange(total)
+        self._plan = (flat, need, self.hi.copy())
+        self.t.reshape(-1)[flat] = t_ns
+        self.ok.reshape(-1)[flat] = True if valid is None else valid
+        if self.n_channels:
+            self.v.reshape(self.n_channels, -1)[:, flat] = values
         self.hi += need
-        # the newest stamp of each row: the last sample of its last run with samples
-        idx = np.flatnonzero(counts > 0)[::-1]
-        rr, first_seen = np.unique(rows[idx], return_index=True)
-        self.last[rr] = t_ns[np.cumsum(counts)[idx[first_seen]] - 1]
-        self.has[rr] = True
+        has = counts > 0  # the newest stamp of each row: the last sample of its run
+        self.last[rows[has]] = t_ns[np.cumsum(counts)[has] - 1]
+        self.has[rows[has]] = True
 
     def trim_before(self, t_ns: int) -> None:
         """Drop every row's samples older than ``t_ns``."""
@@ -440,7 +443,7 @@ class _RowView:
 
     @property
     def _v(self) -> np.ndarray:
-        return self.buf.v[self.row]
+        return self.buf.v[:, self.row]
 
     @property
     def _ok(self) -> np.ndarray:
@@ -493,7 +496,7 @@ class _RowView:
         t = buf.t[r, lo:hi]
         i = lo + int(np.searchsorted(t, start_ns, side="left"))
         j = lo + int(np.searchsorted(t, end_ns, side="left"))
-        return buf.t[r, i:j].copy(), buf.v[r, :, i:j].copy(), buf.ok[r, i:j].copy()
+        return buf.t[r, i:j].copy(), buf.v[:, r, i:j].copy(), buf.ok[r, i:j].copy()
 
 
 class _Part:
@@ -629,6 +632,7 @@ class Windower:
         self._resumed_ns: int | None = None  # first force stamp after the last stall (no onset before it)
         self._live: list[_CellState] = []  # cells not stalled behind the newest (the contact judged on)
         self._probed_onset: int | None = None  # the exploration the release was probed for
+        self._trimmed_ns: int | None = None  # the horizon of the last trim
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
@@ -746,16 +750,18 @@ class Windower:
 
     def _fast_ok(self, chunk: PartChunk, part_code: int, rows: np.ndarray) -> bool:
         """Whether :meth:`add_part` may take ``chunk`` in one piece (see there)."""
-        vc = np.asarray(chunk.vibration_count, np.int64)
-        dc = np.asarray(chunk.deformation_count, np.int64)
+        vc = chunk.vibration_count
+        dc = chunk.deformation_count
         cid0 = int(chunk.cell_ids[0])
         n_s, n_v = self._shapes[cid0]
         vib, dfm = chunk.vibration, chunk.deformation
         t_v, t_d = chunk.vibration_t_ns, chunk.deformation_t_ns
         n_a, n_d = int(vc.sum()), int(dc.sum())
-        if (vc.size != len(chunk) or dc.size != len(chunk) or np.any(vc <= 0) or np.any(dc < 0)
-                or getattr(vib, "ndim", 0) != 2 or getattr(dfm, "ndim", 0) != 2 or vib.shape != (n_s, n_a)
-                or dfm.shape != (n_v, n_d) or len(t_v) != n_a or len(t_d) != n_d or len(chunk.force_n) != n_d):
+        if (getattr(vib, "shape", None) != (n_s, n_a) or getattr(dfm, "shape", None) != (n_v, n_d)
+                or t_v.shape != (n_a,) or t_d.shape != (n_d,) or np.shape(chunk.force_n) != (n_d,)
+                or vc.shape != rows.shape or dc.shape != rows.shape or vc.min() <= 0 or dc.min() < 0):
+            return False
+        if np.bincount(rows).max() > 1:  # a cell twice in one message: run by run
             return False
         for valid, size in ((chunk.vibration_valid, n_a), (chunk.deformation_valid, n_d)):
             if valid is not None and np.shape(valid) != (size,):
@@ -763,15 +769,12 @@ class Windower:
         n_extra = self._n_extra[cid0]
         if n_extra and chunk.extra is not None and np.shape(chunk.extra) != (n_extra, n_d):
             return False
-        if chunk.deformation_tare is not None and np.shape(chunk.deformation_tare)[0] != len(chunk):
+        if chunk.deformation_tare is not None and np.shape(chunk.deformation_tare)[0] != rows.size:
             return False
         part = self._parts.get(self._part_names[part_code])
-        for stamps, counts, buf in ((t_v, vc, None if part is None else part.vib),
-                                    (t_d, dc, None if part is None else part.dfm),
-                                    (t_d, dc, None if part is None else part.force)):
-            if not _increasing_per_row(np.asarray(stamps, np.int64), rows, counts, buf):
-                return False
-        return True
+        if not _in_order(t_v, vc, rows, None if part is None else (part.vib,)):
+            return False
+        return _in_order(t_d, dc, rows, None if part is None else (part.dfm, part.force))
 
     def _add_runs(self, chunk: PartChunk, part_name: str, rows: np.ndarray) -> None:
         """Write an in-order message (:meth:`_fast_ok`) into its body part's buffers."""
@@ -790,9 +793,9 @@ class Windower:
         if part.extra is not None:
             extra = (np.full((part.extra.n_channels, t_d.size), np.nan) if chunk.extra is None
                      else np.asarray(chunk.extra, np.float64))  # missing, never zeros: levels flags it
-            part.extra.append_runs(rows, dc, t_d, extra)
+            part.extra.append_runs(rows, dc, t_d, extra, like=part.dfm)
         f = np.asarray(chunk.force_n, np.float64)
-        part.force.append_runs(rows, dc, t_d, f[None, :])
+        part.force.append_runs(rows, dc, t_d, f[None, :], like=part.dfm)
         if chunk.deformation_tare is not None:
             tare = np.asarray(chunk.deformation_tare, np.float64)
             for i, c in enumerate(ids.tolist()):  # a copy per run: messages own their arrays
@@ -964,7 +967,7 @@ class Windower:
         inside = idx >= lo[:, None]
         idx = np.maximum(idx, 0)
         t = buf.t[rows[:, None], idx]
-        v = buf.v[rows[:, None], 0, idx]
+        v = buf.v[0][rows[:, None], idx]
         inside &= (t >= start[:, None]) & (t <= last[:, None])
         fin = inside & np.isfinite(v)
         n = fin.sum(axis=1)
@@ -979,6 +982,7 @@ class Windower:
         self._onset_ns = None
         self._emitted_current = False
         self._latest_ns = None
+        self._trimmed_ns = None
 
     # ----------------------------------------------------------------- output
     def poll(self) -> list[Window]:
@@ -1339,10 +1343,12 @@ class Windower:
             # carried, a cell that never lets go) must not keep every sample since
             # its onset (memory and the release scan would grow without bound).
             horizon = min(horizon, self._onset_ns)
-        for st in self._cells.values():
-            for stream in (st.vib, st.dfm, st.force, st.extra):
-                if stream is not None:
-                    stream.trim_before(horizon)
+        if self._trimmed_ns is not None and self._trimmed_ns <= horizon < self._trimmed_ns + TRIM_STEP_NS:
+            return  # samples are dropped once per TRIM_STEP_NS of horizon, not at every poll
+        self._trimmed_ns = horizon
+        for part in self._parts.values():
+            for buf in part.buffers:
+                buf.trim_before(horizon)
 
     def buffer_capacity(self, cell_id: int) -> tuple[int, int, int]:
         """Samples of a cell's vibration, deformation and force buffers, sized from its cell type's rates.
@@ -1373,22 +1379,23 @@ class Windower:
         return self._onset_ns is not None
 
 
-def _increasing_per_row(t_ns: np.ndarray, rows: np.ndarray, counts: np.ndarray, buf: _RowBuffer | None) -> bool:
-    """Whether each row's samples (its runs, in run order) increase strictly from the row's newest buffered one."""
+def _in_order(t_ns: np.ndarray, counts: np.ndarray, rows: np.ndarray, bufs: tuple[_RowBuffer, ...] | None) -> bool:
+    """Whether every run's stamps increase strictly and start after its row's newest stamp in ``bufs``
+    (each row at most one run)."""
     if not t_ns.size:
         return True
-    sr = np.repeat(rows, counts)
-    if rows.size > 1 and np.unique(rows).size < rows.size:  # a row with several runs: its samples in run order
-        order = np.argsort(sr, kind="stable")
-        t_ns, sr = t_ns[order], sr[order]
-    same = sr[1:] == sr[:-1]
-    if np.any(same & (np.diff(t_ns) <= 0)):
+    up = np.diff(t_ns) > 0
+    ends = np.cumsum(counts)
+    up[ends[:-1][ends[:-1] < t_ns.size] - 1] = True  # from one run's last stamp to the next run's first: any
+    if not up.all():
         return False
-    if buf is not None:
-        first = np.r_[True, ~same]
-        fr = sr[first]
-        if np.any(buf.has[fr] & (t_ns[first] <= buf.last[fr])):
-            return False
+    if bufs is not None:
+        has = counts > 0
+        first = t_ns[(ends - counts)[has]]
+        r = rows[has]
+        for buf in bufs:
+            if np.any(buf.has[r] & (first <= buf.last[r])):
+                return False
     return True
 
 
