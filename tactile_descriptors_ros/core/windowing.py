@@ -633,6 +633,7 @@ class Windower:
         self._live: list[_CellState] = []  # cells not stalled behind the newest (the contact judged on)
         self._probed_onset: int | None = None  # the exploration the release was probed for
         self._trimmed_ns: int | None = None  # the horizon of the last trim
+        self._jump: tuple[int, int] | None = None  # (newest before, first after) the last stall of every cell
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
@@ -812,8 +813,17 @@ class Windower:
                     part.hot_until[rr] = t_d[starts[run] + dc[run] - 1]
                     part.hot[rr] = True
                 self._update_last_force_rows(part, np.unique(rows[with_f]))
-        end = int(np.max(t_v[np.cumsum(vc) - 1]))
-        self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
+        ends = np.cumsum(vc)
+        firsts, lasts = t_v[ends - vc], t_v[ends - 1]
+        if self._latest_ns is None:  # the first run only sets the newest stamp, as add_many's first chunk does
+            self._latest_ns = int(lasts[0])
+            firsts, lasts = firsts[1:], lasts[1:]
+        if lasts.size:  # each run against the newest stamp before it, as add_many takes them one by one
+            before = np.maximum.accumulate(np.concatenate(([self._latest_ns], lasts[:-1])))
+            hit = np.flatnonzero(firsts - before > self._stall_ns)
+            if hit.size:
+                self._jump = (int(before[hit[-1]]), int(firsts[hit[-1]]))
+            self._latest_ns = max(self._latest_ns, int(lasts.max()))
 
     @staticmethod
     def _unsorted_flags(items: list[tuple[int, CellChunk]]) -> list[bool] | None:
@@ -914,9 +924,20 @@ class Windower:
                 self._update_last_force(st)
                 if f.size and np.fmax.reduce(f) >= self.release_n:  # fmax: NaN never hides a touch
                     st.hot_until_ns = int(t_f[-1])
-        end = int(t_v[-1])
-        self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
+        self._advance(int(t_v[0]), int(t_v[-1]))
         return True
+
+    def _advance(self, first_ns: int, end_ns: int) -> None:
+        """Move the newest vibration stamp to ``end_ns``; a message starting more than
+        :data:`WATERMARK_STALL_S` after it ends a stall of every cell (no cell sent anything in between)."""
+        latest = self._latest_ns
+        if latest is None:
+            self._latest_ns = end_ns
+            return
+        if first_ns - latest > self._stall_ns:
+            self._jump = (latest, first_ns)
+        if end_ns > latest:
+            self._latest_ns = end_ns
 
     def _new_cell(self, cell_id: int, dtype_s: np.dtype, dtype_v: np.dtype) -> _CellState:
         """The state of a cell's first chunk; its body part's buffers are made with the part's first cell.
@@ -983,6 +1004,7 @@ class Windower:
         self._emitted_current = False
         self._latest_ns = None
         self._trimmed_ns = None
+        self._jump = None
 
     # ----------------------------------------------------------------- output
     def poll(self) -> list[Window]:
@@ -1024,9 +1046,27 @@ class Windower:
         (unplugged, dead) is not waited for.
         """
         newest = self._latest_ns
-        floor = newest - self._stall_ns
+        floor = self._stall_floor(newest)
         lasts = [t for st in self._cells.values() if (t := st.vib.last_t_ns) is not None and t >= floor]
         return min(lasts) if lasts else newest
+
+    def _stall_floor(self, newest: int) -> int:
+        """Cells whose data ends before this are not waited for: :data:`WATERMARK_STALL_S` behind the newest.
+
+        After a stall of every cell (a driver stopped: a message starts more
+        than that after the newest stamp held, :meth:`_advance`), the cells
+        that were live before it are waited for until the newest stamp has
+        moved on by that much again: the first body part's message after the
+        stall must not make the others, whose messages follow, look dead.
+        """
+        floor = newest - self._stall_ns
+        if self._jump is not None:
+            before, after = self._jump
+            if newest < after + self._stall_ns:
+                floor = min(floor, before - self._stall_ns)
+            else:
+                self._jump = None
+        return floor
 
     def _watermark(self) -> int | None:
         """The latest time every live cell has force data for (None before any force).
@@ -1039,9 +1079,9 @@ class Windower:
         if not cells:
             self._live = []
             return None
-        newest = max(t for _, t in cells)
-        self._live = [st for st, t in cells if t >= newest - self._stall_ns]
-        return min(t for st, t in cells if t >= newest - self._stall_ns)
+        floor = self._stall_floor(max(t for _, t in cells))
+        self._live = [st for st, t in cells if t >= floor]
+        return min(t for st, t in cells if t >= floor)
 
     def _force_at(self, st: _CellState, t_ns: int) -> float:
         """The cell's mean finite force over the ``smooth_s`` up to ``t_ns`` (its latest when it ends there)."""
