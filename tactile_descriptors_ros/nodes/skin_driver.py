@@ -41,11 +41,11 @@ from collections.abc import Sequence
 import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
-from ..codecs.skin import ACCEL_MPS2_PER_COUNT, SkinSampleBatch
+from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
-from ..streams.skin import CellState, SkinStream, drain_frames
+from ..streams.skin import MAX_BACKLOG_S, READ_FRAMES, CellState, SkinStream, drain_frames
 from ..streams.skin_parts import SkinPartFrames
 from ..topics import FRAMES_TOPIC
 from .common import RateMeter, Status, declare, run_node
@@ -104,6 +104,10 @@ class SkinDriver(DriverBase):
         self.frame_ids = {c.id: str(c.extra.get("frame_id", f"skin_cell_{c.id}")) for p in self.robot.body_parts
                           for c in p.cells}
         self.known = set(self.full_robot.cell_index())
+        # a read keeps at most MAX_BACKLOG_S of the bus's frames: every known cell's accelerometer, force,
+        # proximity (at the force rate) and temperature frames
+        per_cell_hz = self.accel_rate_hz + 2 * self.force_rate_hz + NOMINAL_RATE_HZ[Modality.TEMPERATURE]
+        self.max_read_frames = max(READ_FRAMES, int(len(self.known) * per_cell_hz * MAX_BACKLOG_S))
         self.decoder = None
         self.stream: SkinStream | None = None
         self._rates: dict[str, RateMeter] = {}  # samples per body part
@@ -158,7 +162,7 @@ class SkinDriver(DriverBase):
     # ---------------------------------------------------------------- reading
     def _read(self) -> SkinSampleBatch:
         if self.is_can:  # every queued frame at once (the newest of a long backlog), decoded with array operations
-            frames, shed = drain_frames(self.transport, 0.05)
+            frames, shed = drain_frames(self.transport, 0.05, limit=self.max_read_frames)
             if shed:
                 self.faults["frames_shed"] += shed
             self._arrival_ns = time.time_ns()  # python-can's clock, for frames without a bus time

@@ -47,13 +47,16 @@ from .clock import DeviceClock
 from .frames import SkinFrame
 from .skin_parts import SkinPartFrames
 
-__all__ = ["SkinStream", "CellState", "RECENT_FORCE", "drain_frames", "READ_FRAMES", "MAX_READ_FRAMES",
+__all__ = ["SkinStream", "CellState", "RECENT_FORCE", "drain_frames", "READ_FRAMES", "MAX_READ_FRAMES", "MAX_BACKLOG_S",
            "MAX_MESSAGE_BYTES"]
 
 #: Frames asked of a message transport per ``recv_batch`` call.
 READ_FRAMES = 65536
-#: Most frames one read keeps (1.5 s of a 116-cell skin): a driver further behind sheds the oldest, counted.
-MAX_READ_FRAMES = 262144
+#: Most frames one read keeps by default; a driver sizes it from its bus (:data:`MAX_BACKLOG_S` of frames).
+MAX_READ_FRAMES = 131072
+#: Seconds of frames one read keeps: a driver further behind real time sheds the older ones (counted), so
+#: that it catches up at once and the messages it publishes after a stall stay few.
+MAX_BACKLOG_S = 0.25
 #: Largest body part message in sample bytes (whole batches; at least one batch): 64 kB.
 MAX_MESSAGE_BYTES = 65536
 #: Bytes of one accelerometer sample (x, y, z, offset) and one force sample (3 sensors, offset, proximity).
@@ -479,6 +482,8 @@ class SkinStream:
             sel_p = mask_p & (self._prox.t < end)
             out += self._messages(self._parts[k], self._acc.take(sel_a), self._force.take(sel_f),
                                   self._prox.take(sel_p))
+        if len(out) > n_parts:  # a backlog in several messages per part: in time order, the parts side by side
+            out.sort(key=lambda m: m.stamp_ns)
         return out
 
     def _messages(self, part: str, acc, force, prox) -> list[SkinPartFrames]:
