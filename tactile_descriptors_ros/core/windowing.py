@@ -818,11 +818,13 @@ class Windower:
         if self._latest_ns is None:  # the first run only sets the newest stamp, as add_many's first chunk does
             self._latest_ns = int(lasts[0])
             firsts, lasts = firsts[1:], lasts[1:]
-        if lasts.size:  # each run against the newest stamp before it, as add_many takes them one by one
-            before = np.maximum.accumulate(np.concatenate(([self._latest_ns], lasts[:-1])))
-            hit = np.flatnonzero(firsts - before > self._stall_ns)
-            if hit.size:
-                self._jump = (int(before[hit[-1]]), int(firsts[hit[-1]]))
+        if lasts.size:
+            if int(firsts.max()) - self._latest_ns > self._stall_ns:  # rare: a stall may end in this message
+                # each run against the newest stamp before it, as add_many takes them one by one
+                before = np.maximum.accumulate(np.concatenate(([self._latest_ns], lasts[:-1])))
+                hit = np.flatnonzero(firsts - before > self._stall_ns)
+                if hit.size:
+                    self._jump = (int(before[hit[-1]]), int(firsts[hit[-1]]))
             self._latest_ns = max(self._latest_ns, int(lasts.max()))
 
     @staticmethod
