@@ -222,7 +222,6 @@ class BiotacDriver(DriverBase):
 
     def _consume(self, items: list[ReadItem]) -> None:
         host = time.monotonic_ns()
-        out = []
         with self._lock:
             for item in items:
                 rate, bad_rate = self._rates[item.chip_select]
@@ -230,7 +229,7 @@ class BiotacDriver(DriverBase):
                 if item.frames.counts.bad:
                     bad_rate.add(item.frames.counts.bad)
                 self._last_frame[item.chip_select] = host * 1e-9
-                out += self.stream.add(item, host)
+            out = self.stream.add_read(items, host)
         for st, batch in out:
             self._publish(st, batch)
 
