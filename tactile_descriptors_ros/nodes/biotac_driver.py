@@ -26,8 +26,9 @@ first frame and re-anchors when the two drift apart by more than
 ``resync_s``; ``device`` uses the device time as it is (simulations; bridges
 synchronised to ROS time).
 
-``~/tare`` (std_srvs/Trigger) zeroes the PDC and electrode baselines over the
-last ``tare.window_s`` of frames; it is refused while any BioTac reads a force
+``~/tare`` (std_srvs/Trigger) sets the PDC and electrode baselines to their
+resting level (:func:`~..core.tare.resting_level`) over the last
+``tare.window_s`` of frames; it is refused while any BioTac reads a force
 at or above the contact threshold.  With ``tare_on_start_s > 0`` the first
 frames are used as the baseline (nothing is published before), so the force
 of an untared sensor never reaches the window node.
@@ -83,7 +84,7 @@ class BiotacDriver(DriverBase):
         self.wire = declare(self, "wire", "auto", "framing on the transport: spi (SPI sampling), bridge (our "
                             "serial framing); auto = spi for cheetah, bridge otherwise", choices=("auto", "spi", "bridge"))
         self._declare_stamps_and_tare(full.contact.force_threshold_n, "baseline from the first frames [s] (0 = off)",
-                                      "frames averaged by ~/tare [s]")
+                                      "the last frames ~/tare takes the resting level over [s]")
         self.track_s = declare(self, "tare.track_s", 0.5, "PDC baseline follows drift with this time constant while "
                                "the force is below tare.track_band_n [s] (0 = tare only at start and on ~/tare)",
                                minimum=0.0, on_set=lambda v: lambda: self._set_track_s(v))
@@ -221,7 +222,6 @@ class BiotacDriver(DriverBase):
 
     def _consume(self, items: list[ReadItem]) -> None:
         host = time.monotonic_ns()
-        out = []
         with self._lock:
             for item in items:
                 rate, bad_rate = self._rates[item.chip_select]
@@ -229,7 +229,7 @@ class BiotacDriver(DriverBase):
                 if item.frames.counts.bad:
                     bad_rate.add(item.frames.counts.bad)
                 self._last_frame[item.chip_select] = host * 1e-9
-                out += self.stream.add(item, host)
+            out = self.stream.add_read(items, host)
         for st, batch in out:
             self._publish(st, batch)
 
