@@ -42,7 +42,7 @@ export AMENT_PREFIX_PATH := $(VIRTUAL_ENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PRE
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
-.PHONY: setup test demo demo-nao report report-length report-headline protocols bench fuzz clean
+.PHONY: setup test browser demo demo-nao report report-length report-headline protocols bench fuzz clean
 
 setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli $(VENV)/.kernel
 
@@ -87,7 +87,7 @@ $(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg lab/pyproject.toml
 # (package.xml, launch/, config/: each file a link into this checkout, like colcon's
 # --symlink-install; ros2 launch does not follow linked folders) and
 # lib/$(PKG)/<executable> for `ros2 run` and launch_ros.
-SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/scenes/*.yaml)
+SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/scenes/*.yaml config/rviz/*.rviz)
 $(VENV)/.ament: Makefile $(VENV)/.installed resource/$(PKG) $(SHARE_FILES)
 	$(STEP) "setup 5/7: ament index entries of the venv prefix (a few seconds)"
 	rm -rf $(VENV)/share/$(PKG) $(VENV)/lib/$(PKG)
@@ -115,8 +115,9 @@ $(VENV)/setup.bash: Makefile $(VENV)/.venv-created
 	  'export ROS_DOMAIN_ID="$${ROS_DOMAIN_ID:-$(shell shuf -i 1-100 -n 1)}"' \
 	  > $@
 
-# ros2 launch / run / topic / param / service / lifecycle and launch_testing.
-$(VENV)/.ros2cli: $(VENV)/.deps
+# ros2 launch / run / topic / param / service / lifecycle and launch_testing, and the interface
+# packages not on PyPI (tf2_msgs for /tf_static): a venv set up before install.sh built one gets it.
+$(VENV)/.ros2cli: $(VENV)/.deps $(wildcard $(ROS2_CLI)/install.sh)
 	$(STEP) "setup 6/7: ros2 CLI and launch system (1-3 minutes)"
 	@if [ -x "$(ROS2_CLI)/install.sh" ]; then \
 	  echo "installing the ros2 CLI and launch system from $(ROS2_CLI) (about a minute)"; \
@@ -130,7 +131,18 @@ $(VENV)/.kernel: $(VENV)/.installed tactile_descriptors_ros/core/numba_kernel.py
 	$(VPY) -c "import sys; from tactile_descriptors_ros.core.fast import main; sys.exit(main())"
 	touch $@
 
-test: setup
+# Headless Chromium for the browser view's tests (Debian's package, installed with apt-get as root, as
+# CI runs; idempotent).  Where it cannot be installed the tests that need it are skipped, saying why.
+browser:
+	@if command -v chromium >/dev/null 2>&1; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  printf '==> [%s] %s\n' "$$(date +%H:%M:%S)" "headless Chromium for the browser tests (apt-get install chromium, 1-3 minutes)"; \
+	  { DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null 2>&1 \
+	    || { apt-get update -q >/dev/null 2>&1 && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium >/dev/null 2>&1; }; } \
+	  || echo "note: chromium could not be installed: the browser tests will be skipped"; \
+	else echo "note: no chromium, and no apt-get as root to install it: the browser tests will be skipped"; fi
+
+test: setup browser
 	mkdir -p $(ROS_LOG_DIR)
 	$(VPY) -m pytest $(PYTEST_ARGS)
 

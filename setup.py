@@ -10,13 +10,14 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=[PACKAGE, PACKAGE + ".*"]),
-    package_data={PACKAGE: ["sim/models/*.json"]},
+    package_data={PACKAGE: ["sim/models/*.json", "view/static/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
         ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
         ("share/" + PACKAGE + "/config/rocket", glob("config/rocket/*.json")),
+        ("share/" + PACKAGE + "/config/rviz", glob("config/rviz/*.rviz")),
         ("share/" + PACKAGE + "/launch", glob("launch/*.launch.py")),
     ],
     # What the robot needs (drivers, window node, classifier, bags, the tactile CLI). The
@@ -36,6 +37,8 @@ setup(
             "skin_driver = tactile_descriptors_ros.nodes.skin_driver:main",
             "window_node = tactile_descriptors_ros.nodes.window_node:main",
             "classifier_node = tactile_descriptors_ros.nodes.classifier_node:main",
+            "contact_node = tactile_descriptors_ros.nodes.contact_node:main",
+            "tf_publisher = tactile_descriptors_ros.nodes.tf_publisher:main",
         ],
     },
 )

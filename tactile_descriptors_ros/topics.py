@@ -9,7 +9,8 @@ absolute forms (:func:`absolute`).  Remap them per node as usual
 
 from __future__ import annotations
 
-__all__ = ["FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "absolute", "frames_topic"]
+__all__ = ["FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "CONTACT_TOPIC", "WRENCH_TOPIC",
+           "MARKERS_TOPIC", "IMAGE_TOPIC", "CONTACTS_TOPIC", "TF_STATIC_TOPIC", "absolute", "frames_topic"]
 
 #: Frames of one body part (``{body_part}`` filled in): ``BioTacFrameBatch`` or ``SkinPartFrames``.
 FRAMES_TOPIC = "tactile/{body_part}/frames"
@@ -19,6 +20,16 @@ DESCRIPTOR_TOPIC = "tactile/descriptor"
 LABEL_TOPIC = "tactile/label"
 #: Predictions of the classifier (``Prediction``).
 PREDICTION_TOPIC = "tactile/prediction"
+#: Contact of one body part per frames message (``Contact``, ``geometry_msgs/WrenchStamped``).
+CONTACT_TOPIC = "tactile/{body_part}/contact"
+WRENCH_TOPIC = "tactile/{body_part}/wrench"
+#: rviz2's view of one body part per display period (``visualization_msgs/MarkerArray``, ``sensor_msgs/Image``).
+MARKERS_TOPIC = "tactile/{body_part}/markers"
+IMAGE_TOPIC = "tactile/{body_part}/image"
+#: Every body part's contact per display period (``ContactArray``), what ``tactile view`` draws.
+CONTACTS_TOPIC = "tactile/contacts"
+#: The geometry's static frames (``tf2_msgs/TFMessage``; absolute, as tf2 has it: a namespace does not move it).
+TF_STATIC_TOPIC = "/tf_static"
 
 
 def frames_topic(body_part: str, fmt: str = FRAMES_TOPIC) -> str:

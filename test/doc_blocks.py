@@ -12,6 +12,14 @@ terminal left open: it is started in its own process group, the following
 blocks of the page run against it (a second terminal), and before the next such
 block, or at the end of the page, it gets Ctrl-C (SIGINT to the group) and must
 end with no traceback.
+
+A block that serves until Ctrl-C (``tactile view`` without ``--snapshot``)
+runs beside the graph the same way (a third terminal): it is ready when it
+has printed its address and that address answers with the page; the blocks
+after it run while it serves, and it gets Ctrl-C before the graph does (at
+the next block that keeps running, or at the end of the page).  It serves on
+a free port the runner names in ``TACTILE_VIEW_PORT``, so two runs on one
+machine do not collide on the documented default.
 """
 
 from __future__ import annotations
@@ -19,9 +27,12 @@ from __future__ import annotations
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
+import urllib.error
+import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +42,10 @@ REPO = Path(__file__).resolve().parents[1]
 COMMAND_LANGS = {"bash", "sh", "shell", "console"}
 #: The first line of an untagged block that shows a command.
 COMMAND_START = re.compile(r"^(make|tactile|ros2|colcon|source|python3?|pip|\.venv/|[A-Z_]+=\S+ \S)\b")
+#: A command that keeps serving a page until Ctrl-C (a snapshot writes a file and ends).
+SERVES = re.compile(r"^tactile view\b(?!.*--snapshot)")
+#: What a serving command prints when it is up (``tactile view: http://127.0.0.1:8765/ (...)``).
+SERVING_URL = re.compile(r"(http://[^\s/]+/)")
 #: bounds that stop a hung block (a loaded 2-core machine): they measure nothing
 BLOCK_S = 300.0
 READY_S = 240.0
@@ -50,7 +65,13 @@ class Block:
 
     @property
     def keeps_running(self) -> bool:
+        """A graph: ``ros2 launch`` or ``ros2 run``."""
         return any(re.match(r"ros2 (launch|run) ", line) for line in self.text.splitlines())
+
+    @property
+    def serves(self) -> bool:
+        """A server beside the graph (:data:`SERVES`)."""
+        return any(SERVES.match(line) for line in self.text.splitlines())
 
     def __str__(self) -> str:
         return f"{self.page}:{self.line}"
@@ -64,6 +85,12 @@ def blocks(page: str) -> list[Block]:
     return out
 
 
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def _env(tmp: Path) -> dict[str, str]:
     env = dict(os.environ)
     env.pop("VIRTUAL_ENV", None)
@@ -71,6 +98,7 @@ def _env(tmp: Path) -> dict[str, str]:
     env["ROS_HOME"] = str(tmp / "ros_home")  # the classifier's model file goes here, not into ~/.ros
     env["HOME"] = str(tmp / "home")
     env["PYTHONUNBUFFERED"] = "1"
+    env["TACTILE_VIEW_PORT"] = str(_free_port())  # tactile view's default port, one per run
     return env
 
 
@@ -87,6 +115,8 @@ def _untracked() -> set[str]:
 class Terminal:
     """A block that keeps running (``ros2 launch`` / ``ros2 run``), stopped with Ctrl-C."""
 
+    what = "no node came up"
+
     def __init__(self, block: Block, env: dict[str, str], log: Path) -> None:
         self.block, self.log = block, log
         with open(log, "w") as fh:
@@ -94,7 +124,17 @@ class Terminal:
                                          stderr=subprocess.STDOUT, preexec_fn=_sigint_default,
                                          start_new_session=True)
         self.env = env
-        self._wait_ready()
+        try:
+            self._wait_ready()
+        except BaseException:
+            self.kill()
+            raise
+
+    def kill(self) -> None:
+        """End the block's process group at once (a block that failed, or a test that did)."""
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
 
     def _wait_ready(self) -> None:
         """Until ``ros2 node list`` shows a node (the block has started its graph)."""
@@ -106,7 +146,7 @@ class Terminal:
                                    capture_output=True, text=True, timeout=60).stdout.split()
             if nodes:
                 return
-        raise AssertionError(f"{self.block}: no node came up:\n{self.log.read_text()[-3000:]}")
+        raise AssertionError(f"{self.block}: {self.what}:\n{self.log.read_text()[-3000:]}")
 
     def stop(self) -> None:
         """Ctrl-C; it must end, without a traceback."""
@@ -121,6 +161,31 @@ class Terminal:
                                      f"{self.log.read_text()[-3000:]}") from None
         text = self.log.read_text(errors="replace")
         assert "Traceback" not in text and "escalating to" not in text, f"{self.block}:\n{text[-4000:]}"
+
+
+class Server(Terminal):
+    """A block that serves a page until Ctrl-C (:data:`SERVES`), beside a graph."""
+
+    what = "no page served"
+
+    def _wait_ready(self) -> None:
+        """Until it has printed its address and the address answers with a page."""
+        deadline = time.monotonic() + READY_S
+        while time.monotonic() < deadline:
+            assert self.proc.poll() is None, f"{self.block} ended early:\n{self.log.read_text()[-3000:]}"
+            m = SERVING_URL.search(self.log.read_text(errors="replace"))
+            if m is None:
+                time.sleep(0.2)  # the log file has no event to wait on; the address appears once
+                continue
+            try:
+                with urllib.request.urlopen(m.group(1), timeout=30) as r:
+                    page = r.read()
+            except (urllib.error.URLError, OSError) as exc:
+                raise AssertionError(f"{self.block}: {m.group(1)} does not answer: {exc}") from None
+            assert r.status == 200 and b"<html" in page.lower(), f"{self.block}: {m.group(1)} served {page[:200]!r}"
+            self.url = m.group(1)
+            return
+        raise AssertionError(f"{self.block}: {self.what}:\n{self.log.read_text()[-3000:]}")
 
 
 def _in_venv(page: str, text: str) -> str:
@@ -144,26 +209,32 @@ def run_page(page: str, skip: dict[tuple[str, str], str], tmp_path: Path) -> Non
         pytest.skip(f"{page} has no command block that runs here")
     env = _env(tmp_path)
     before = _untracked()
-    terminal: Terminal | None = None
+    terminals: list[Terminal] = []  # the graph first, a server beside it after
+
+    def stop_all() -> None:
+        while terminals:
+            terminals.pop().stop()  # the server before the graph it shows
+
     try:
         for i, block in enumerate(runnable):
-            if block.keeps_running:
-                if terminal is not None:
-                    terminal.stop()
-                terminal = Terminal(Block(block.page, block.line, block.lang, _in_venv(page, block.text)), env,
-                                    tmp_path / f"terminal_{i}.log")
+            if block.keeps_running or block.serves:
+                if block.keeps_running:
+                    stop_all()
+                else:
+                    while terminals and isinstance(terminals[-1], Server):
+                        terminals.pop().stop()
+                kind = Terminal if block.keeps_running else Server
+                terminals.append(kind(Block(block.page, block.line, block.lang, _in_venv(page, block.text)), env,
+                                      tmp_path / f"terminal_{i}.log"))
                 continue
             out = subprocess.run(["bash", "-e", "-c", _in_venv(page, block.text)], cwd=REPO, env=env, capture_output=True,
                                  text=True, timeout=BLOCK_S)
             assert out.returncode == 0, f"{block} exited {out.returncode}:\n{out.stdout[-3000:]}\n{out.stderr[-3000:]}"
             assert "Traceback" not in out.stderr, f"{block}:\n{out.stderr[-3000:]}"
-        if terminal is not None:
-            terminal.stop()
-            terminal = None
+        stop_all()
     finally:
-        if terminal is not None and terminal.proc.poll() is None:
-            os.killpg(terminal.proc.pid, signal.SIGKILL)
-            terminal.proc.wait()
+        for terminal in reversed(terminals):
+            terminal.kill()
         subprocess.run([str(Path(sys.prefix) / "bin" / "ros2"), "daemon", "stop"], env=env, capture_output=True,
                        timeout=60)
         for path in _untracked() - before:

@@ -212,6 +212,7 @@ def parse_cell_type(name: str, r: YamlReader) -> CellType:
     extra = r.get("extra_channels", [], list)
     if not all(isinstance(c, str) and c for c in extra):
         raise r.error("extra_channels", "needs a list of channel names")
+    r.get("sites", None)  # sensing sites: read with the geometry (core.geometry.parse_sites)
     known = set(vib.channels) | set(dfm.channels)
     for i, ch in enumerate(extra):
         if ch in known or ch in extra[:i]:

@@ -32,6 +32,7 @@ import yaml
 
 from ..errors import ConfigError
 from .cell_types import CellType, parse_cell_type
+from .geometry import POSE_KEYS, RobotGeometry, parse_geometry
 from .groups import check_groups, groups_of_channels
 from .yamlreader import YamlReader, config_dir, resolve_yaml
 
@@ -43,6 +44,7 @@ __all__ = [
     "WindowSpec",
     "DescriptorSpec",
     "select_body_parts",
+    "ViewSpec",
     "RobotDescription",
     "load_robot",
     "parse_robot",
@@ -129,6 +131,26 @@ class DescriptorSpec:
 
 
 @dataclass(frozen=True)
+class ViewSpec:
+    """How the views show the robot (``view`` section): colour scale, display rate, staleness.
+
+    Attributes
+    ----------
+    force_max_n : float
+        Force at the top of the colour scale [N] (a cell at or above it is the
+        colour map's last colour); fixed, so one colour is one force.
+    rate_hz : float
+        Display rate of markers, images and the browser view [Hz].
+    stale_s : float
+        A cell with no valid sample for this long is shown grey [s].
+    """
+
+    force_max_n: float = 3.0
+    rate_hz: float = 10.0
+    stale_s: float = 0.5
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """A robot: its cell types, its body parts in descriptor order, and parameters.
 
@@ -144,6 +166,9 @@ class RobotDescription:
         The node graph section, read by the launcher and launch files.
     source : str
         File the description was read from.
+    geometry : RobotGeometry or None
+        Where the cells are (:mod:`.geometry`); None when the file gives none.
+    view : ViewSpec
     """
 
     name: str
@@ -155,6 +180,8 @@ class RobotDescription:
     descriptor: DescriptorSpec
     nodes: Mapping[str, Any]
     source: str = ""
+    geometry: RobotGeometry | None = None
+    view: ViewSpec = ViewSpec()
 
     def body_part(self, name: str) -> BodyPart:
         """Return the body part called ``name``; raise ConfigError naming the known ones."""
@@ -243,6 +270,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
             raise pr.error("name", f"body part {pname!r} is listed twice")
         seen_parts.add(pname)
         ctype = pr.get("cell_type", kind=str)
+        pr.get("link", "", str)  # the link the body part is on: read with the geometry
         if ctype not in cell_types:
             raise pr.error("cell_type", f"unknown cell type {ctype!r} (known: {', '.join(cell_types)})")
         cells = []
@@ -258,7 +286,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
                 raise cr.error("id", f"cell id {cid} is already listed in body part {seen_cells[cid]!r}")
             seen_cells[cid] = pname
             cname = cr.get("name", f"{pname}_{cid}", str)
-            extra = {k: v for k, v in cr.data.items() if k not in ("id", "name")}
+            extra = {k: v for k, v in cr.data.items() if k not in ("id", "name", *POSE_KEYS)}
             cells.append(Cell(cid, cname, extra))
         pr.check_unknown()
         parts.append(BodyPart(pname, ctype, tuple(cells)))
@@ -291,8 +319,16 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
     desc = _parse_descriptor(dr, cell_types, parts)
 
     nodes = root.get("nodes", {}, dict)
+    vr = root.child("view", {})
+    view = ViewSpec(force_max_n=vr.number("force_max_n", 3.0, positive=True),
+                    rate_hz=vr.number("rate_hz", 10.0, positive=True),
+                    stale_s=vr.number("stale_s", 0.5, positive=True))
+    vr.check_unknown()
+    root.get("geometry", None)  # parsed below, with the parts and cell types
     root.check_unknown()
-    robot = RobotDescription(name, description, cell_types, tuple(parts), contact, window, desc, nodes, source)
+    geometry = parse_geometry(data, parts, cell_types, source)
+    robot = RobotDescription(name, description, cell_types, tuple(parts), contact, window, desc, nodes, source,
+                             geometry, view)
     _validate_nodes(robot, source)
     return robot
 

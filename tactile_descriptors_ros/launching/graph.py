@@ -5,11 +5,11 @@ names a node and says what to run::
 
     nodes:
       biotac_driver:                  # node name
-        executable: biotac_driver     # biotac_driver | skin_driver | window_node | classifier_node
+        executable: biotac_driver     # one of EXECUTABLES
         body_parts: [thumb, index]    # optional: the body parts this node serves (default: all)
         namespace: ""                 # optional
         parameters: {transport: cheetah, serial: {port: /dev/ttyACM0}}   # nested = dotted names
-        sim_parameters: {transport: simulated}   # merged over parameters with --sim SCENE
+        sim_parameters: {transport: simulated}   # merged over parameters with --sim SCENE (any node)
         remappings: {tactile/descriptor: /hand/descriptor}
 
 :func:`build_graph` turns it into :class:`NodeSpec` objects that both the
@@ -17,7 +17,7 @@ ROS 2 launch files (``launch/*.launch.py``, one ``launch_ros.actions.Node``
 per spec) and the in-repo launcher (:mod:`.processes`, ``tactile launch``)
 start, so the two cannot drift apart.  It adds what every node needs
 (``robot`` as an absolute path, ``body_parts``), the simulation switch
-(``--sim SCENE``: drivers get ``sim_parameters`` and ``sim.scene``), and the
+(``--sim SCENE``: every node gets its ``sim_parameters``, drivers ``sim.scene``), and the
 scale-out option (one window node per body part).
 
 No rclpy and no launch import here: this module is plain data and is tested
@@ -52,7 +52,7 @@ __all__ = [
 
 PACKAGE = "tactile_descriptors_ros"
 #: Executables of the package (console scripts in setup.py).
-EXECUTABLES = ("biotac_driver", "skin_driver", "window_node", "classifier_node")
+EXECUTABLES = ("biotac_driver", "skin_driver", "window_node", "classifier_node", "contact_node", "tf_publisher")
 #: Executables that talk to hardware (and switch to a simulated transport with ``--sim``).
 DRIVERS = ("biotac_driver", "skin_driver")
 _ENTRY_KEYS = {"executable", "body_parts", "namespace", "parameters", "sim_parameters", "remappings"}
@@ -177,9 +177,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     robot : RobotDescription or str or path
         A loaded description, a shipped robot name or a YAML path.
     sim_scene : str or path, optional
-        A scene name (``demo_shadow_hand``) or path: drivers run on the
-        simulated transport (their ``sim_parameters``, plus ``sim.scene`` as
-        an absolute path).
+        A scene name (``demo_shadow_hand``) or path: every node gets its
+        ``sim_parameters``; drivers run on the simulated transport (plus
+        ``sim.scene`` as an absolute path).
     sim_speed : float, optional
         ``sim.speed`` of the drivers with ``sim_scene``: simulated seconds per
         wall second (a busy machine needs less than 1; default: the
@@ -238,8 +238,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
             if e["body_parts"]:
                 params["body_parts"] = list(e["body_parts"])
         params.update(e["parameters"])
-        if exe in DRIVERS and scene_param is not None:
+        if scene_param is not None:
             params.update(e["sim_parameters"])
+        if exe in DRIVERS and scene_param is not None:
             params.setdefault("transport", "simulated")
             params["sim.scene"] = scene_param
             if sim_speed is not None:

@@ -81,6 +81,17 @@ PARAMETER_TYPES: dict[str, dict[str, str]] = {
         "prediction_order": "string", "clock_jump_s": "double", "enable_reset": "bool",
         "qos.label.history": "string", **_qos("descriptor", "label", "prediction"),
     },
+    "contact_node": {
+        "robot": "string", "body_parts": "string_array", "contact.force_threshold_n": "double",
+        "contact.floor_n": "double", "view.rate_hz": "double", "view.force_max_n": "double",
+        "view.stale_s": "double", "view.image_size_px": "integer", "view.refresh_s": "double",
+        "view.markers": "bool", "view.images": "bool", "frames_topic": "string", "frames.drain_max": "integer",
+        "diagnostics_period_s": "double",
+        **_qos("frames", "contact", "view", "prediction"),
+    },
+    "tf_publisher": {
+        "robot": "string", "publish_links": "bool", "publish_sites": "bool", "diagnostics_period_s": "double",
+    },
 }
 
 

@@ -104,6 +104,9 @@ class SkinDriver(DriverBase):
         self.frame_ids = {c.id: str(c.extra.get("frame_id", f"skin_cell_{c.id}")) for p in self.robot.body_parts
                           for c in p.cells}
         self.known = set(self.full_robot.cell_index())
+        # header.frame_id of a body part's messages: its link when the robot has a geometry, else its name
+        geo = self.robot.geometry
+        self.part_frames = {p.name: geo.part_links[p.name] if geo is not None else p.name for p in self.robot.body_parts}
         # a read keeps at most MAX_BACKLOG_S of the bus's frames: every known cell's accelerometer, force,
         # proximity (at the force rate) and temperature frames
         per_cell_hz = self.accel_rate_hz + 2 * self.force_rate_hz + NOMINAL_RATE_HZ[Modality.TEMPERATURE]
@@ -196,7 +199,9 @@ class SkinDriver(DriverBase):
             self.stream.resume()
 
     def _publish(self, part: SkinPartFrames) -> None:
-        self.part_publishers[part.body_part].publish(skin_part_to_msg(part))
+        msg = skin_part_to_msg(part)
+        msg.header.frame_id = self.part_frames[part.body_part]  # the body part's link in the TF tree
+        self.part_publishers[part.body_part].publish(msg)
         self.part_messages[part.body_part] += 1
 
     def _log_stream(self, level: str, text: str) -> None:

@@ -124,8 +124,10 @@ class WindowNode(Node):
                                minimum=0.0, on_set_group=tune),
         )
         self.force_threshold_n = self.windower.onset_n
-        self.frame_id = declare(self, "frame_id", self.robot.name,
-                                "header.frame_id of the descriptors (default: the robot's name)",
+        root = self.robot.geometry.root_frame if self.robot.geometry is not None else self.robot.name
+        self.frame_id = declare(self, "frame_id", root,
+                                "header.frame_id of the descriptors (default: the robot's root frame, its name "
+                                "without a geometry section)",
                                 on_set=lambda v: lambda: setattr(self, "frame_id", v))
         self.id_stride = declare(self, "exploration_id_stride", 1,
                                  "published exploration id = local id * stride + offset", minimum=1)

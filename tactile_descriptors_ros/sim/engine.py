@@ -167,6 +167,11 @@ class SimResult:
         Time of the end of the scene.
     stats : dict
         Clipped samples and other counters.
+    contact_points : list of dict
+        With the ``contact_patch`` effect, where each exploration pressed on
+        each body part it touched (the ground truth of contact location):
+        ``exploration``, ``body_part``, ``frame_id`` (the body part's link),
+        ``xyz`` [m] and ``normal`` in that frame.
     """
 
     scene: Scene
@@ -177,6 +182,7 @@ class SimResult:
     effect_calls: Counter
     end_ns: int
     stats: dict[str, Any]
+    contact_points: list[dict[str, Any]] = field(default_factory=list)
 
     def labels(self) -> list[tuple[int, int, str]]:
         """``(onset_ns, release_ns, label)`` per exploration."""
@@ -200,6 +206,7 @@ class SimResult:
             "start_ns": self.scene.start_ns, "end_ns": self.end_ns,
             "explorations": [e.to_dict() for e in self.explorations], "slip_events": self.slip_events,
             "faults": self.faults, "effects": {k: dict(v) for k, v in self.scene.effects.items()},
+            "contact_points": self.contact_points,
             "cells": {str(c.cell_id): {"name": c.name, "body_part": c.body_part, "kind": c.kind,
                                         "streams": {s: {"rate_hz": st.rate_hz, "channels": list(st.channels)}
                                                     for s, st in c.streams.items()}}
@@ -261,6 +268,8 @@ class SimContext:
         self.faults: dict[str, Any] = {"parity_words": 0, "corrupt_frames": 0, "dropped_frames": 0, "unplugged": []}
         self.stats: dict[str, Any] = {"clipped_samples": 0}
         self._materials: dict[str, MaterialModel] = {}
+        self.contact_points: dict[tuple[int, str], dict[str, Any]] = {}
+        self._taxels: dict[str, Any] = {}
 
     def apply(self, name: str) -> None:
         """Run effect ``name`` (counted)."""
@@ -280,6 +289,47 @@ class SimContext:
         return self._materials[name]
 
     # -- kinematics (not effects: every effect that needs them asks) ------------
+
+    def taxels(self, part: str):
+        """The sensing points of body part ``part`` (:meth:`~...core.geometry.RobotGeometry.taxels`)."""
+        if part not in self._taxels:
+            robot = self.scene.robot
+            self._taxels[part] = robot.geometry.taxels(robot, part)
+        return self._taxels[part]
+
+    def contact_point(self, j: int, part: str) -> dict[str, Any]:
+        """Where exploration ``j`` presses on body part ``part`` (``contact_patch``; fixed per exploration).
+
+        A point on the segment from a random sensing point (cell or BioTac
+        electrode) towards one of its three nearest, at most half way, with
+        the normal interpolated alike: inside the skin, between the cells, as
+        an object touches it.  The point stays where it is while the part
+        slides (the object's surface moves under the skin, not the contact).
+        """
+        key = (j, part)
+        if key not in self.contact_points:
+            tax = self.taxels(part)
+            r = self.rng("contact_point", j, zlib.crc32(part.encode()))
+            k = int(r.integers(len(tax)))
+            m, t = k, 0.0
+            if len(tax) > 1:
+                d = np.linalg.norm(tax.positions - tax.positions[k], axis=1)
+                d[k] = np.inf
+                nearest = np.argsort(d, kind="stable")[:3]
+                m, t = int(nearest[r.integers(len(nearest))]), float(r.uniform(0.0, 0.5))
+            xyz = tax.positions[k] + t * (tax.positions[m] - tax.positions[k])
+            normal = tax.normals[k] + t * (tax.normals[m] - tax.normals[k])
+            normal = normal / np.linalg.norm(normal)
+            self.contact_points[key] = {"exploration": j, "body_part": part, "frame_id": tax.frame_id,
+                                        "xyz": [float(v) for v in xyz], "normal": [float(v) for v in normal]}
+        return self.contact_points[key]
+
+    def patch_weights(self, j: int, part: str, radius_m: float) -> np.ndarray:
+        """Gaussian weights (peak 1) of the part's sensing points around exploration ``j``'s contact point."""
+        tax = self.taxels(part)
+        centre = np.asarray(self.contact_point(j, part)["xyz"])
+        d2 = np.sum((tax.positions - centre) ** 2, axis=1)
+        return np.exp(-0.5 * d2 / radius_m**2)
 
     def force_profile(self, timing: ExplorationTiming, t_s: np.ndarray, ramp_s: float) -> np.ndarray:
         """Normalised force 0..1: ramp in, hold, ramp out (trapezoid)."""
@@ -504,9 +554,19 @@ def _ramp(ctx: SimContext) -> float:
 
 
 def _load_factors(ctx: SimContext, g: _Group, j: int, idx: np.ndarray, spread: float) -> np.ndarray:
-    """Per-cell share of a body part's force (mean 1), fixed per exploration."""
+    """Per-cell share of a body part's force (mean 1), fixed per exploration.
+
+    With the ``contact_patch`` effect a skin body part's force is the total
+    pressed at the exploration's contact point, shared among the cells by a
+    Gaussian of their distance from it (``radius_m``); otherwise it is every
+    cell's mean force, shared by random load factors (spread ``spread``).
+    """
     if idx.size == 1:
         return np.ones(1)
+    if ctx.scene.has("contact_patch") and g.kind == "skin":
+        part = g.cell_part[int(idx[0])]
+        w = ctx.patch_weights(j, part, float(ctx.scene.effects["contact_patch"]["radius_m"]))
+        return w / w.sum()
     r = ctx.rng("load", j, int(g.cell_ids[idx[0]]))
     f = np.clip(1.0 + spread * r.standard_normal(idx.size), 0.2, None)
     return f / f.mean()
@@ -654,7 +714,7 @@ def effect_electrode_deformation(ctx: SimContext, p: Mapping[str, Any]) -> None:
         else:
             rate = g.rates["force"]
             n_per = g.cell_type.force.n_per_count
-            for j, timing, _part, idx, force, sliding in _contacts(ctx, g):
+            for j, timing, part, idx, force, sliding in _contacts(ctx, g):
                 if not sliding:
                     continue
                 g0, g1 = _sample_range(ctx, timing, rate, g.n_total["force"])
@@ -672,7 +732,11 @@ def effect_electrode_deformation(ctx: SimContext, p: Mapping[str, Any]) -> None:
                 t_s = _times(g0, g1, rate)
                 env = ctx.force_profile(timing, t_s, ramp)
                 speed, _, _, _ = ctx.motion_profile(timing, t_s)
-                _add(g, "force", idx, g0, gain_all * relfl * (force / n_per) * (env * speed)[None, None, :])
+                # relative to each cell's force: every cell's mean force is F by default, its share of F
+                # with contact_patch (untouched cells feel no texture)
+                scale = force if not ctx.scene.has("contact_patch") else \
+                    force * g.scratch.get("force_share", {}).get((part, j), np.ones((idx.size, 3)))[:, :, None]
+                _add(g, "force", idx, g0, gain_all * relfl * (scale / n_per) * (env * speed)[None, None, :])
 
 
 def effect_stick_slip(ctx: SimContext, p: Mapping[str, Any]) -> None:
@@ -740,6 +804,39 @@ def effect_proximity(ctx: SimContext, p: Mapping[str, Any]) -> None:
             env = np.interp(_times(lo, hi, rate), [t0 - lead, t0, t1, t1 + lead], [0.0, 1.0, 1.0, 0.0])
             cur = g.data["proximity"][idx, 0, lo - base : hi - base]
             g.data["proximity"][idx, 0, lo - base : hi - base] = np.maximum(cur, full * env[None, :])
+
+
+def effect_contact_patch(ctx: SimContext, p: Mapping[str, Any]) -> None:
+    """Press at a place: the ground truth of contact location (``SimResult.contact_points``).
+
+    Each exploration presses each body part it touches at one point
+    (:meth:`SimContext.contact_point`).  A skin body part's force is shared
+    among its cells by their distance from that point (see
+    :func:`_load_factors`, applied by ``normal_force``); a BioTac's
+    electrodes near it rise by ``electrode_counts_per_n`` counts per newton
+    times a Gaussian of their distance (``biotac_radius_m``), on top of the
+    fitted electrode response, following the force ramp.
+    """
+    gain = float(p["electrode_counts_per_n"])
+    radius = float(p["biotac_radius_m"])
+    ramp = _ramp(ctx)
+    for g in ctx.groups:
+        for j, timing, part, idx, force, _sliding in _contacts(ctx, g):
+            ctx.contact_point(j, part)
+            if g.kind != "biotac":
+                continue
+            rate = g.rates["electrodes"]
+            g0, g1 = _sample_range(ctx, timing, rate, g.n_total["electrodes"])
+            if g1 <= g0:
+                continue
+            tax = ctx.taxels(part)
+            w = ctx.patch_weights(j, part, radius)
+            env = ctx.force_profile(timing, _times(g0, g1, rate), ramp)
+            rise = np.zeros((len(g.channels["electrodes"]), g1 - g0))
+            for k, channels in enumerate(tax.channels):
+                for ch in channels:
+                    rise[ch] += gain * force * w[k] * env
+            _add(g, "electrodes", int(idx[0]), g0, rise)
 
 
 def effect_bias_drift(ctx: SimContext, p: Mapping[str, Any]) -> None:
@@ -871,6 +968,7 @@ EFFECT_FUNCTIONS: dict[str, Callable[[SimContext, Mapping[str, Any]], None]] = {
     "normal_force": effect_normal_force,
     "texture_vibration": effect_texture_vibration,
     "electrode_deformation": effect_electrode_deformation,
+    "contact_patch": effect_contact_patch,
     "stick_slip": effect_stick_slip,
     "proximity": effect_proximity,
     "bias_drift": effect_bias_drift,
@@ -978,7 +1076,8 @@ def simulate(scene: Scene, explorations: range | None = None) -> SimResult:
     end_ns = scene.start_ns + int(round(t1 * 1e9))
     stats = dict(ctx.stats)
     stats["chunk_start_ns"] = scene.start_ns + int(round(t0 * 1e9))
-    return SimResult(scene, cells, chunk_timings, ctx.slip_events, ctx.faults, ctx.calls, end_ns, stats)
+    points = [v for (j, _), v in sorted(ctx.contact_points.items()) if j in rng_]
+    return SimResult(scene, cells, chunk_timings, ctx.slip_events, ctx.faults, ctx.calls, end_ns, stats, points)
 
 
 def iter_simulate(scene: Scene, max_chunk_s: float = 30.0):

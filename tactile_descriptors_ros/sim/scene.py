@@ -70,6 +70,7 @@ EFFECTS: dict[str, dict[str, Any]] = {
     "corrupt_frames": {"probability": 0.0005},
     "unplug": {"events": []},
     "proximity": {"lead_s": 0.3},
+    "contact_patch": {"radius_m": 0.01, "biotac_radius_m": 0.004, "electrode_counts_per_n": 150.0},
 }
 
 #: Single motions; sequences are joined with '+'.
@@ -374,6 +375,9 @@ def parse_scene(data: Any, source: str = "<dict>", *, seed: int | None = None) -
     sr.check_unknown()
 
     effects = _parse_effects(root, robot)
+    if "contact_patch" in effects and robot.geometry is None:
+        raise SceneError(f"contact_patch presses at places on the cells: robot {robot.name!r} has no geometry "
+                         "section", key="effects.contact_patch", source=source)
     if "bad_parity" in effects and not any(sensor_kind(robot, p.cell_type) == "biotac" for p in robot.body_parts):
         raise SceneError("bad_parity applies to BioTac SPI words; this robot has none (use corrupt_frames)",
                          key="effects.bad_parity", source=source)

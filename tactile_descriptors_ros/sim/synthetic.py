@@ -49,8 +49,9 @@ WINDOW_HOP_S = 0.5
 def skin_robot(n_cells: int, cells_per_part: int = 116) -> RobotDescription:
     """A robot of ``n_cells`` NAO skin cells (the ``skin_cell`` type of ``nao.yaml``).
 
-    Cells are split into body parts of at most ``cells_per_part`` cells; for
-    ``n_cells == 116`` the shipped NAO description is returned unchanged.
+    Cells are split into body parts of at most ``cells_per_part`` cells, with
+    no geometry (a synthetic skin has no place on a robot); for ``n_cells ==
+    116`` the shipped NAO description is returned unchanged.
     """
     if n_cells == 116:
         return load_robot("nao")
@@ -58,6 +59,7 @@ def skin_robot(n_cells: int, cells_per_part: int = 116) -> RobotDescription:
         data = yaml.safe_load(fh)
     data["robot"]["name"] = f"skin_{n_cells}"
     data.pop("nodes", None)
+    data.pop("geometry", None)
     parts = []
     for k, start in enumerate(range(0, n_cells, cells_per_part)):
         ids = range(start + 1, min(n_cells, start + cells_per_part) + 1)

@@ -19,6 +19,13 @@ SKIP: dict[tuple[str, str], str] = {
     ("README.md", "mkdir -p ~/ws/src && cd ~/ws/src && git clone <this repository> tactile_descriptors_ros"):
         "needs rosdep and a clone URL; test/packaging/test_colcon.py builds the same two packages "
         "with the same colcon command and launches from install/",
+    ("README.md", 'rviz2 -d "$(ros2 pkg prefix tactile_descriptors_ros)/share/tactile_descriptors_ros/config/rviz/'
+                  'shadow_hand.rviz"'):
+        "rviz2 is not installable from PyPI; test/core/test_urdf_rviz.py checks that file (topics, QoS, fixed "
+        "frame) and test/packaging/test_ament_index.py that the share directory holds it",
+    ("docs/view.md", "tactile bench --view-overhead --rounds 2 --seconds 30"):
+        "four runs of the NAO's contact node at full rate, minutes; lab/test/bench/test_view_overhead.py runs "
+        "the same command with one short round",
     ("docs/simulator.md", "tactile fit-textures ../shared/data/biotac_slide_20_50 -o texture_models   "
                           "# fit the texture models (default ./texture_models)"):
         "a lab verb that fits all 20 materials of the real recordings (minutes) and rewrites the shipped models; "

@@ -18,12 +18,18 @@ from tactile_descriptors_ros.launching.processes import node_command
 
 def test_shadow_hand_graph():
     specs = build_graph("shadow_hand")
-    assert [s.executable for s in specs] == ["biotac_driver", "window_node", "classifier_node"]
-    drv = specs[0].parameters
+    assert [s.executable for s in specs] == ["biotac_driver", "window_node", "classifier_node", "tf_publisher",
+                                             "contact_node"]
+    by = {s.executable: s.parameters for s in specs}
+    drv = by["biotac_driver"]
     assert drv["transport"] == "cheetah" and drv["cheetah.port"] == -1
     assert drv["robot"] == str(robot_config_path("shadow_hand").resolve())
-    assert specs[1].parameters["body_parts"] == ["thumb", "index", "middle", "ring", "little"]
-    assert specs[2].parameters["robot"] == drv["robot"]  # the classifier keeps its model per robot
+    assert by["window_node"]["body_parts"] == ["thumb", "index", "middle", "ring", "little"]
+    assert by["classifier_node"]["robot"] == drv["robot"]  # the classifier keeps its model per robot
+    # on the robot its robot_state_publisher publishes the links; simulated, tf_publisher does
+    assert by["tf_publisher"]["publish_links"] is False
+    sim = {s.executable: s.parameters for s in build_graph("shadow_hand", sim_scene="touch_shadow_hand")}
+    assert sim["tf_publisher"]["publish_links"] is True and "sim.scene" not in sim["tf_publisher"]
 
 
 def test_sim_scene_switches_drivers_only():
@@ -101,8 +107,8 @@ def test_tactile_launch_print_json(capsys):
                  "classifier_node.eta=0.5"]) == 0
     out = json.loads(capsys.readouterr().out)
     names = [n["name"] for n in out["nodes"]]
-    assert names[0] == "skin_driver" and names[-1] == "classifier_node" and len(names) == 9
-    assert out["nodes"][-1]["parameters"]["eta"] == 0.5
+    assert names[0] == "skin_driver" and names[-3:] == ["classifier_node", "tf_publisher", "contact_node"]
+    assert len(names) == 11 and out["nodes"][-3]["parameters"]["eta"] == 0.5
     with pytest.raises(ConfigError, match="NODE.PARAMETER"):
         from tactile_descriptors_ros.tools.cmd_launch import parse_set
 

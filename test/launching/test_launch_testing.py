@@ -127,10 +127,11 @@ class TestShutdown(unittest.TestCase):
     """After launch_testing stopped the graph."""
 
     def test_every_node_exited_cleanly(self, proc_info):
-        # SIGINT: drivers, window node and classifier each end with exit code 0 (none escalated to SIGTERM)
+        # SIGINT: drivers, window node, classifier, contact node and tf_publisher each end with exit code 0
+        # (none escalated to SIGTERM)
         launch_testing.asserts.assertExitCodes(proc_info)
         self.assertEqual(sorted(Path(info.cmd[0]).name for info in proc_info),
-                         ["biotac_driver", "classifier_node", "window_node"])
+                         ["biotac_driver", "classifier_node", "contact_node", "tf_publisher", "window_node"])
 
     def test_the_classifier_kept_what_it_learned(self, model_path):
         path = Path(model_path)

@@ -20,6 +20,14 @@ def _node(executable, ros_context):
         from tactile_descriptors_ros.nodes.window_node import WindowNode
 
         return WindowNode(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand")])
+    if executable == "contact_node":
+        from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+        return ContactNode(context=ros_context, parameter_overrides=[Parameter("robot", value="nao")])
+    if executable == "tf_publisher":
+        from tactile_descriptors_ros.nodes.tf_publisher import TfPublisher
+
+        return TfPublisher(context=ros_context, parameter_overrides=[Parameter("robot", value="nao")])
     if executable == "classifier_node":
         from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
 

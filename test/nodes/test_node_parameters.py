@@ -9,6 +9,8 @@ import time
 import pytest
 from node_helpers import BiotacStream, spin_until
 
+from tactile_descriptors_ros.core.robot import load_robot
+
 pytestmark = pytest.mark.ros
 
 
@@ -110,13 +112,15 @@ def test_descriptors_carry_the_robot_frame(ros_context):
     ex.add_node(w)
     ex.add_node(io)
     try:
-        assert w.get_parameter("frame_id").value == "shadow_hand"
+        # the robot's root frame, the root of the TF tree tf_publisher puts on /tf_static
+        root = load_robot("shadow_hand").geometry.root_frame
+        assert w.get_parameter("frame_id").value == root == "forearm"
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and w.kernel_ready.is_set(), 60)
         for m in BiotacStream().exploration(40.0):
             pub.publish(m)
             ex.spin_once(timeout_sec=0.005)
         assert spin_until(ex, lambda: got, 10)
-        assert got[0].header.frame_id == "shadow_hand"
+        assert got[0].header.frame_id == root
     finally:
         ex.shutdown()
         w.destroy_node()
@@ -348,6 +352,7 @@ def test_docs_list_exactly_the_parameters_each_node_lets_change_at_run_time(ros_
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
 
     monkeypatch.setenv("ROS_HOME", str(tmp_path))
@@ -357,7 +362,8 @@ def test_docs_list_exactly_the_parameters_each_node_lets_change_at_run_time(ros_
                  Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
                  Parameter("transport", value="loopback")]),
              "skin_driver": SkinDriver(context=ros_context, parameter_overrides=[
-                 Parameter("robot", value="nao"), Parameter("transport", value="loopback")])}
+                 Parameter("robot", value="nao"), Parameter("transport", value="loopback")]),
+             "contact_node": ContactNode(context=ros_context, parameter_overrides=[Parameter("robot", value="nao")])}
     try:
         running = {}
         for name, node in nodes.items():

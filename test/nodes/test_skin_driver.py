@@ -11,6 +11,7 @@ from node_helpers import cell_runs
 from tactile_descriptors_ros.codecs.skin import Modality
 from tactile_descriptors_ros.codecs.skin_can import SkinCanEncoder
 from tactile_descriptors_ros.codecs.skin_serial import SkinSerialEncoder
+from tactile_descriptors_ros.core.robot import load_robot
 
 pytestmark = pytest.mark.ros
 
@@ -60,7 +61,8 @@ def test_can_virtual_bus_publishes_cells_and_reports_unknown_ids(ros_context):
         _samples(lambda c, m, v: bus.send(enc.encode(c, m, v)))
         assert _spin_until(ex, lambda: {c for m in got for c in m.cell_ids} >= {1, 2})
         assert {m.body_part for m in got} == {"left_hand"}
-        assert {m.header.frame_id for m in got} == {"left_hand"}
+        # the body part's link in the TF tree (REP-120 name), as nao.yaml's geometry places it
+        assert {m.header.frame_id for m in got} == {load_robot("nao").geometry.part_links["left_hand"]} == {"l_wrist"}
         _, frame, _ = cell_runs(got, 1)[0]
         assert frame.accel.shape[1] == len(frame.accel_offset_ns) > 0
         assert frame.force[:, 0].tolist() == [100, 110, 120]

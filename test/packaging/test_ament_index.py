@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 PKG = "tactile_descriptors_ros"
-NODES = ("biotac_driver", "classifier_node", "skin_driver", "window_node")
+NODES = ("biotac_driver", "classifier_node", "contact_node", "skin_driver", "tf_publisher", "window_node")
 PREFIX = Path(sys.prefix)
 
 
@@ -31,6 +31,10 @@ def test_package_in_ament_index_of_venv(repo_dir):
     assert (share / "package.xml").read_text() == (repo_dir / "package.xml").read_text()
     assert {p.name for p in (share / "launch").glob("*.launch.py")} == {"shadow_hand.launch.py", "nao.launch.py"}
     assert (share / "config" / "shadow_hand.yaml").is_file() and (share / "config" / "scenes").is_dir()
+    # where the README's rviz2 command finds the shipped configurations
+    for robot in ("shadow_hand", "nao"):
+        assert (share / "config" / "rviz" / f"{robot}.rviz").read_text() == \
+            (repo_dir / "config" / "rviz" / f"{robot}.rviz").read_text()
 
 
 def test_executables_in_lib_pkg():

@@ -94,10 +94,11 @@ def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir
             os.killpg(launch.pid, signal.SIGKILL)
             launch.wait()
     # every node ran from the workspace's install/, none from the venv
-    assert len(nodes) == 3, nodes
+    assert len(nodes) == 5, nodes
     scripts = [Path(next(a for a in cmd if "/lib/" in a)) for cmd in nodes]
     assert all(p.parent == lib for p in scripts), scripts
-    assert {p.name for p in scripts} == {"skin_driver", "window_node", "classifier_node"}
+    assert {p.name for p in scripts} == {"skin_driver", "tf_publisher", "window_node", "contact_node",
+                                         "classifier_node"}
 
 
 def _children(pid: int) -> list:

@@ -44,6 +44,7 @@ def small_nao(tmp_path_factory):
     data["body_parts"] = [{"name": "right_hand", "cell_type": "skin_cell", "cells": [{"id": 15}, {"id": 16}, {"id": 17}]},
                           {"name": "chest", "cell_type": "skin_cell", "cells": [{"id": 20}, {"id": 21}, {"id": 22}]}]
     data.pop("nodes", None)
+    data.pop("geometry", None)  # cells picked for the wire, not placed on the robot
     path = tmp_path_factory.mktemp("robot") / "small_nao.yaml"
     path.write_text(yaml.safe_dump(data))
     NAO["scene"]["robot"] = str(path)

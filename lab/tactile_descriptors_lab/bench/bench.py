@@ -602,6 +602,11 @@ def targets(report: BenchReport) -> dict:
                   "another, in real time: zero lost frames, every descriptor at the classifier, every prediction "
                   "back (tactile bench --scale-graph --cells 10000 --hosts 2)",
         "met": None}
+    # the views against the graph without them: runs of the whole NAO graph, measured on their own (docs/view.md)
+    out["view_overhead"] = {
+        "target": "the views (rviz2 markers and images, tactile view with one page) on the NAO graph at full rate "
+                  "< 10 % of one core (tactile bench --view-overhead)",
+        "met": None}
     return out
 
 

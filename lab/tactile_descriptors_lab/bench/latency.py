@@ -45,8 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["measure_latency", "message_cost", "shipped_latency_settings", "TARGET_MS", "DESIGN_WAIT_TARGET_MS",
-           "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
+__all__ = ["measure_latency", "message_cost", "shipped_latency_settings", "ProbeFrames", "probe_frames",
+           "set_sequence", "TARGET_MS", "DESIGN_WAIT_TARGET_MS", "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
 
 #: Target: sensor stamp (fixed: window end; exploration: release decision) -> prediction, p95, at NAO full rate.
 TARGET_MS = 20.0
@@ -72,7 +72,7 @@ def _cpu_s(pid: int) -> float | None:
 
 
 @dataclasses.dataclass
-class _ProbeFrames:
+class ProbeFrames:
     """The probe's messages: ``templates[k % len(templates)]`` is batch ``k`` (one message per body part).
 
     Samples lie on the absolute grids of the nominal rates (a batch starting at
@@ -86,8 +86,8 @@ class _ProbeFrames:
     period_ns: int
 
 
-def _probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700)) -> _ProbeFrames:
-    """The probe's ``SkinPartFrames`` for every body part (see :class:`_ProbeFrames`).
+def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700)) -> ProbeFrames:
+    """The probe's ``SkinPartFrames`` for every body part (see :class:`ProbeFrames`).
 
     Force counts are drawn from ``force_counts`` (untared: 300-700 counts are
     0.7-1.7 N, every cell in contact; 0-20 counts are below the release threshold).
@@ -127,10 +127,10 @@ def _probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int]
         templates.append(out)
         last_a.append(int(offsets_a[-1]))
         last_f.append(int(offsets_f[-1]) if offsets_f.size else -1)
-    return _ProbeFrames(templates, np.array(last_a, np.int64), np.array(last_f, np.int64), period_ns)
+    return ProbeFrames(templates, np.array(last_a, np.int64), np.array(last_f, np.int64), period_ns)
 
 
-def _set_sequence(msg, k: int) -> None:
+def set_sequence(msg, k: int) -> None:
     """Every cell run of a probe message is batch ``k`` of its cell."""
     import array
 
@@ -173,7 +173,7 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
     from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, skin_part_msg_to_chunks
 
     desc = load_robot(robot)
-    probe = _probe_frames(desc, batch_s, seed)
+    probe = probe_frames(desc, batch_s, seed)
     batch_ns = int(round(batch_s * 1e9))
     t0 = probe.period_ns * (1_000_000_000_000 // probe.period_ns)
     raws = []
@@ -293,12 +293,12 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     load_before = os.getloadavg()
     per_message = message_cost(robot=robot, batch_s=batch_s, seed=seed) if micro else None
     if mode == "fixed":
-        phases = {"contact": _probe_frames(desc, batch_s, seed)}
+        phases = {"contact": probe_frames(desc, batch_s, seed)}
     else:
-        phases = {"contact": _probe_frames(desc, batch_s, seed, (800, 1000)),
-                  "released": _probe_frames(desc, batch_s, seed + 1, (0, 20))}
-    probe_frames = phases["contact"]
-    n_templates = len(probe_frames.templates)
+        phases = {"contact": probe_frames(desc, batch_s, seed, (800, 1000)),
+                  "released": probe_frames(desc, batch_s, seed + 1, (0, 20))}
+    contact_frames = phases["contact"]
+    n_templates = len(contact_frames.templates)
     batch_ns = int(round(batch_s * 1e9))
 
     context = rclpy.Context()
@@ -382,7 +382,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
 
         pids = {n.spec.name: n.process.pid for n in graph.nodes} if graph else {"probe (all nodes)": os.getpid()}
         cpu_start = {name: _cpu_s(pid) for name, pid in pids.items()}
-        start_ns = (time.time_ns() // probe_frames.period_ns + 1) * probe_frames.period_ns  # template 0 first
+        start_ns = (time.time_ns() // contact_frames.period_ns + 1) * contact_frames.period_ns  # template 0 first
         n_batches = int(round(duration_s / batch_s))
         cycle_ns = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
         released_ns = int(round(EXPLORATION_RELEASED_S * 1e9))
@@ -398,7 +398,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             stamp = ns_to_stamp(t0)
             for pub, (_, msg) in zip(pubs, phases["contact" if touching else "released"].templates[k % n_templates]):
                 msg.header.stamp = stamp
-                _set_sequence(msg, k)
+                set_sequence(msg, k)
                 pub.publish(msg)
             published.append((t0, sent))
         done_ns = time.monotonic_ns()
@@ -440,12 +440,12 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     which = np.arange(len(t0s)) % n_templates
     if mode == "fixed":
         # a fixed window closes once every cell has a vibration sample at or after end + lateness
-        closing_sample = t0s + probe_frames.last_accel_offset_ns[which]
+        closing_sample = t0s + contact_frames.last_accel_offset_ns[which]
         delay_ns = int(round(lateness_s * 1e9))
         reference_delay_ns = 0
     else:
         # an exploration ends once every cell's force stayed below release for release_s
-        last_f = probe_frames.last_force_offset_ns[which]
+        last_f = contact_frames.last_force_offset_ns[which]
         closing_sample = np.maximum.accumulate(np.where(last_f >= 0, t0s + last_f, 0))
         delay_ns = release_ns
         reference_delay_ns = release_ns

@@ -14,7 +14,9 @@ cell and group before timing; the report ends with the targets, met or not
 ``--latency`` also measures sensor stamp -> Prediction through the ROS node
 graph; ``--scale-graph --cells N`` instead runs N skin cells through skin
 drivers and one window node per body part, each its own process
-(lab/docs/performance.md, section Scale).  Reading the numbers: lab/docs/performance.md.
+(lab/docs/performance.md, section Scale); ``--view-overhead`` instead measures the views' CPU
+on the NAO graph at full rate against the same graph without them
+(docs/view.md).  Reading the numbers: lab/docs/performance.md.
 """
 
 from __future__ import annotations
@@ -96,14 +98,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instead of timing: run a synthetic skin of --cells cells through skin drivers and one "
                         "window node per body part, each its own process, and report CPU per process, lost "
                         "frames, windows and whether it kept up in real time (lab/docs/performance.md, section Scale)")
+    p.add_argument("--view-overhead", action="store_true",
+                   help="instead of timing: feed the NAO's contact node at full rate (700 frames messages/s) "
+                        "with the views (its markers and images, tactile view with one page) and without, "
+                        "--rounds times each, and report the views' CPU against the 10 %% target (docs/view.md)")
+    p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead "
+                   "(default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
     p.add_argument("--parts", type=int, default=None,
                    help="body parts of --scale-graph, one driver and one window node each (default: one per 500 "
                         "cells)")
     p.add_argument("--seconds", type=float, default=30.0,
-                   help="measurement time of --scale-graph after the warm-up [s] (default 30)")
+                   help="measurement time of --scale-graph and of each --view-overhead run after the warm-up [s] "
+                        "(default 30)")
     p.add_argument("--settle-s", type=float, default=5.0,
-                   help="time between the first descriptor of every body part and the measurement [s] (default 5)")
+                   help="time between the first descriptor of every body part (--view-overhead: the first "
+                        "contact) and the measurement [s] (default 5)")
     p.add_argument("--warm-up-s", type=float, default=180.0,
                    help="longest wait for the first descriptor of every body part before --scale-graph measures "
                         "anyway [s] (default 180)")
@@ -138,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
         return _soak(args)
     if args.scale_graph:
         return _scale_graph(args)
+    if args.view_overhead:
+        return _view_overhead(args)
 
     from tactile_descriptors_lab.bench.bench import BenchMismatch, format_report, run_bench
     from tactile_descriptors_ros.core import fast
@@ -264,4 +276,32 @@ def _scale_graph(args: argparse.Namespace) -> int:
         return 1
     bar.close()
     print(json.dumps(report.to_dict(), default=float) if args.json else format_scale_graph(report))
+    return 0
+
+
+def _view_overhead(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from tactile_descriptors_lab.bench.view_overhead import format_view_overhead, measure
+
+    if args.rounds < 1 or not args.seconds > 0 or not args.settle_s >= 0:
+        print("tactile bench: error: --rounds and --seconds must be positive, --settle-s at least 0", file=sys.stderr)
+        return 2
+    bar = tqdm(total=2 * args.rounds, desc="view overhead", unit="run", file=sys.stderr, leave=False)
+    started = [0]
+
+    def progress(text: str) -> None:
+        if text.endswith("starting"):  # a run begins: the ones before it are done
+            bar.n = started[0]
+            started[0] += 1
+        bar.set_postfix_str(text)  # refreshes the bar
+
+    try:
+        report = measure(args.seconds, args.settle_s, args.rounds, progress=progress)
+    except (RuntimeError, ImportError) as exc:
+        bar.close()
+        print(f"tactile bench: error: view overhead failed: {exc}", file=sys.stderr)
+        return 1
+    bar.close()
+    print(json.dumps(report, default=float) if args.json else format_view_overhead(report))
     return 0

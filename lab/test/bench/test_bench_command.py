@@ -36,7 +36,8 @@ def test_bench_command_json_smoke(capsys):
     targets = report["targets"]
     assert set(targets) == {"shadow_hand_time", "nao_time", "nao_speedup", "skin_10000_time", "latency",
                             "latency_exploration", "latency_design_wait", "skin_10000_graph",
-                            "skin_10000_graph_2_hosts", "shadow_hand_best_mode_time", "nao_best_mode_time"}
+                            "skin_10000_graph_2_hosts", "view_overhead", "shadow_hand_best_mode_time",
+                            "nao_best_mode_time"}
     # the shipped feature groups, checked against the evaluation's values before they were timed
     best = {b["key"]: b for b in report["best_mode"]}
     assert best["shadow_hand"]["groups"] == ["per_channel", "bands", "levels", "statistics"]
@@ -61,6 +62,7 @@ def test_bench_command_json_smoke(capsys):
     assert targets["latency_exploration"]["met"] is None and targets["latency_design_wait"]["met"] is None
     assert targets["skin_10000_graph"]["met"] is None  # measured by tactile bench --scale-graph
     assert targets["skin_10000_graph_2_hosts"]["met"] is None  # ... --scale-graph --hosts 2
+    assert targets["view_overhead"]["met"] is None  # measured by tactile bench --view-overhead
 
 
 def test_bench_aborts_when_the_kernel_disagrees_with_the_reference(monkeypatch, capsys):

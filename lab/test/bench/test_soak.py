@@ -46,7 +46,7 @@ def test_bench_soak_command_reports_every_node(tmp_path):
                           "--soak-sample-s", "1", "--json"], capture_output=True, text=True, timeout=240)
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
-    assert set(d["nodes"]) == {"skin_driver", "window_node", "classifier_node"}
+    assert set(d["nodes"]) == {"skin_driver", "tf_publisher", "window_node", "contact_node", "classifier_node"}
     for n in d["nodes"].values():
         assert len(n["rss_mb"]) >= 5 and n["rss_end_mb"] > 0 and n["cpu_percent"] is not None
     assert set(d["lost_frames"]) == {"lost_frames", "bad_frames", "sequence_restart"}
