@@ -95,7 +95,7 @@ $(VENV)/.ament: Makefile $(VENV)/.installed resource/$(PKG) $(SHARE_FILES)
 	cp resource/$(PKG) $(VENV)/share/ament_index/resource_index/packages/$(PKG)
 	for f in $(SHARE_FILES); do mkdir -p $(VENV)/share/$(PKG)/$$(dirname $$f); \
 	  ln -sfn $(CURDIR)/$$f $(VENV)/share/$(PKG)/$$f; done
-	for exe in $$($(VPY) -c "import importlib.metadata as m; \
+	for exe in $$($(VPY) -I -c "import importlib.metadata as m; \
 	    print(*sorted(e.name for e in m.distribution('$(PKG)').entry_points if e.group == 'console_scripts'))"); do \
 	  ln -sfn ../../bin/$$exe $(VENV)/lib/$(PKG)/$$exe; done
 	touch $@
