@@ -220,29 +220,30 @@ def check_value(name: str, value: Any, default: Any, *, choices: Sequence[Any] |
     return value
 
 
-def _interrupt_once() -> Callable[[], bool]:
-    """Make SIGINT raise ``KeyboardInterrupt`` once and ignore the ones that follow; return "was it?".
+def _note_interrupts() -> Callable[[], bool]:
+    """Make SIGINT only *noted* by Python; return "did it come?".
 
-    A Ctrl-C in a terminal reaches a node twice: from the terminal (the whole
-    process group) and from ``ros2 launch``, which forwards it.  A second
-    ``KeyboardInterrupt`` would cut the clean-up short (a traceback from a
-    thread join or a service's destruction).  Installed before ``rclpy.init``,
-    whose handler wakes the executor and then calls this one.  The returned
-    function tells whether SIGINT came: the interrupt can surface as another
-    exception (pybind11 turns it into a ``RuntimeError`` when it lands inside a
-    call such as ``take_message``).
+    ``rclpy.init`` installs rclpy's own handler for SIGINT and SIGTERM, which
+    shuts the contexts down (the executor then returns from ``spin``) and
+    then calls the Python handler found at ``init``.  Python's default one
+    raises ``KeyboardInterrupt`` at whatever bytecode the main thread runs
+    next -- inside a callback, a thread join, or a ``__del__`` (where Python
+    can only print "Exception ignored in ..."); a second Ctrl-C (the terminal
+    sends one to the process group and ``ros2 launch`` forwards another) would
+    cut the clean-up short the same way.  So the handler installed here raises
+    nothing: shutdown goes through rclpy's path alone, and every callback,
+    ``close()`` and destructor runs to its end.  The returned function tells
+    whether SIGINT came (a call that failed because the context was shut down
+    under it is then a clean stop, not a fault).
     """
     import signal
-    import threading
 
     interrupted = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         return interrupted.is_set  # signal handlers can be set only from the main thread
 
     def handler(signum, frame):
-        if not interrupted.is_set():
-            interrupted.set()
-            raise KeyboardInterrupt
+        interrupted.set()
 
     signal.signal(signal.SIGINT, handler)
     return interrupted.is_set
@@ -420,46 +421,61 @@ def report_unknown_overrides(node) -> None:
                                 f"(see docs/nodes.md)")
 
 
-def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
+def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> int:
     """Create a node, spin it until Ctrl-C or shutdown, then clean up.
 
-    A :class:`~tactile_descriptors_ros.errors.TactileError` raised while
+    Ctrl-C (SIGINT) and SIGTERM go through rclpy's own shutdown path: its
+    handler shuts the context down and ``spin`` returns; nothing is raised
+    into the running code (:func:`_note_interrupts`).  A
+    :class:`~tactile_descriptors_ros.errors.TactileError` raised while
     building or spinning the node (misconfiguration, a device that cannot be
-    opened) is logged as a fatal error and gives exit code 2 -- a clear
-    message instead of a traceback.  The node's ``close()`` (if any) runs on
-    every exit path so devices are closed and models saved.
+    opened) is logged as a fatal error under the node's own logger (its name
+    after remapping, also when the constructor failed half-way) and gives
+    exit code 2 -- a clear message instead of a traceback.  The node's
+    ``close()`` (if any) runs on every exit path once the node was built, so
+    devices are closed and models saved.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    interrupted = _interrupt_once()
+    interrupted = _note_interrupts()
     rclpy.init(args=list(args) if args is not None else sys.argv)
-    node = None
+    node = None  # also a node whose constructor failed half-way: its logger has the node's name
+    built = False
     code = 0
     try:
-        node = factory()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+        if isinstance(factory, type):
+            node = factory.__new__(factory)
+            node.__init__()
+        else:
+            node = factory()
+        built = True
+        if rclpy.ok():  # a Ctrl-C during construction has shut the context down already
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            executor.spin()
+    except ExternalShutdownException:
         pass
     except TactileError as exc:
-        name = node.get_name() if node is not None else "node"
-        print(f"[FATAL] [{name}]: {exc}", file=sys.stderr, flush=True)
+        _logger_of(node, factory).fatal(str(exc))
         code = 2
     except Exception:
         if rclpy.ok() and not interrupted():
             raise
-        # a callback was cut short by Ctrl-C (e.g. publishing after the context shut down): a clean stop
+        # a call failed because Ctrl-C shut the context down under it: a clean stop
     finally:
-        if node is not None:
+        if node is not None and built:
             close = getattr(node, "close", None)
             if close is not None:
                 try:
                     close()
                 except Exception as exc:  # noqa: BLE001 - report, keep shutting down
-                    print(f"[ERROR] [{node.get_name()}]: while closing: {exc!r}", file=sys.stderr, flush=True)
-            node.destroy_node()
+                    _logger_of(node, factory).error(f"while closing: {exc!r}")
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - a constructor that failed before rclpy made the node
+                pass
         rclpy.try_shutdown()
         _ignore_interrupts()
         # Everything is closed and saved: spare the exit a full garbage collection of the node's
@@ -467,6 +483,23 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
         # ros2 launch would escalate to SIGTERM).
         gc.freeze()
     return code
+
+
+def _logger_of(node: Any, factory: Callable[..., Any]):
+    """The node's logger (named after the node as remapped); before rclpy made the node, one of its default name."""
+    import inspect
+
+    from rclpy.logging import get_logger
+
+    try:
+        return node.get_logger()
+    except Exception:  # noqa: BLE001 - the constructor failed before Node.__init__ set the logger up
+        pass
+    try:
+        name = inspect.signature(factory).parameters["node_name"].default
+    except (KeyError, TypeError, ValueError):
+        name = getattr(factory, "__name__", "node")
+    return get_logger(str(name))
 
 
 def _ignore_interrupts() -> None:
