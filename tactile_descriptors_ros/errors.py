@@ -11,6 +11,7 @@ from __future__ import annotations
 __all__ = [
     "TactileError",
     "ConfigError",
+    "SchemaError",
     "SignalError",
     "CodecError",
     "ParityError",
@@ -54,6 +55,14 @@ class ConfigError(TactileError, ValueError):
         if key:
             where += f"'{key}': "
         super().__init__(where + message)
+
+
+class SchemaError(ConfigError):
+    """A node's parameter schema is wrong (a name given twice, an unknown type, a default outside its range).
+
+    Keyed ``<executable>.<parameter>``; raised when the schema is built, so a
+    broken schema fails every import and test of its node.
+    """
 
 
 class SignalError(TactileError, ValueError):

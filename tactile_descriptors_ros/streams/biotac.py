@@ -382,12 +382,12 @@ class BiotacStream:
         return (float(np.mean(last)) - st.tare_pdc) * self.force_n_per_count
 
     def tare_one(self, st: SensorState, window_s: float, check_contact: bool,
-                 contact_threshold_n: float = float("inf")) -> tuple[bool, str]:
+                 force_threshold_n: float = float("inf")) -> tuple[bool, str]:
         """Zero the PDC and electrode baselines over the last ``window_s`` of frames."""
         if check_contact:
             f = self.force_now(st)
-            if f is not None and f >= contact_threshold_n:
-                return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {contact_threshold_n} N)"
+            if f is not None and f >= force_threshold_n:
+                return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {force_threshold_n} N)"
         if not st.recent_pdc:
             return False, f"{st.cfg.sensor_name}: no valid PDC samples yet"
         newest = st.recent_pdc[-1][0]

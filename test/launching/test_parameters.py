@@ -9,46 +9,8 @@ import pytest
 
 from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.launching.graph import build_graph
-from tactile_descriptors_ros.launching.parameters import BUILTIN_PARAMETERS, PARAMETER_TYPES, check_parameters
+from tactile_descriptors_ros.launching.parameters import check_parameters
 from tactile_descriptors_ros.tools.cli import main
-
-
-def _node(executable, ros_context):
-    from rclpy.parameter import Parameter
-
-    if executable == "window_node":
-        from tactile_descriptors_ros.nodes.window_node import WindowNode
-
-        return WindowNode(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand")])
-    if executable == "classifier_node":
-        from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
-
-        return ClassifierNode(context=ros_context, parameter_overrides=[Parameter("load_model", value=False)])
-    if executable == "biotac_driver":
-        from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver as cls
-
-        robot = "shadow_hand"
-    else:
-        from tactile_descriptors_ros.nodes.skin_driver import SkinDriver as cls
-
-        robot = "nao"
-    return cls(context=ros_context, parameter_overrides=[Parameter("robot", value=robot),
-                                                         Parameter("autostart", value=False)])
-
-
-@pytest.mark.ros
-@pytest.mark.parametrize("executable", sorted(PARAMETER_TYPES))
-def test_parameter_table_is_what_the_node_declares(ros_context, executable):
-    from rclpy.parameter import Parameter
-
-    node = _node(executable, ros_context)
-    try:
-        names = node.list_parameters([], 0).names
-        declared = {n: Parameter.Type(node.get_parameter(n).type_).name.lower() for n in names}
-    finally:
-        node.destroy_node()
-    want = {**{k: v for k, v in BUILTIN_PARAMETERS.items() if k in declared}, **PARAMETER_TYPES[executable]}
-    assert declared == want
 
 
 def test_integer_for_a_double_is_widened_and_other_types_refused():
