@@ -394,7 +394,7 @@ class WindowNode(Node):
         for part, meter in self._rates.items():
             values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin cell batches/s
             seen = self._last_seen.get(part)
-            if seen is None or now - seen > 2.0:
+            if seen is None or now - seen > self.params["diagnostics.silent_after_s"]:
                 silent.append(part)
         values.update({f"fault_{k}": v for k, v in sorted(faults.items())})
         values.update({f"quality_{k}": v for k, v in self.last_quality.items()})

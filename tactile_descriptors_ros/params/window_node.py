@@ -63,6 +63,8 @@ WINDOW_NODE = NodeSchema("window_node", join(
           "handed to the windower at once (0 = one per callback; lab/docs/latency.md)", default=1000,
           range=(0, 1_000_000), unit="messages", tunable=True),
     diagnostics_period(),
+    Param("diagnostics.silent_after_s", "double", "a served body part that sent no frames for this long is reported "
+          "silent (WARN)", default=2.0, unit="s", range=(0.1, 3600.0), tunable=True),
     qos("frames", "best_effort", "volatile", 256),
     qos("descriptor", "reliable", "volatile", 10),
 ))

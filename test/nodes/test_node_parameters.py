@@ -326,3 +326,36 @@ def test_scene_end_is_announced_and_diagnostics_say_so(ros_context, tmp_path):
     finally:
         drv.close()
         drv.destroy_node()
+
+
+def test_silent_after_is_set_at_run_time(ros_context):
+    """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch
+
+    w = _window(ros_context, qos__frames__reliability="reliable")
+    io = rclpy.create_node("io", context=ros_context)
+    pub = io.create_publisher(BioTacFrameBatch, "tactile/index/frames", 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(w)
+    ex.add_node(io)
+
+    def status():
+        return w.diagnostics.statuses()[0].message
+
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 30)
+        assert w.set_parameters([Parameter("diagnostics.silent_after_s", value=3600.0)])[0].successful
+        pub.publish(BiotacStream().batch(0.0, 40.0))
+        assert spin_until(ex, lambda: w.frames_taken >= 1, 30)
+        assert "no frames from" not in status()
+        r = w.set_parameters([Parameter("diagnostics.silent_after_s", value=0.1)])[0]
+        assert r.successful, r.reason
+        assert spin_until(ex, lambda: "no frames from index" in status(), 30)
+    finally:
+        ex.shutdown()
+        w.destroy_node()
+        io.destroy_node()
