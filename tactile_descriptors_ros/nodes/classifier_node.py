@@ -64,9 +64,9 @@ from ..core.model_store import ModelLock, ModelStore, layout_file_name
 from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
 from ..params.classifier_node import CLASSIFIER_NODE
-from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
+from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC, layout_topic
 from .common import Diagnostics, Status, run_node
-from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
+from .conversions import DescriptorLayouts, DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
 from .parameters import NodeParameters
 from .qos import qos_of
 
@@ -124,7 +124,7 @@ class ClassifierNode(Node):
         from rclpy.event_handler import SubscriptionEventCallbacks
         from std_srvs.srv import Trigger
 
-        from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+        from tactile_descriptors_msgs.msg import Descriptor, DescriptorLayout, Label, Prediction
         from tactile_descriptors_msgs.srv import LearnLabel
 
         self.holder = self.get_fully_qualified_name()
@@ -181,6 +181,11 @@ class ClassifierNode(Node):
         self.sub_desc = self.create_subscription(
             Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, qos_desc,
             event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("descriptors_lost", e)))
+        # the labels of the descriptors' values, sent once per layout on the (latched) layout topic; a descriptor
+        # that arrives before its layout waits for it (at most LAYOUT_WAIT_S, at most label_horizon of them)
+        self.layouts = DescriptorLayouts(max_held=params["label_horizon"], wait_s=self.LAYOUT_WAIT_S)
+        self.sub_layout = self.create_subscription(DescriptorLayout, layout_topic(self.sub_desc.topic_name),
+                                                   self._on_layout, qos_of(params, "layout"))
         self.sub_label = self.create_subscription(
             Label, LABEL_TOPIC, self._on_label, qos_label,
             event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("labels_lost", e)))
@@ -193,7 +198,7 @@ class ClassifierNode(Node):
         self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("classifier", self._status)
         # what waits in stamp order is released when its wait runs out, even if nothing else arrives
-        self.order_timer = self.create_timer(0.05, lambda: self.order.poll(time.monotonic()))
+        self.order_timer = self.create_timer(0.05, self._poll)
         params.finish()
         where = self.given_path or self.model_folder / "<layout>.json"
         self.get_logger().info(f"model file {where}; predictions on {self.pub.topic_name} "
@@ -267,10 +272,35 @@ class ClassifierNode(Node):
             self.model = self._new_model(sample.labels)
         return self.model
 
+    #: longest wait of a descriptor for its layout [s]
+    LAYOUT_WAIT_S = 10.0
+
+    def _poll(self) -> None:
+        """Timer: release what waits in stamp order past its wait; drop descriptors whose layout never came."""
+        now = time.monotonic()
+        for msg in self.layouts.expire(now):
+            self.get_logger().warning(
+                f"descriptor of exploration {msg.exploration_id} names layout {msg.layout_id!r}, which did not come "
+                f"on {self.sub_layout.topic_name} within {self.LAYOUT_WAIT_S:g} s: dropped", throttle_duration_sec=5.0)
+        self.order.poll(now)
+
+    def _on_layout(self, msg) -> None:
+        """A ``DescriptorLayout``: learn its labels, then take the descriptors that waited for it."""
+        held = self.layouts.add(msg)
+        if msg.layout_id not in self.layouts.labels:
+            self.get_logger().warning(f"layout {msg.layout_id!r} refused: its id is not the id of its labels",
+                                      throttle_duration_sec=5.0)
+        for waiting in held:
+            self._on_descriptor(waiting)
+
     # ------------------------------------------------------------ descriptors
     def _on_descriptor(self, msg) -> None:
+        labels = self.layouts.of(msg)
+        if labels is None:
+            self.layouts.hold(msg, time.monotonic())
+            return
         try:
-            sample = descriptor_from_msg(msg)
+            sample = descriptor_from_msg(msg, labels)
         except SignalError as exc:
             self.counts["malformed_descriptor"] += 1
             self.get_logger().warning(f"malformed descriptor: {exc}", throttle_duration_sec=5.0)
@@ -478,7 +508,9 @@ class ClassifierNode(Node):
                   "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held,
                   "waiting_in_stamp_order": self.order.waiting,
                   "compactions": store.compactions if store else 0,
-                  "compaction_failures": store.compaction_failures if store else 0}
+                  "compaction_failures": store.compaction_failures if store else 0,
+                  "layouts": len(self.layouts.labels), "waiting_for_layout": self.layouts.held,
+                  "unknown_layout": self.layouts.unknown, "bad_layout": self.layouts.bad}
         values.update({k: v for k, v in sorted((self.counts + self.labels.counts + self.order.counts).items())})
         if self.layout_error:
             return Status("error", self.layout_error, values)
@@ -489,6 +521,9 @@ class ClassifierNode(Node):
                           values)
         refused = {k: v for k, v in sorted(self.labels.counts.items()) if v and k not in ("labels_learned",
                                                                                           "early_labels")}
+        if self.layouts.unknown or self.layouts.bad:
+            return Status("warn", f"{self.layouts.unknown} descriptors whose layout never came on "
+                                  f"{self.sub_layout.topic_name}, {self.layouts.bad} layouts refused", values)
         lost = {k: self.counts[k] for k in ("labels_lost", "descriptors_lost", "reset_refused") if self.counts[k]}
         if refused or lost or self.counts["malformed_descriptor"]:
             what = ", ".join(f"{k}={v}" for k, v in {**refused, **lost}.items())

@@ -57,11 +57,13 @@ from ..core.robot import check_blocks, load_robot, select_body_parts
 from ..core.windowing import CellChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
-from ..topics import DESCRIPTOR_TOPIC
+from ..topics import DESCRIPTOR_TOPIC, layout_topic
 from .common import Diagnostics, RateMeter, Status, run_node, steady_clock
 from .conversions import (
     biotac_msg_to_chunk,
+    descriptor_layout_to_msg,
     descriptor_to_msg,
+    layout_id,
     message_kind,
     skin_part_msg_to_chunks,
 )
@@ -77,7 +79,7 @@ class WindowNode(Node):
 
     def __init__(self, node_name: str = "window_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, SkinPartFrames
+        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout, SkinPartFrames
 
         self.params = params = NodeParameters(self, WINDOW_NODE)
         robot_arg = params.declare("robot")
@@ -121,6 +123,10 @@ class WindowNode(Node):
         qos_frames = qos_of(params, "frames")
         qos_desc = qos_of(params, "descriptor")
         self.pub = self.create_publisher(Descriptor, DESCRIPTOR_TOPIC, qos_desc)
+        # the labels of the values, once per layout, latched beside the descriptors (remapped with them)
+        self.layout_pub = self.create_publisher(DescriptorLayout, layout_topic(self.pub.topic_name),
+                                                qos_of(params, "layout"))
+        self.layouts_published: set[str] = set()
         self._cells_by_name: dict[tuple[str, str], int] = {}
         self._extra: dict[str, tuple[str, ...]] = {}  # body part -> its cell type's extra channels
         self.subs = []
@@ -361,7 +367,12 @@ class WindowNode(Node):
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
             return
         eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
-        msg = descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid)
+        layout = layout_id(desc.labels)
+        if layout not in self.layouts_published:  # before the first descriptor that names it
+            self.layout_pub.publish(descriptor_layout_to_msg(desc, frame_id=self.params["frame_id"],
+                                                             stamp_ns=self.get_clock().now().nanoseconds))
+            self.layouts_published.add(layout)
+        msg = descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid, layout=layout)
         self.pub.publish(msg)
         self._describe_ms.append(1e3 * (time.perf_counter() - started))
         self.descriptors_published += 1

@@ -78,6 +78,7 @@ CLASSIFIER_NODE = NodeSchema("classifier_node", join(
           tunable=True, check=_frame_id_or_empty, max_chars=256),
     diagnostics_period(),
     qos("descriptor", "reliable", "volatile", 50),
+    qos("layout", "reliable", "transient_local", 100),
     qos("label", "reliable", "volatile", 1000, history="keep_all"),
     qos("prediction", "reliable", "volatile", 50),
 ))

@@ -67,4 +67,5 @@ WINDOW_NODE = NodeSchema("window_node", join(
           "silent (WARN)", default=2.0, unit="s", range=(0.1, 3600.0), tunable=True),
     qos("frames", "best_effort", "volatile", 256),
     qos("descriptor", "reliable", "volatile", 10),
+    qos("layout", "reliable", "transient_local", 1),
 ))

@@ -19,11 +19,19 @@ from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
-
 import yaml
+from test_ros2_launch import (
+    BIN,
+    CLI_S,
+    FIRST_PREDICTION_S,
+    PKG,
+    SCENES,
+    Graph,
+    _sigint_default,
+    long_scene,
+    start_launch,
+)
 
-from test_ros2_launch import (BIN, CLI_S, FIRST_PREDICTION_S, PKG, SCENES, Graph, _sigint_default, long_scene,
-                              start_launch)
 from tactile_descriptors_ros.launching.graph import build_graph
 from tactile_descriptors_ros.params import SCHEMAS
 
