@@ -25,6 +25,7 @@ __all__ = [
     "SceneError",
     "DataFormatError",
     "BagError",
+    "NodeExitedError",
 ]
 
 
@@ -119,3 +120,19 @@ class DataFormatError(TactileError, ValueError):
 
 class BagError(TactileError):
     """A bag could not be written, read or replayed."""
+
+
+class NodeExitedError(TactileError):
+    """A node of a launched graph ended on its own: the launch ends too, naming the node and its exit code.
+
+    Parameters
+    ----------
+    node : str
+    code : int
+    """
+
+    def __init__(self, node: str, code: int) -> None:
+        self.node = node
+        self.code = code
+        super().__init__(f"node {node} exited with code {code}: stopping the launch (a graph with a node "
+                         "missing recognises nothing)")

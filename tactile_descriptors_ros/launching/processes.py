@@ -5,7 +5,7 @@ What ``ros2 launch`` does for the package's own nodes, on a machine without
 :class:`~.graph.NodeSpec` becomes one process::
 
     <python> -m tactile_descriptors_ros.nodes.<executable> --ros-args
-        -r __node:=<name> [-r __ns:=/<namespace>] --params-file <tmp yaml> [-r from:=to ...]
+        -r __node:=<name> [-r __ns:=/<namespace>] --params-file <tmp yaml> [--log-level L] [-r from:=to ...]
 
 started with this interpreter (the venv's own python: the ROS wheels'
 bootstrapper has set the library paths of this process, and children
@@ -58,6 +58,8 @@ def node_command(spec: NodeSpec, params_file: str | os.PathLike[str], python: st
     if ns:
         cmd += ["-r", f"__ns:=/{ns}"]
     cmd += ["--params-file", os.fspath(params_file)]
+    if spec.log_level:
+        cmd += ["--log-level", spec.log_level]
     for src, dst in spec.remappings:
         cmd += ["-r", f"{src}:={dst}"]
     return cmd
