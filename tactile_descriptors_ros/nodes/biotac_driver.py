@@ -48,7 +48,15 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, FramePattern
 from ..errors import ConfigError
 from ..params.biotac_driver import BIOTAC_DRIVER
-from ..streams.biotac import BiotacStream, BridgeFrameSource, ReadItem, SensorConfig, SensorState, SpiFrameSource
+from ..streams.biotac import (
+    RECENT_FRAMES,
+    BiotacStream,
+    BridgeFrameSource,
+    ReadItem,
+    SensorConfig,
+    SensorState,
+    SpiFrameSource,
+)
 from ..streams.frames import BioTacBatch
 from .common import RateMeter, Status, run_node
 from .conversions import biotac_batch_to_msg
@@ -110,6 +118,11 @@ class BiotacDriver(DriverBase):
         self._start([("transport", self._transport_status)]
                     + [(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
                        for cs, cfg in sorted(self.sensors.items())])
+
+    def _tare_history(self) -> tuple[float, str]:
+        frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
+        return RECENT_FRAMES / frame_hz, (f"{RECENT_FRAMES} frames at {frame_hz:g} frames/s from word_rate_hz and "
+                                          "frame_pattern")
 
     def _track_alpha(self, track_s: float) -> float:
         """The weight of one frame in the baseline that follows drift with time constant ``track_s`` (0 = off)."""

@@ -123,10 +123,34 @@ class DriverBase(LifecycleNode):
         self.qos_frames = qos_of(params, "frames")
         return full, served
 
+    def _tare_history(self) -> tuple[float, str]:
+        """How long the stream keeps samples for a tare [s], and what decides it (for a refusal's reason)."""
+        raise NotImplementedError
+
+    def _check_tare_window(self, name: str, window_s: float) -> None:
+        """A tare averages the samples the stream keeps: a longer window would silently be a shorter one.
+
+        Raises
+        ------
+        ConfigError
+            Naming ``name`` and what decides the history.
+        """
+        history_s, why = self._tare_history()
+        if window_s > history_s:
+            raise ConfigError(f"{window_s:g} s is longer than the {history_s:g} s of samples the driver keeps for a "
+                              f"tare ({why})", key=name)
+
+    def _tare_window_hook(self, values, changed):
+        """``ros2 param set ... tare.window_s``: checked against the history; the next ``~/tare`` reads it."""
+        self._check_tare_window("tare.window_s", values["tare.window_s"])
+
     def _start(self, tasks: Iterable[tuple[str, Callable[[], Status]]]) -> None:
         """Create ``~/tare`` and the diagnostics (``tasks``), then configure and activate if ``autostart``."""
         from std_srvs.srv import Trigger
 
+        for name in ("tare_on_start_s", "tare.window_s"):
+            self._check_tare_window(name, self.params[name])
+        self.params.on_set("tare", self._tare_window_hook)
         self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
         self.diagnostics = Diagnostics(self, self.params["diagnostics_period_s"], hardware_id=self.transport_name)
         for name, task in tasks:

@@ -45,7 +45,7 @@ from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..params.skin_driver import SKIN_DRIVER
-from ..streams.skin import CellState, SkinStream
+from ..streams.skin import RECENT_FORCE, CellState, SkinStream
 from ..streams.skin_parts import PartGatherer, SkinRun, pack_skin_part
 from .common import RateMeter, Status, run_node
 from .conversions import skin_part_to_msg
@@ -94,6 +94,10 @@ class SkinDriver(DriverBase):
         self.part_messages: dict[str, int] = {p.name: 0 for p in self.robot.body_parts}
         self._start([("bus", self._bus_status)]
                     + [(part.name, lambda p=part: self._part_status(p)) for part in self.robot.body_parts])
+
+    def _tare_history(self) -> tuple[float, str]:
+        return RECENT_FORCE / self.force_rate_hz, (f"{RECENT_FORCE} force samples at the robot's "
+                                                   f"{self.force_rate_hz:g} Hz")
 
     # ------------------------------------------------------------- lifecycle
     def _simulated_source(self):

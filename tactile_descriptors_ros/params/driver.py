@@ -29,9 +29,11 @@ def driver_params(*, kind: str, transports: tuple[str, ...], transport: str, tra
               default="clock", choices=("clock", "device")),
         Param("resync_s", "double", "re-anchor clock stamps when they drift this far from the node clock "
               "(0 = never)", default=1.0, unit="s", range=(0.0, 3600.0)),
-        Param("tare_on_start_s", "double", tare_on_start, default=0.5, unit="s", range=(0.0, 60.0)),
-        Param("tare.window_s", "double", f"{tare_window}; applies to the next ~/tare", default=0.2, unit="s",
-              range=(0.01, 60.0), tunable=True),
+        Param("tare_on_start_s", "double", f"{tare_on_start}; at most the samples the driver keeps (BioTac: "
+              "2000 frames, 20 s at 100 frames/s; skin cell: 500 force samples, 2 s at 250 Hz)", default=0.5, unit="s",
+              range=(0.0, 60.0)),
+        Param("tare.window_s", "double", f"{tare_window}; applies to the next ~/tare; at most the samples the driver "
+              "keeps (as tare_on_start_s)", default=0.2, unit="s", range=(0.01, 60.0), tunable=True, apply="tare"),
         Param("contact.force_threshold_n", "double", "contact gate F_t: ~/tare is refused at or above this force"
               f"{tare_window_tunable_text}", robot="contact.force_threshold_n", unit="N", range=(0.0, MAX_FORCE_N),
               tunable=True),

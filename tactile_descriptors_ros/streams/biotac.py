@@ -28,7 +28,11 @@ from ..codecs.sequence import Unwrapper
 from ..errors import CodecError
 from .frames import BioTacBatch
 
-__all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream"]
+__all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream",
+           "RECENT_FRAMES"]
+
+#: Frames kept per BioTac for ~/tare and the contact check.
+RECENT_FRAMES = 2000
 
 
 @dataclass
@@ -191,8 +195,8 @@ class SensorState:
 
     cfg: SensorConfig
     frames: list[tuple[int, int, BiotacFrames]] = field(default_factory=list)  # (seq, stamp_ns, frames)
-    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, pdc)
-    recent_el: deque = field(default_factory=lambda: deque(maxlen=2000))  # (stamp_ns, electrodes)
+    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))  # (stamp_ns, pdc)
+    recent_el: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))  # (stamp_ns, electrodes)
     tare_pdc: float = 0.0
     tare_electrodes: np.ndarray | None = None
     tared: bool = False

@@ -359,3 +359,26 @@ def test_silent_after_is_set_at_run_time(ros_context):
         ex.shutdown()
         w.destroy_node()
         io.destroy_node()
+
+
+def test_a_tare_window_longer_than_the_kept_samples_is_refused(ros_context):
+    """A tare averages the samples the stream keeps (a BioTac's last 2000 frames: 20 s at 100 frames/s; a skin
+    cell's last 500 force samples: 2 s at 250 Hz): a longer window is refused, not silently shortened."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.errors import ConfigError
+    from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver
+    from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
+
+    common = [Parameter("transport", value="loopback"), Parameter("autostart", value=False)]
+    drv = BiotacDriver(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand"), *common])
+    try:
+        assert drv.set_parameters([Parameter("tare.window_s", value=20.0)])[0].successful
+        r = drv.set_parameters([Parameter("tare.window_s", value=20.5)])[0]
+        assert not r.successful and "longer than the 20 s of samples" in r.reason and "word_rate_hz" in r.reason
+        assert drv.params["tare.window_s"] == 20.0
+    finally:
+        drv.destroy_node()
+    with pytest.raises(ConfigError, match=r"'tare_on_start_s': 3 s is longer than the 2 s .* 250 Hz"):
+        SkinDriver(context=ros_context, parameter_overrides=[Parameter("robot", value="nao"),
+                                                             Parameter("tare_on_start_s", value=3.0), *common])
