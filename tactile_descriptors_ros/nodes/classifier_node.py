@@ -127,6 +127,9 @@ class ClassifierNode(Node):
         from tactile_descriptors_msgs.msg import Descriptor, DescriptorLayout, Label, Prediction
         from tactile_descriptors_msgs.srv import LearnLabel
 
+        # set first: destroy_node releases them, also after a constructor that raised (a refused parameter)
+        self.store: ModelStore | None = None
+        self.folder_lock: ModelLock | None = None
         self.holder = self.get_fully_qualified_name()
         self.params = params = NodeParameters(self, CLASSIFIER_NODE)
         robot_arg = params.declare("robot")
@@ -156,8 +159,6 @@ class ClassifierNode(Node):
         self.enable_reset = params["enable_reset"]
 
         self.model: OnlineClassifier | None = None
-        self.store: ModelStore | None = None
-        self.folder_lock: ModelLock | None = None
         self.layout_error: str | None = None
         # ModelError: another node holds the file or folder, or the file is corrupt -> refuse to start
         if self.given_path is not None:
@@ -260,8 +261,8 @@ class ClassifierNode(Node):
 
     def _new_model(self, labels) -> OnlineClassifier:
         """An empty model of a descriptor layout, with this node's learning parameters."""
-        return OnlineClassifier(labels, eta=self.params["eta"], log_activity=self.log_activity, standardize=self.standardize,
-                                update=self.pa_update, average=self.pa_average)
+        return OnlineClassifier(labels, eta=self.params["eta"], log_activity=self.log_activity,
+                                standardize=self.standardize, update=self.pa_update, average=self.pa_average)
 
     def _model_for(self, sample: DescriptorSample) -> OnlineClassifier:
         """The model descriptors of this layout are predicted with (opening the layout's file with a default path)."""
