@@ -30,7 +30,11 @@ def test_descriptor_comments_name_what_the_window_node_sends():
     assert f'"{shipped}"' in _comment("Descriptor.msg", "channel_mode")
     assert "DescriptorLayout" in _comment("Descriptor.msg", "layout_id")
     assert "empty" in _comment("Descriptor.msg", "labels")
-    assert "Crammer" in (REPO / "msg" / "msg" / "Prediction.msg").read_text()  # the shipped update is max-loss
+    from tactile_descriptors_ros.params.classifier_node import CLASSIFIER_NODE
+
+    update = {"arow": "AROW", "max_loss": "Crammer et al.'s max-loss update", "prediction": "PA-I"}
+    shipped_update = update[CLASSIFIER_NODE["pa_update"].default]
+    assert f"by default {shipped_update}" in (REPO / "msg" / "msg" / "Prediction.msg").read_text()
     assert "descriptor's" in _comment("Prediction.msg", "header")
 
 
