@@ -8,6 +8,7 @@
 #   make demo     set everything up, then run a simulated robot through the live graph
 #   make report   regenerate lab/docs/results.md and its plots from the real recordings
 #   make report-length  only its touch-length sections (minutes, not an hour)
+#   make report-headline  only its headline table (the figures the README quotes first)
 #   make protocols  the paper's protocols on simulated robots (lab/docs/simulated.md)
 #   make bench    time the descriptor path against a naive baseline
 #   make clean    remove the venv and build products
@@ -41,7 +42,7 @@ export AMENT_PREFIX_PATH := $(VIRTUAL_ENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PRE
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
-.PHONY: setup test demo demo-nao report report-length protocols bench fuzz clean
+.PHONY: setup test demo demo-nao report report-length report-headline protocols bench fuzz clean
 
 setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli $(VENV)/.kernel
 
@@ -143,6 +144,9 @@ demo-nao: setup
 
 report: setup
 	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --readme README.md
+
+report-headline: setup
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --only headline --readme README.md
 
 report-length: setup
 	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --only length --readme README.md

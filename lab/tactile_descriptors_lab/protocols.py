@@ -57,7 +57,8 @@ import yaml
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
 from tactile_descriptors_ros.core.cell_types import CellType
 from tactile_descriptors_ros.core.robot import RobotDescription
-from tactile_descriptors_ros.errors import ConfigError, SceneError
+from tactile_descriptors_ros.core.tare import resting_level
+from tactile_descriptors_ros.errors import ConfigError, SceneError, SignalError
 from tactile_descriptors_ros.sim.engine import CellRecord, ExplorationTiming, SimResult, Stream, iter_simulate
 from tactile_descriptors_ros.sim.scene import Scene, parse_scene, scene_path
 
@@ -421,13 +422,18 @@ def _clean(st: Stream, rows: np.ndarray, sl: slice) -> tuple[np.ndarray, np.ndar
 
 
 def _tare(cell: CellRecord, cell_type: CellType, t0_ns: int, t1_ns: int) -> np.ndarray:
-    """Per force channel: median of the valid samples in [t0, t1) (no contact)."""
+    """Per force channel: the resting level over the valid samples in [t0, t1) (no contact).
+
+    :func:`~tactile_descriptors_ros.core.tare.resting_level` over a span at
+    rest (``rest_percentile`` 100), as a driver's ``~/tare`` takes it.
+    """
     st, rows = _stream_with(cell, cell_type.force.channels)
     vals, _, _, _ = _clean(st, rows, _span(st, t0_ns, t1_ns))
-    if vals.shape[1] < 3:
-        raise SceneError(f"cell {cell.cell_id}: fewer than 3 force samples without contact to tare on "
-                         f"(pause too short?)", key="explorations.pause_s")
-    return np.median(vals.astype(np.float64), axis=1)
+    try:
+        return resting_level(vals).reference
+    except SignalError as e:
+        raise SceneError(f"cell {cell.cell_id}: no force level without contact to tare on ({e}; pause too "
+                         "short?)", key="explorations.pause_s") from None
 
 
 def exploration_signals(result: SimResult, timing: ExplorationTiming, robot: RobotDescription, *,

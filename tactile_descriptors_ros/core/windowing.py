@@ -37,7 +37,7 @@ from ..errors import ConfigError, SignalError
 from .aggregation import CellSignals
 from .robot import RobotDescription
 
-__all__ = ["CellChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S", "BUFFER_HEADROOM",
+__all__ = ["CellChunk", "PartChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S", "BUFFER_HEADROOM",
            "BUFFER_SLACK_S"]
 
 #: Exploration mode judges contact only up to the time every cell has sent
@@ -55,6 +55,10 @@ WATERMARK_STALL_S = 0.5
 BUFFER_HEADROOM = 1.5
 #: Seconds of samples a buffer holds beyond the retained span [s].
 BUFFER_SLACK_S = 2.0
+
+#: Samples older than the kept span are dropped once the span's start has moved by this much [ns] (not at
+#: every poll: a poll then costs nothing per cell).
+TRIM_STEP_NS = 100_000_000
 
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
@@ -95,6 +99,81 @@ class CellChunk:
     deformation_valid: np.ndarray | None = None
     extra: np.ndarray | None = None
     deformation_tare: np.ndarray | None = None
+
+
+@dataclass
+class PartChunk:
+    """Samples of several cells from one message, as runs: run ``i`` is cell ``cell_ids[i]``'s samples.
+
+    Every sample array is the concatenation of the runs' samples in run
+    order; ``vibration_count[i]`` and ``deformation_count[i]`` say how many
+    each run holds (force samples ride on the deformation stamps, one each).
+    :meth:`Windower.add_part` takes it with a few array operations per
+    message; :meth:`chunks` gives the same samples as one :class:`CellChunk`
+    per run (what :meth:`Windower.add_many` takes, the reference).
+
+    Attributes
+    ----------
+    cell_ids, vibration_count, deformation_count : numpy.ndarray of int64, shape (n_runs,)
+    vibration : numpy.ndarray, shape (n_s, sum(vibration_count))
+    vibration_t_ns : numpy.ndarray of int64
+    deformation : numpy.ndarray, shape (n_v, sum(deformation_count))
+    deformation_t_ns : numpy.ndarray of int64
+    force_n : numpy.ndarray of float64, shape (sum(deformation_count),)
+    vibration_valid, deformation_valid : numpy.ndarray of bool, optional
+    extra : numpy.ndarray, shape (n_extra, sum(deformation_count)), optional
+    deformation_tare : numpy.ndarray, shape (n_runs, n_v), optional
+    """
+
+    cell_ids: np.ndarray
+    vibration_count: np.ndarray
+    deformation_count: np.ndarray
+    vibration: np.ndarray
+    vibration_t_ns: np.ndarray
+    deformation: np.ndarray
+    deformation_t_ns: np.ndarray
+    force_n: np.ndarray
+    vibration_valid: np.ndarray | None = None
+    deformation_valid: np.ndarray | None = None
+    extra: np.ndarray | None = None
+    deformation_tare: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(len(self.cell_ids))
+
+    def take(self, runs: np.ndarray) -> PartChunk:
+        """The runs selected by a boolean mask, as a new chunk (arrays copied only where runs are left out)."""
+        runs = np.asarray(runs, bool)
+        if runs.all():
+            return self
+        a = np.repeat(runs, self.vibration_count)
+        d = np.repeat(runs, self.deformation_count)
+        return PartChunk(
+            self.cell_ids[runs], self.vibration_count[runs], self.deformation_count[runs],
+            self.vibration[:, a], self.vibration_t_ns[a], self.deformation[:, d], self.deformation_t_ns[d],
+            self.force_n[d], None if self.vibration_valid is None else self.vibration_valid[a],
+            None if self.deformation_valid is None else self.deformation_valid[d],
+            None if self.extra is None else self.extra[:, d],
+            None if self.deformation_tare is None else self.deformation_tare[runs])
+
+    def chunks(self) -> list[tuple[int, CellChunk]]:
+        """One :class:`CellChunk` per run, in run order (slices of these arrays)."""
+        out = []
+        a_end = np.cumsum(self.vibration_count).tolist()
+        d_end = np.cumsum(self.deformation_count).tolist()
+        a0 = d0 = 0
+        for i, cid in enumerate(np.asarray(self.cell_ids).tolist()):
+            a1, d1 = a_end[i], d_end[i]
+            out.append((int(cid), CellChunk(
+                vibration=self.vibration[:, a0:a1], vibration_t_ns=self.vibration_t_ns[a0:a1],
+                deformation=self.deformation[:, d0:d1], deformation_t_ns=self.deformation_t_ns[d0:d1],
+                force_n=self.force_n[d0:d1], force_t_ns=self.deformation_t_ns[d0:d1],
+                vibration_valid=None if self.vibration_valid is None else self.vibration_valid[a0:a1],
+                deformation_valid=None if self.deformation_valid is None else self.deformation_valid[d0:d1],
+                extra=None if self.extra is None else self.extra[:, d0:d1],
+                deformation_tare=None if self.deformation_tare is None else self.deformation_tare[i])))
+            a0, d0 = a1, d1
+        return out
 
 
 @dataclass
@@ -216,19 +295,258 @@ class SampleStream:
         return self._t[sl].copy(), self._v[:, sl].copy(), self._ok[sl].copy()
 
 
-class _CellState:
-    def __init__(self, n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype, n_extra: int = 0,
-                 capacity: tuple[int, int, int] = (256, 256, 256)) -> None:
+class _RowBuffer:
+    """The samples of several streams (rows: the cells of one body part) in one set of 2-D arrays.
+
+    Row ``r`` holds its samples between ``lo[r]`` and ``hi[r]`` of ``t[r]``,
+    ``v[:, r]`` (channels x capacity) and ``ok[r]``, as a :class:`SampleStream`
+    holds its own; :class:`_RowView` gives one row the :class:`SampleStream`
+    interface.  :meth:`append_runs` writes a whole message -- several runs,
+    one row each -- with a few array operations, whatever the number of
+    rows: the intake of a body part costs per message, not per cell.  Rows
+    are moved down (each on its own, once per third of the capacity) or the
+    arrays grow only when a row reaches the end.
+    """
+
+    def __init__(self, n_rows: int, n_channels: int, dtype: np.dtype, capacity: int, touch: bool = False) -> None:
+        cap = max(int(capacity), 1)
+        self.n_channels = int(n_channels)
+        self.t = np.empty((n_rows, cap), dtype=np.int64)
+        self.v = np.empty((self.n_channels, n_rows, cap), dtype=dtype)  # channel-major: v[ch] is (rows, capacity)
+        self.ok = np.empty((n_rows, cap), dtype=bool)
+        if touch:
+            for a in (self.t, self.v, self.ok):
+                a.fill(0)
+        self.lo = np.zeros(n_rows, np.int64)
+        self.hi = np.zeros(n_rows, np.int64)
+        self._plan: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last append_runs' positions
+        self.last = np.zeros(n_rows, np.int64)  # newest stamp of each row (valid where ``has``)
+        self.has = np.zeros(n_rows, bool)
+
+    @property
+    def capacity(self) -> int:
+        return int(self.t.shape[1])
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.t.nbytes + self.v.nbytes + self.ok.nbytes)
+
+    def _make_room(self, need: np.ndarray) -> None:
+        """Room for ``need[r]`` more samples in every row: rows moved down, or all arrays grown."""
+        cap = self.capacity
+        size = self.hi - self.lo
+        if np.any(size + need > cap - cap // 4):
+            new = int(max(2 * cap, 2 * int(np.max(size + need))))
+            n = self.t.shape[0]
+            t = np.empty((n, new), np.int64)
+            v = np.empty((self.n_channels, n, new), self.v.dtype)
+            ok = np.empty((n, new), bool)
+        else:  # room enough once the trimmed heads are dropped: move the rows that need it down in place
+            t, v, ok = self.t, self.v, self.ok
+        full = np.flatnonzero(self.hi + need > cap) if t is self.t else np.arange(self.t.shape[0])
+        for r in full.tolist():
+            lo, hi = int(self.lo[r]), int(self.hi[r])
+            t[r, :hi - lo] = self.t[r, lo:hi]
+            v[:, r, :hi - lo] = self.v[:, r, lo:hi]
+            ok[r, :hi - lo] = self.ok[r, lo:hi]
+            self.lo[r], self.hi[r] = 0, hi - lo
+        self.t, self.v, self.ok = t, v, ok
+
+    def append(self, row: int, t_ns: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None) -> None:
+        """Samples of one row (as :meth:`SampleStream.append`)."""
+        n = t_ns.shape[0]
+        if values.shape != (self.n_channels, n):
+            raise SignalError(f"expected samples of shape ({self.n_channels}, {n}), got {values.shape}")
+        if n == 0:
+            return
+        if int(self.hi[row]) + n > self.capacity:
+            need = np.zeros(self.t.shape[0], np.int64)
+            need[row] = n
+            self._make_room(need)
+        hi = int(self.hi[row])
+        self.t[row, hi:hi + n] = t_ns
+        self.v[:, row, hi:hi + n] = values
+        self.ok[row, hi:hi + n] = True if valid is None else valid
+        self.hi[row] = hi + n
+        self.last[row] = t_ns[n - 1]
+        self.has[row] = True
+
+    def append_runs(self, rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, values: np.ndarray,
+                    valid: np.ndarray | None = None, like: _RowBuffer | None = None) -> None:
+        """Runs of samples, run ``i`` (``counts[i]`` samples, concatenated in run order) to row ``rows[i]``.
+
+        Every row takes at most one run; ``values`` is (channels, total
+        samples).  ``like``: a buffer that took the same runs just before
+        with the same row ends and capacity (its sample positions are reused).
+        """
+        total = int(t_ns.shape[0])
+        if values.shape != (self.n_channels, total):
+            raise SignalError(f"expected samples of shape ({self.n_channels}, {total}), got {values.shape}")
+        if total == 0:
+            return
+        if like is not None and like._plan is not None and like.capacity == self.capacity \
+                and np.array_equal(like._plan[2], self.hi):
+            flat, need, _ = like._plan
+        else:
+            n_rows, cap = self.t.shape
+            need = np.zeros(n_rows, np.int64)
+            need[rows] = counts
+            if np.any(self.hi + need > cap):
+                self._make_room(need)
+                cap = self.t.shape[1]
+            # one flat index per sample (row * capacity + column): a scatter, whatever the number of rows
+            flat = np.repeat(rows * cap + self.hi[rows] - (np.cumsum(counts) - counts), counts) + np.arange(total)
+        self._plan = (flat, need, self.hi.copy())
+        self.t.reshape(-1)[flat] = t_ns
+        self.ok.reshape(-1)[flat] = True if valid is None else valid
+        if self.n_channels:
+            self.v.reshape(self.n_channels, -1)[:, flat] = values
+        self.hi += need
+        has = counts > 0  # the newest stamp of each row: the last sample of its run
+        self.last[rows[has]] = t_ns[np.cumsum(counts)[has] - 1]
+        self.has[rows[has]] = True
+
+    def trim_before(self, t_ns: int) -> None:
+        """Drop every row's samples older than ``t_ns``."""
+        live = np.flatnonzero(self.hi > self.lo)
+        if not live.size:
+            return
+        old = live[self.t[live, self.lo[live]] < t_ns]
+        for r in old.tolist():
+            lo, hi = int(self.lo[r]), int(self.hi[r])
+            lo += int(np.searchsorted(self.t[r, lo:hi], t_ns, side="left"))
+            self.lo[r] = lo
+            if lo == hi:
+                self.has[r] = False
+
+    def clear(self, row: int) -> None:
+        self.lo[row] = self.hi[row] = 0
+        self.has[row] = False
+
+
+class _RowView:
+    """One row of a :class:`_RowBuffer` with the interface of a :class:`SampleStream`."""
+
+    __slots__ = ("buf", "row")
+
+    def __init__(self, buf: _RowBuffer, row: int) -> None:
+        self.buf = buf
+        self.row = row
+
+    @property
+    def n_channels(self) -> int:
+        return self.buf.n_channels
+
+    @property
+    def _t(self) -> np.ndarray:
+        return self.buf.t[self.row]
+
+    @property
+    def _v(self) -> np.ndarray:
+        return self.buf.v[:, self.row]
+
+    @property
+    def _ok(self) -> np.ndarray:
+        return self.buf.ok[self.row]
+
+    @property
+    def _lo(self) -> int:
+        return int(self.buf.lo[self.row])
+
+    @property
+    def _hi(self) -> int:
+        return int(self.buf.hi[self.row])
+
+    def __len__(self) -> int:
+        return int(self.buf.hi[self.row] - self.buf.lo[self.row])
+
+    @property
+    def last_t_ns(self) -> int | None:
+        return int(self.buf.last[self.row]) if self.buf.has[self.row] else None
+
+    @property
+    def capacity(self) -> int:
+        return self.buf.capacity
+
+    @property
+    def nbytes(self) -> int:
+        """This row's share of its buffer's bytes."""
+        return self.buf.nbytes // self.buf.t.shape[0]
+
+    def append(self, t_ns: np.ndarray, values: np.ndarray, valid: np.ndarray | None = None) -> None:
+        self.buf.append(self.row, t_ns, values, valid)
+
+    def clear(self) -> None:
+        self.buf.clear(self.row)
+
+    def trim_before(self, t_ns: int) -> None:
+        buf, r = self.buf, self.row
+        lo, hi = int(buf.lo[r]), int(buf.hi[r])
+        if hi == lo or t_ns <= buf.t[r, lo]:
+            return
+        lo += int(np.searchsorted(buf.t[r, lo:hi], t_ns, side="left"))
+        buf.lo[r] = lo
+        if lo == hi:
+            buf.has[r] = False
+
+    def between(self, start_ns: int, end_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Samples with ``start <= t < end`` (copies)."""
+        buf, r = self.buf, self.row
+        lo, hi = int(buf.lo[r]), int(buf.hi[r])
+        t = buf.t[r, lo:hi]
+        i = lo + int(np.searchsorted(t, start_ns, side="left"))
+        j = lo + int(np.searchsorted(t, end_ns, side="left"))
+        return buf.t[r, i:j].copy(), buf.v[:, r, i:j].copy(), buf.ok[r, i:j].copy()
+
+
+class _Part:
+    """The sample buffers of one body part's cells: one row per cell of the robot description's part."""
+
+    def __init__(self, cell_ids: list[int], n_s: int, n_v: int, dtype_s: np.dtype, dtype_v: np.dtype, n_extra: int,
+                 capacity: tuple[int, int, int], smooth_k: int) -> None:
         cap_s, cap_v, cap_f = capacity
-        self.vib = SampleStream(n_s, dtype_s, cap_s, touch=True)
-        self.dfm = SampleStream(n_v, dtype_v, cap_v, touch=True)
+        n = len(cell_ids)
+        self.cell_ids = list(cell_ids)
+        self.row = {cid: i for i, cid in enumerate(cell_ids)}
+        self.ids = np.array(cell_ids, np.int64)
+        self.smooth_k = int(smooth_k)  # force samples looked at for a cell's latest smoothed force
+        self.last_force = np.zeros(n)  # each cell's mean force over the last smooth_s
+        self.hot_until = np.zeros(n, np.int64)  # last stamp of a chunk with a force at or above release
+        self.hot = np.zeros(n, bool)  # hot_until is set
+        self.vib = _RowBuffer(n, n_s, dtype_s, cap_s, touch=True)
+        self.dfm = _RowBuffer(n, n_v, dtype_v, cap_v, touch=True)
         # extra channels ride on the deformation stamps (one value per deformation sample)
-        self.extra = SampleStream(n_extra, np.float64, cap_v, touch=True) if n_extra else None
+        self.extra = _RowBuffer(n, n_extra, np.float64, cap_v, touch=True) if n_extra else None
+        self.force = _RowBuffer(n, 1, np.float64, cap_f, touch=True)
+        self.buffers = [b for b in (self.vib, self.dfm, self.extra, self.force) if b is not None]
+
+
+class _CellState:
+    """One cell: views of its rows in its body part's buffers, its tare and contact state."""
+
+    def __init__(self, part: _Part, row: int) -> None:
+        self.part = part
+        self.row = row
+        self.vib = _RowView(part.vib, row)
+        self.dfm = _RowView(part.dfm, row)
+        self.extra = _RowView(part.extra, row) if part.extra is not None else None
+        self.force = _RowView(part.force, row)
         self.tare: np.ndarray | None = None  # latest deformation tare reported
-        self.force = SampleStream(1, np.float64, cap_f, touch=True)
-        self.last_force_n = 0.0  # mean over the last ``smooth_s`` of force samples
-        self.hot_until_ns: int | None = None  # last stamp of a chunk with a force at or above release
-        self.below_since_ns: int | None = None
+
+    @property
+    def last_force_n(self) -> float:
+        """Mean finite force over the last ``smooth_s`` of the cell's force samples (kept when none is finite)."""
+        return float(self.part.last_force[self.row])
+
+    @property
+    def hot_until_ns(self) -> int | None:
+        """Last stamp of a chunk with a force at or above release (None before any)."""
+        return int(self.part.hot_until[self.row]) if self.part.hot[self.row] else None
+
+    @hot_until_ns.setter
+    def hot_until_ns(self, t_ns: int | None) -> None:
+        self.part.hot[self.row] = t_ns is not None
+        self.part.hot_until[self.row] = 0 if t_ns is None else t_ns
 
 
 class Windower:
@@ -292,6 +610,13 @@ class Windower:
         self.max_invalid_fraction = float(max_invalid_fraction)
         self.faults: Counter[str] = Counter()
         self._cells: dict[int, _CellState] = {}
+        self._parts: dict[str, _Part] = {}
+        # cell id -> (body part, row in its buffers), as sorted arrays for a message's runs at once
+        table = sorted((c.id, k, i) for k, p in enumerate(robot.body_parts) for i, c in enumerate(p.cells))
+        self._part_names = [p.name for p in robot.body_parts]
+        self._ids = np.array([x[0] for x in table], np.int64)
+        self._id_part = np.array([x[1] for x in table], np.int64)
+        self._id_row = np.array([x[2] for x in table], np.int64)
         self._index = robot.cell_index()
         self._shapes = {cid: (len(robot.cell_types[part.cell_type].vibration.channels),
                               len(robot.cell_types[part.cell_type].deformation.channels))
@@ -306,6 +631,11 @@ class Windower:
         self._released_since: int | None = None
         self._now_ns = 0  # the time of the current exploration step
         self._swept_ns: int | None = None  # the watermark the state machine has run to
+        self._resumed_ns: int | None = None  # first force stamp after the last stall (no onset before it)
+        self._live: list[_CellState] = []  # cells not stalled behind the newest (the contact judged on)
+        self._probed_onset: int | None = None  # the exploration the release was probed for
+        self._trimmed_ns: int | None = None  # the horizon of the last trim
+        self._jump: tuple[int, int] | None = None  # (newest before, first after) the last stall of every cell
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
@@ -388,6 +718,114 @@ class Windower:
             return [self._ingest(cid, chunk, None) for cid, chunk in items]
         return [self._ingest(cid, chunk, bad) for (cid, chunk), bad in zip(items, unsorted)]
 
+    def add_part(self, chunk: PartChunk) -> np.ndarray:
+        """Buffer the runs of one message (the cells of a body part); per run, whether it was buffered.
+
+        Exactly :meth:`add_many` of ``chunk.chunks()`` -- the same buffers,
+        faults and return values -- in a few array operations per message
+        when every run is in order (each cell's stamps increasing from where
+        its buffers end, no empty run, one body part): the cost of a message
+        then hardly depends on its number of cells.  Any other message goes
+        through :meth:`add_many` run by run, which decides every fault as
+        :meth:`add` does.  Runs of cells the robot does not have are dropped
+        and counted (``unknown_cell``) either way.
+        """
+        n = len(chunk)
+        if not n:
+            return np.zeros(0, bool)
+        cid = np.asarray(chunk.cell_ids, np.int64)
+        pos = np.minimum(np.searchsorted(self._ids, cid), self._ids.size - 1)
+        known = self._ids[pos] == cid
+        if not known.all():
+            self.faults["unknown_cell"] += int((~known).sum())
+            ok = np.zeros(n, bool)
+            if known.any():
+                ok[known] = self.add_part(chunk.take(known))
+            return ok
+        part_code = self._id_part[pos]
+        if (part_code != part_code[0]).any() or not self._fast_ok(chunk, int(part_code[0]), self._id_row[pos]):
+            return np.array(self.add_many(chunk.chunks()), bool)
+        self._add_runs(chunk, self._part_names[int(part_code[0])], self._id_row[pos])
+        return np.ones(n, bool)
+
+    def _fast_ok(self, chunk: PartChunk, part_code: int, rows: np.ndarray) -> bool:
+        """Whether :meth:`add_part` may take ``chunk`` in one piece (see there)."""
+        vc = chunk.vibration_count
+        dc = chunk.deformation_count
+        cid0 = int(chunk.cell_ids[0])
+        n_s, n_v = self._shapes[cid0]
+        vib, dfm = chunk.vibration, chunk.deformation
+        t_v, t_d = chunk.vibration_t_ns, chunk.deformation_t_ns
+        n_a, n_d = int(vc.sum()), int(dc.sum())
+        if (getattr(vib, "shape", None) != (n_s, n_a) or getattr(dfm, "shape", None) != (n_v, n_d)
+                or t_v.shape != (n_a,) or t_d.shape != (n_d,) or np.shape(chunk.force_n) != (n_d,)
+                or vc.shape != rows.shape or dc.shape != rows.shape or vc.min() <= 0 or dc.min() < 0):
+            return False
+        if np.bincount(rows).max() > 1:  # a cell twice in one message: run by run
+            return False
+        for valid, size in ((chunk.vibration_valid, n_a), (chunk.deformation_valid, n_d)):
+            if valid is not None and np.shape(valid) != (size,):
+                return False
+        n_extra = self._n_extra[cid0]
+        if n_extra and chunk.extra is not None and np.shape(chunk.extra) != (n_extra, n_d):
+            return False
+        if chunk.deformation_tare is not None and np.shape(chunk.deformation_tare)[0] != rows.size:
+            return False
+        part = self._parts.get(self._part_names[part_code])
+        if not _in_order(t_v, vc, rows, None if part is None else (part.vib,)):
+            return False
+        return _in_order(t_d, dc, rows, None if part is None else (part.dfm, part.force))
+
+    def _add_runs(self, chunk: PartChunk, part_name: str, rows: np.ndarray) -> None:
+        """Write an in-order message (:meth:`_fast_ok`) into its body part's buffers."""
+        vc = np.asarray(chunk.vibration_count, np.int64)
+        dc = np.asarray(chunk.deformation_count, np.int64)
+        ids = np.asarray(chunk.cell_ids, np.int64)
+        vib, dfm = np.asarray(chunk.vibration), np.asarray(chunk.deformation)
+        for c in ids.tolist():
+            if c not in self._cells:  # a cell's first chunk (in run order, as add_many creates them)
+                self._new_cell(c, vib.dtype, dfm.dtype)
+        part = self._parts[part_name]
+        t_v = np.asarray(chunk.vibration_t_ns, np.int64)
+        t_d = np.asarray(chunk.deformation_t_ns, np.int64)
+        part.vib.append_runs(rows, vc, t_v, vib, chunk.vibration_valid)
+        part.dfm.append_runs(rows, dc, t_d, dfm, chunk.deformation_valid)
+        if part.extra is not None:
+            extra = (np.full((part.extra.n_channels, t_d.size), np.nan) if chunk.extra is None
+                     else np.asarray(chunk.extra, np.float64))  # missing, never zeros: levels flags it
+            part.extra.append_runs(rows, dc, t_d, extra, like=part.dfm)
+        f = np.asarray(chunk.force_n, np.float64)
+        part.force.append_runs(rows, dc, t_d, f[None, :], like=part.dfm)
+        if chunk.deformation_tare is not None:
+            tare = np.asarray(chunk.deformation_tare, np.float64)
+            for i, c in enumerate(ids.tolist()):  # a copy per run: messages own their arrays
+                self._cells[c].tare = tare[i].copy()
+        if self._exploration:
+            with_f = np.flatnonzero(dc > 0)
+            if with_f.size:
+                starts = np.cumsum(dc) - dc
+                peak = np.fmax.reduceat(f, starts[with_f])  # fmax: NaN never hides a touch
+                hot = with_f[peak >= self.release_n]
+                if hot.size:  # each cell's last such run: its last force stamp
+                    rr, last_of = np.unique(rows[hot][::-1], return_index=True)
+                    run = hot[::-1][last_of]
+                    part.hot_until[rr] = t_d[starts[run] + dc[run] - 1]
+                    part.hot[rr] = True
+                self._update_last_force_rows(part, np.unique(rows[with_f]))
+        ends = np.cumsum(vc)
+        firsts, lasts = t_v[ends - vc], t_v[ends - 1]
+        if self._latest_ns is None:  # the first run only sets the newest stamp, as add_many's first chunk does
+            self._latest_ns = int(lasts[0])
+            firsts, lasts = firsts[1:], lasts[1:]
+        if lasts.size:
+            if int(firsts.max()) - self._latest_ns > self._stall_ns:  # rare: a stall may end in this message
+                # each run against the newest stamp before it, as add_many takes them one by one
+                before = np.maximum.accumulate(np.concatenate(([self._latest_ns], lasts[:-1])))
+                hit = np.flatnonzero(firsts - before > self._stall_ns)
+                if hit.size:
+                    self._jump = (int(before[hit[-1]]), int(firsts[hit[-1]]))
+            self._latest_ns = max(self._latest_ns, int(lasts.max()))
+
     @staticmethod
     def _unsorted_flags(items: list[tuple[int, CellChunk]]) -> list[bool] | None:
         """Per item, whether its vibration stamps fail to increase strictly (one pass over all)."""
@@ -434,8 +872,7 @@ class Windower:
                     return False
         st = self._cells.get(cell_id)
         if st is None:
-            st = self._cells[cell_id] = _CellState(vib.shape[0], dfm.shape[0], vib.dtype, dfm.dtype, n_extra,
-                                                   self.buffer_capacity(cell_id))
+            st = self._new_cell(cell_id, vib.dtype, dfm.dtype)
         t_v = np.asarray(chunk.vibration_t_ns, dtype=np.int64)
         if t_v.size == 0:
             self.faults["empty"] += 1
@@ -488,36 +925,87 @@ class Windower:
                 self._update_last_force(st)
                 if f.size and np.fmax.reduce(f) >= self.release_n:  # fmax: NaN never hides a touch
                     st.hot_until_ns = int(t_f[-1])
-        end = int(t_v[-1])
-        self._latest_ns = end if self._latest_ns is None else max(self._latest_ns, end)
+        self._advance(int(t_v[0]), int(t_v[-1]))
         return True
+
+    def _advance(self, first_ns: int, end_ns: int) -> None:
+        """Move the newest vibration stamp to ``end_ns``; a message starting more than
+        :data:`WATERMARK_STALL_S` after it ends a stall of every cell (no cell sent anything in between)."""
+        latest = self._latest_ns
+        if latest is None:
+            self._latest_ns = end_ns
+            return
+        if first_ns - latest > self._stall_ns:
+            self._jump = (latest, first_ns)
+        if end_ns > latest:
+            self._latest_ns = end_ns
+
+    def _new_cell(self, cell_id: int, dtype_s: np.dtype, dtype_v: np.dtype) -> _CellState:
+        """The state of a cell's first chunk; its body part's buffers are made with the part's first cell.
+
+        A body part's buffers hold every cell of the part (one row each) in
+        the sample types of the first chunk that reached the part.
+        """
+        part, _ = self._index[cell_id]
+        buffers = self._parts.get(part.name)
+        if buffers is None:
+            n_s, n_v = self._shapes[cell_id]
+            rate = self.robot.cell_types[part.cell_type].force.rate_hz
+            smooth_k = int(math.ceil(1.5 * self.smooth_ns * 1e-9 * rate)) + 2
+            buffers = self._parts[part.name] = _Part([c.id for c in part.cells], n_s, n_v, dtype_s, dtype_v,
+                                                     self._n_extra[cell_id], self.buffer_capacity(cell_id), smooth_k)
+        st = self._cells[cell_id] = _CellState(buffers, buffers.row[cell_id])
+        return st
 
     def _update_last_force(self, st: _CellState) -> None:
         """The cell's mean finite force over the last ``smooth_s`` (kept when none is finite)."""
-        fs = st.force
-        last_f = fs.last_t_ns
-        if last_f is None:
+        self._update_last_force_rows(st.part, np.array([st.row]))
+
+    def _update_last_force_rows(self, part: _Part, rows: np.ndarray) -> None:
+        """:meth:`_update_last_force` of several cells of a body part at once.
+
+        Each cell's last ``smooth_k`` force samples (more than ``smooth_s``
+        holds at the cell type's force rate) are looked at as one row of a
+        2-D array; the mean of those within ``smooth_s`` of the newest that
+        are finite becomes the cell's latest force.  A cell whose oldest
+        looked-at sample is still within ``smooth_s`` (samples faster than
+        the rate says) is looked at again with all its samples in it.
+        """
+        buf = part.force
+        rows = rows[buf.has[rows]]
+        if not rows.size:
             return
-        t = fs._t[fs._lo:fs._hi]
-        i = int(t.searchsorted(last_f - self.smooth_ns, side="left"))
-        j = int(t.searchsorted(last_f + 1, side="left"))
-        recent = fs._v[0, fs._lo + i:fs._lo + j]
-        if recent.size == 0:
-            return
-        total = np.add.reduce(recent)
-        if math.isfinite(total):  # all finite: the mean of the finite ones is the plain mean
-            st.last_force_n = float(total / recent.size)
-            return
-        finite = recent[np.isfinite(recent)]
-        if finite.size:
-            st.last_force_n = float(finite.mean())
+        k = part.smooth_k
+        lo, hi, last = buf.lo[rows], buf.hi[rows], buf.last[rows]
+        start = last - self.smooth_ns
+        first = hi - k
+        more = (first > lo) & (buf.t[rows, np.maximum(first, 0)] >= start)
+        if more.any():  # rare: widen the look for every row to the longest such window
+            r = rows[more]
+            k = int(max(hi[more] - lo[more] - np.array([np.searchsorted(buf.t[x, buf.lo[x]:buf.hi[x]], st_, "left")
+                                                         for x, st_ in zip(r.tolist(), start[more].tolist())])))
+            first = hi - k
+        idx = first[:, None] + np.arange(k)[None, :]
+        inside = idx >= lo[:, None]
+        idx = np.maximum(idx, 0)
+        t = buf.t[rows[:, None], idx]
+        v = buf.v[0][rows[:, None], idx]
+        inside &= (t >= start[:, None]) & (t <= last[:, None])
+        fin = inside & np.isfinite(v)
+        n = fin.sum(axis=1)
+        total = np.add.reduce(np.where(fin, v, 0.0), axis=1)
+        upd = n > 0
+        part.last_force[rows[upd]] = total[upd] / n[upd]
 
     def _reset_time(self) -> None:
         self._swept_ns = None
+        self._resumed_ns = None
         self._next_start_ns = None
         self._onset_ns = None
         self._emitted_current = False
         self._latest_ns = None
+        self._trimmed_ns = None
+        self._jump = None
 
     # ----------------------------------------------------------------- output
     def poll(self) -> list[Window]:
@@ -544,7 +1032,11 @@ class Windower:
         watermark = self._vibration_watermark()
         while self._next_start_ns + self.length_ns + self.lateness_ns <= watermark:
             start = self._next_start_ns
-            out.append(self._make_window(start, start + self.length_ns, 0, "fixed"))
+            w = self._make_window(start, start + self.length_ns, 0, "fixed")
+            if w.cells:
+                out.append(w)
+            else:  # inside a stall: no cell sent anything in it
+                self.faults["windows_without_samples"] += 1
             self._next_start_ns += self.hop_ns
         return out
 
@@ -555,9 +1047,27 @@ class Windower:
         (unplugged, dead) is not waited for.
         """
         newest = self._latest_ns
-        floor = newest - self._stall_ns
+        floor = self._stall_floor(newest)
         lasts = [t for st in self._cells.values() if (t := st.vib.last_t_ns) is not None and t >= floor]
         return min(lasts) if lasts else newest
+
+    def _stall_floor(self, newest: int) -> int:
+        """Cells whose data ends before this are not waited for: :data:`WATERMARK_STALL_S` behind the newest.
+
+        After a stall of every cell (a driver stopped: a message starts more
+        than that after the newest stamp held, :meth:`_advance`), the cells
+        that were live before it are waited for until the newest stamp has
+        moved on by that much again: the first body part's message after the
+        stall must not make the others, whose messages follow, look dead.
+        """
+        floor = newest - self._stall_ns
+        if self._jump is not None:
+            before, after = self._jump
+            if newest < after + self._stall_ns:
+                floor = min(floor, before - self._stall_ns)
+            else:
+                self._jump = None
+        return floor
 
     def _watermark(self) -> int | None:
         """The latest time every live cell has force data for (None before any force).
@@ -566,11 +1076,13 @@ class Windower:
         messages interleaved or were batched.  A cell more than
         :data:`WATERMARK_STALL_S` behind the most recent one is not waited for.
         """
-        lasts = [st.force.last_t_ns for st in self._cells.values() if len(st.force)]
-        if not lasts:
+        cells = [(st, st.force.last_t_ns) for st in self._cells.values() if len(st.force)]
+        if not cells:
+            self._live = []
             return None
-        newest = max(lasts)
-        return min(t for t in lasts if t >= newest - self._stall_ns)
+        floor = self._stall_floor(max(t for _, t in cells))
+        self._live = [st for st, t in cells if t >= floor]
+        return min(t for st, t in cells if t >= floor)
 
     def _force_at(self, st: _CellState, t_ns: int) -> float:
         """The cell's mean finite force over the ``smooth_s`` up to ``t_ns`` (its latest when it ends there)."""
@@ -579,9 +1091,7 @@ class Windower:
         if last is None or last <= t_ns:
             return st.last_force_n
         t, lo = fs._t, fs._lo
-        j = fs._hi
-        while j > lo and t[j - 1] > t_ns:  # a cell is ahead of the watermark by a few samples: walk back
-            j -= 1
+        j = lo + int(t[lo:fs._hi].searchsorted(t_ns, side="right"))  # the samples up to t_ns
         i = lo + int(t[lo:j].searchsorted(t_ns - self.smooth_ns, side="left"))
         recent = fs._v[0, i:j]
         if recent.size:
@@ -597,7 +1107,7 @@ class Windower:
 
     def _contact_at(self, t_ns: int) -> tuple[bool, bool]:
         """(any cell at or above onset, all cells below release) at ``t_ns``."""
-        forces = [self._force_at(st, t_ns) for st in self._cells.values()]
+        forces = [self._force_at(st, t_ns) for st in self._live]  # a stalled cell's last force is no contact
         if not forces:
             return False, True
         return max(forces) >= self.onset_n, max(forces) < self.release_n
@@ -619,15 +1129,43 @@ class Windower:
             t = min(int(st.force._t[st.force._lo]) for st in self._cells.values() if len(st.force)) - 1
         else:
             t = min(self._swept_ns, now)
-        while True:
-            nxt = self._next_event(t, now)
-            if nxt is None:
-                break
-            out += self._step(nxt)
-            t = nxt
-        out += self._step(now)
+        stalls = self._stalls(t, now) if now - t > self._stall_ns else []
+        for a, b in stalls + [(now, None)]:
+            while True:
+                nxt = self._next_event(t, a)
+                if nxt is None:
+                    break
+                out += self._step(nxt)
+                t = nxt
+            out += self._step(a)
+            t = a
+            if b is not None:  # no cell sent anything from a to b: a gap, never part of an exploration
+                self.faults["stall"] += 1
+                if self._onset_ns is not None and not self._emitted_current:
+                    w = self._close_exploration(a + 1)
+                    if w:
+                        out.append(w)
+                self._onset_ns = None
+                self._emitted_current = False
+                self._released_since = None
+                self._resumed_ns = b
+                t = b - 1
         self._swept_ns = now
         return out
+
+    def _stalls(self, after_ns: int, until_ns: int) -> list[tuple[int, int]]:
+        """Spans ``(a, b)`` in ``(after_ns, until_ns]`` longer than :data:`WATERMARK_STALL_S` with no force sample
+        of any cell: ``a`` the last sample before, ``b`` the first after (a driver stopped, a bus gone).
+
+        Looked for only when the watermark moved by more than that since the
+        previous poll, so it costs one pass over the samples of such a poll.
+        """
+        stamps = [st.force.between(after_ns, until_ns + 1)[0] for st in self._cells.values() if len(st.force)]
+        t = np.unique(np.concatenate(stamps)) if stamps else np.zeros(0, np.int64)
+        if t.size < 2:
+            return []
+        gap = np.flatnonzero(np.diff(t) > self._stall_ns)
+        return [(int(t[i]), int(t[i + 1])) for i in gap.tolist()]
 
     def _next_event(self, after_ns: int, until_ns: int) -> int | None:
         """The first time in ``(after_ns, until_ns)`` where a step could change the state (None: none before).
@@ -640,7 +1178,7 @@ class Windower:
         if after_ns >= until_ns:
             return None
         since = after_ns - self.smooth_ns
-        hot = [st for st in self._cells.values() if st.hot_until_ns is not None and st.hot_until_ns >= since]
+        hot = [st for st in self._live if st.hot_until_ns is not None and st.hot_until_ns >= since]
         candidates = []
         if self._onset_ns is None:  # idle: an onset needs a cell whose raw force reached onset
             level_cells = [st for st in hot if self._raw(st, since, until_ns, np.fmax) >= self.onset_n]
@@ -652,7 +1190,9 @@ class Windower:
                 candidates.append(self._onset_ns + self.max_ns)
             if self._released_since is None:  # open: a release needs every cell below release
                 if not hot:
-                    candidates.append(after_ns + 1)  # nobody touches: released from here on
+                    if self._probed_onset != self._onset_ns:  # once per exploration, never a step per nanosecond
+                        self._probed_onset = self._onset_ns
+                        candidates.append(after_ns + 1)  # nobody touches: released from here on
                 else:
                     strongest = max(hot, key=lambda st: st.last_force_n)
                     if not self._raw(strongest, since, until_ns, np.minimum) >= self.release_n:  # NaN: look closer
@@ -698,7 +1238,19 @@ class Windower:
         mean = (csum[j] - csum[i]) / np.maximum(n, 1)
         if np.all(n > 0):
             return mean
-        return np.array([m if k > 0 else self._force_at(st, int(q)) for m, k, q in zip(mean, n, times_ns)])
+        # none finite in the smooth_s up to a time: the last finite sample before it (0 without one), and
+        # at or after the cell's newest sample its latest mean -- as _force_at, for all such times at once
+        fs = st.force
+        lo, hi = fs._lo, fs._hi
+        ft, fv = fs._t[lo:hi], fs._v[0, lo:hi]
+        ok = np.isfinite(fv)
+        fin_t, fin_v = ft[ok], fv[ok]
+        k = np.searchsorted(fin_t, times_ns, side="right") - 1
+        held = np.where(k >= 0, fin_v[np.maximum(k, 0)] if fin_v.size else 0.0, 0.0)
+        last = fs.last_t_ns
+        held = np.where(np.int64(last if last is not None else np.iinfo(np.int64).max) <= times_ns,
+                        st.last_force_n, held)
+        return np.where(n > 0, mean, held)
 
     def _step(self, now: int) -> list[Window]:
         """One step of the exploration state machine at ``now`` (at or before the watermark)."""
@@ -745,7 +1297,7 @@ class Windower:
     def _onset_time(self) -> int:
         """Start of the current run of smoothed force at or above onset, over cells touching now."""
         best = self._now_ns
-        for st in self._cells.values():
+        for st in self._live:
             if self._force_at(st, self._now_ns) < self.onset_n:
                 continue  # an older touch of a cell that has since let go is not this onset
             t, f, raw = self._smoothed_force(st, self._now_ns - self._retain_ns)
@@ -759,12 +1311,14 @@ class Windower:
             raw_below = np.nonzero(raw[lag_start:run_start + 1] < self.onset_n)[0]
             onset = lag_start + raw_below[-1] + 1 if raw_below.size else lag_start
             best = min(best, int(t[min(onset, run_start)]))
+        if self._resumed_ns is not None:  # a touch held through a stall starts after it, never before
+            best = max(best, self._resumed_ns)
         return best
 
     def _release_time(self) -> int:
         """First stamp after which every cell's smoothed force stayed below release."""
         best = self._onset_ns
-        for st in self._cells.values():
+        for st in self._live:
             t, f, raw = self._smoothed_force(st, self._onset_ns)
             above = np.nonzero(f >= self.release_n)[0]
             if not above.size:
@@ -830,10 +1384,12 @@ class Windower:
             # carried, a cell that never lets go) must not keep every sample since
             # its onset (memory and the release scan would grow without bound).
             horizon = min(horizon, self._onset_ns)
-        for st in self._cells.values():
-            for stream in (st.vib, st.dfm, st.force, st.extra):
-                if stream is not None:
-                    stream.trim_before(horizon)
+        if self._trimmed_ns is not None and self._trimmed_ns <= horizon < self._trimmed_ns + TRIM_STEP_NS:
+            return  # samples are dropped once per TRIM_STEP_NS of horizon, not at every poll
+        self._trimmed_ns = horizon
+        for part in self._parts.values():
+            for buf in part.buffers:
+                buf.trim_before(horizon)
 
     def buffer_capacity(self, cell_id: int) -> tuple[int, int, int]:
         """Samples of a cell's vibration, deformation and force buffers, sized from its cell type's rates.
@@ -851,8 +1407,7 @@ class Windower:
     @property
     def buffer_bytes(self) -> int:
         """Bytes of every cell's sample buffers (what the windower holds, kept samples and headroom)."""
-        return sum(s.nbytes for st in self._cells.values() for s in (st.vib, st.dfm, st.force, st.extra)
-                   if s is not None)
+        return sum(b.nbytes for p in self._parts.values() for b in p.buffers)
 
     @property
     def exploration_id(self) -> int:
@@ -863,6 +1418,26 @@ class Windower:
     def in_contact(self) -> bool:
         """True while an exploration is open."""
         return self._onset_ns is not None
+
+
+def _in_order(t_ns: np.ndarray, counts: np.ndarray, rows: np.ndarray, bufs: tuple[_RowBuffer, ...] | None) -> bool:
+    """Whether every run's stamps increase strictly and start after its row's newest stamp in ``bufs``
+    (each row at most one run)."""
+    if not t_ns.size:
+        return True
+    up = np.diff(t_ns) > 0
+    ends = np.cumsum(counts)
+    up[ends[:-1][ends[:-1] < t_ns.size] - 1] = True  # from one run's last stamp to the next run's first: any
+    if not up.all():
+        return False
+    if bufs is not None:
+        has = counts > 0
+        first = t_ns[(ends - counts)[has]]
+        r = rows[has]
+        for buf in bufs:
+            if np.any(buf.has[r] & (first <= buf.last[r])):
+                return False
+    return True
 
 
 def _ns(seconds: float, key: str, allow_zero: bool = False) -> int:

@@ -26,8 +26,9 @@ first frame and re-anchors when the two drift apart by more than
 ``resync_s``; ``device`` uses the device time as it is (simulations; bridges
 synchronised to ROS time).
 
-``~/tare`` (std_srvs/Trigger) zeroes the PDC and electrode baselines over the
-last ``tare.window_s`` of frames; it is refused while any BioTac reads a force
+``~/tare`` (std_srvs/Trigger) sets the PDC and electrode baselines to their
+resting level (:func:`~..core.tare.resting_level`) over the last
+``tare.window_s`` of frames; it is refused while any BioTac reads a force
 at or above the contact threshold.  With ``tare_on_start_s > 0`` the first
 frames are used as the baseline (nothing is published before), so the force
 of an untared sensor never reaches the window node.
@@ -215,7 +216,6 @@ class BiotacDriver(DriverBase):
 
     def _consume(self, items: list[ReadItem]) -> None:
         host = time.monotonic_ns()
-        out = []
         with self._lock:
             for item in items:
                 rate, bad_rate = self._rates[item.chip_select]
@@ -223,7 +223,7 @@ class BiotacDriver(DriverBase):
                 if item.frames.counts.bad:
                     bad_rate.add(item.frames.counts.bad)
                 self._last_frame[item.chip_select] = host * 1e-9
-                out += self.stream.add(item, host)
+            out = self.stream.add_read(items, host)
         for st, batch in out:
             self._publish(st, batch)
 

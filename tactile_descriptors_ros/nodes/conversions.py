@@ -22,7 +22,7 @@ import numpy as np
 
 from ..core.aggregation import RobotDescriptor
 from ..core.robot import CellType
-from ..core.windowing import CellChunk, Window
+from ..core.windowing import CellChunk, PartChunk, Window
 from ..errors import ConfigError, SignalError
 from ..layouts import DescriptorLayouts, layout_id
 from ..markers import INVALID_ACCEL, INVALID_COUNT
@@ -42,6 +42,7 @@ __all__ = [
     "skin_part_to_msg",
     "skin_part_from_msg",
     "skin_part_msg_to_chunks",
+    "skin_part_msg_to_part_chunk",
     "BIOTAC_EXTRA_CHANNELS",
     "SKIN_EXTRA_CHANNELS",
     "layout_id",
@@ -427,6 +428,22 @@ def skin_part_msg_to_chunks(msg, extra_channels: Sequence[str] = ()) -> list[tup
     from ..streams.skin_parts import skin_part_chunks
 
     return skin_part_chunks(skin_part_from_msg(msg), extra_channels)
+
+
+def skin_part_msg_to_part_chunk(msg, extra_channels: Sequence[str] = ()) -> PartChunk:
+    """``SkinPartFrames`` -> one :class:`PartChunk` (the window node's path: a message in one piece).
+
+    :func:`skin_part_from_msg` then :func:`~..streams.skin_parts.skin_part_chunk`;
+    ``.chunks()`` of it is :func:`skin_part_msg_to_chunks`.
+
+    Raises
+    ------
+    SignalError
+        As :func:`skin_part_from_msg`.
+    """
+    from ..streams.skin_parts import skin_part_chunk
+
+    return skin_part_chunk(skin_part_from_msg(msg), extra_channels)
 
 
 # ----------------------------------------------------------------- descriptor

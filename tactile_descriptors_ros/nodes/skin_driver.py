@@ -26,7 +26,8 @@ a gap in time), re-anchored when it drifts from the node clock by more than
 ``resync_s``; ``device`` uses the bus time stamps (CAN adapters' receive
 time; the simulator's sample time).
 
-``~/tare`` zeroes the force baselines (refused while a cell reads a force at
+``~/tare`` sets the force baselines to their resting level
+(:func:`~..core.tare.resting_level`) over the last ``tare.window_s`` (refused while a cell reads a force at
 or above the contact threshold).  Lifecycle as in
 :mod:`~tactile_descriptors_ros.nodes.biotac_driver`.
 """
@@ -40,13 +41,13 @@ from collections.abc import Sequence
 import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
-from ..codecs.skin import ACCEL_MPS2_PER_COUNT, SkinSampleBatch
+from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..params.skin_driver import SKIN_DRIVER
-from ..streams.skin import RECENT_FORCE, CellState, SkinStream
-from ..streams.skin_parts import PartGatherer, SkinRun, pack_skin_part
+from ..streams.skin import MAX_BACKLOG_S, READ_FRAMES, RECENT_FORCE, CellState, SkinStream, drain_frames
+from ..streams.skin_parts import SkinPartFrames
 from .common import RateMeter, Status, run_node
 from .conversions import skin_part_to_msg
 from .driver_base import DriverBase
@@ -85,12 +86,15 @@ class SkinDriver(DriverBase):
         self.frame_ids = {c.id: str(c.extra.get("frame_id", f"skin_cell_{c.id}")) for p in self.robot.body_parts
                           for c in p.cells}
         self.known = set(self.full_robot.cell_index())
+        # a read keeps at most MAX_BACKLOG_S of the bus's frames: every known cell's accelerometer, force,
+        # proximity (at the force rate) and temperature frames
+        per_cell_hz = self.accel_rate_hz + 2 * self.force_rate_hz + NOMINAL_RATE_HZ[Modality.TEMPERATURE]
+        self.max_read_frames = max(READ_FRAMES, int(len(self.known) * per_cell_hz * MAX_BACKLOG_S))
         self.decoder = None
         self.stream: SkinStream | None = None
-        self._rates: dict[int, RateMeter] = {}
+        self._rates: dict[str, RateMeter] = {}  # samples per body part
         self._arrival_ns: int | None = None
         self.part_publishers: dict[str, object] = {}
-        self.gatherer: PartGatherer | None = None
         self.part_messages: dict[str, int] = {p.name: 0 for p in self.robot.body_parts}
         self._start([("bus", self._bus_status)]
                     + [(part.name, lambda p=part: self._part_status(p)) for part in self.robot.body_parts])
@@ -116,13 +120,17 @@ class SkinDriver(DriverBase):
         self.stream = SkinStream({cid: (part, self.frame_ids[cid]) for cid, part in self.served.items()},
                                  self.accel_rate_hz, self.force_rate_hz, self.batch_s, self.stamp_source,
                                  self.resync_s, self.tare_on_start_s, lambda: self.get_clock().now().nanoseconds,
-                                 self.faults, self._log_stream)
+                                 self.faults, self._log_stream,
+                                 scales=(self.accel_scale, self.force_n_per_count, 0.0))
         rates = self.stream.rates_hz()
         self.decoder = SkinCanDecoder(known_cell_ids=self.known, rates_hz=rates) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known, rates_hz=rates)
-        self._rates = {cid: RateMeter() for cid in self.served}
-        self.gatherer = PartGatherer({p.name: [c.id for c in p.cells] for p in self.robot.body_parts},
-                                     max_wait_s=2 * self.batch_s)
+        self._rates = {p.name: RateMeter() for p in self.robot.body_parts}
+        self._part_index = np.full(0x10000, -1, np.int64)
+        for k, p in enumerate(self.robot.body_parts):
+            for c in p.cells:
+                self._part_index[c.id] = k
+        self._last_data = time.monotonic()
         from tactile_descriptors_msgs.msg import SkinPartFrames
 
         for part in self.robot.body_parts:
@@ -139,8 +147,10 @@ class SkinDriver(DriverBase):
 
     # ---------------------------------------------------------------- reading
     def _read(self) -> SkinSampleBatch:
-        if self.is_can:  # every queued frame at once, decoded with array operations
-            frames = self.transport.recv_batch(65536, 0.05)
+        if self.is_can:  # every queued frame at once (the newest of a long backlog), decoded with array operations
+            frames, shed = drain_frames(self.transport, 0.05, limit=self.max_read_frames)
+            if shed:
+                self.faults["frames_shed"] += shed
             self._arrival_ns = time.time_ns()  # python-can's clock, for frames without a bus time
             return self.decoder.decode_frames(frames, self._arrival_ns)
         data = self.transport.read(1 << 20, 0.05)
@@ -150,33 +160,30 @@ class SkinDriver(DriverBase):
         return self.decoder.feed_batch(data, self._arrival_ns)
 
     def _consume(self, batch: SkinSampleBatch) -> None:
+        now = time.monotonic()
         with self._lock:
             if len(batch):
-                out = self.stream.add(batch, self._arrival_ns)
-                ids, counts = np.unique(batch.cell_id, return_counts=True)
-                for cid, k in zip(ids.tolist(), counts.tolist()):
-                    meter = self._rates.get(cid)
-                    if meter is not None:
-                        meter.add(k)
-                for cell, frame in out:
-                    self.gatherer.add(cell.body_part, SkinRun(cell.cell_id, frame, cell.tare.copy()))
-                    cell.messages += 1
-                due = self.gatherer.due()
+                self._last_data = now
+                due = self.stream.add_parts(batch, self._arrival_ns)
+                k = self._part_index[batch.cell_id]
+                counts = np.bincount(k[k >= 0], minlength=len(self.robot.body_parts))
+                for part, n in zip(self.robot.body_parts, counts.tolist()):
+                    if n:
+                        self._rates[part.name].add(n)
+            elif self.stream.pending() and now - self._last_data >= 2 * self.batch_s:
+                due = self.stream.flush()  # the bus went quiet: the last batches go out
             else:
                 due = []
-            due += self.gatherer.flush_stale()
-        for part, runs in due:
-            self._publish(part, runs)
+        for part in due:
+            self._publish(part)
 
     def _reopened(self, gap_s: float) -> None:
         with self._lock:
             self.stream.resume()
 
-    def _publish(self, part: str, runs: list[SkinRun]) -> None:
-        msg = skin_part_to_msg(pack_skin_part(part, runs, accel_mps2_per_count=self.accel_scale,
-                                              force_n_per_count=self.force_n_per_count))
-        self.part_publishers[part].publish(msg)
-        self.part_messages[part] += 1
+    def _publish(self, part: SkinPartFrames) -> None:
+        self.part_publishers[part.body_part].publish(skin_part_to_msg(part))
+        self.part_messages[part.body_part] += 1
 
     def _log_stream(self, level: str, text: str) -> None:
         if level == "info":
@@ -242,8 +249,6 @@ class SkinDriver(DriverBase):
             values["unknown_cell_ids"] = ", ".join(f"{c} ({n} frames)" for c, n in sorted(unknown.items()))
         if self.other_part_frames:
             values["cells_of_unserved_body_parts"] = len(self.other_part_frames)
-        if self.gatherer is not None:
-            values["part_messages_without_late_cells"] = self.gatherer.partial
         error = self._transport_error(values)
         if error is not None:
             return error
@@ -258,9 +263,10 @@ class SkinDriver(DriverBase):
         silent = [c.id for c, st in zip(part.cells, cells) if st is None or st.last_monotonic is None
                   or now - st.last_monotonic > self.stale_after_s]
         live = [st for st in cells if st is not None]
+        meter = self._rates.get(part.name)
         values = {"cells": len(part.cells), "silent_cells": len(silent),
-                  "samples_per_s": sum(self._rates[st.cell_id].rate_hz for st in live),
-                  "samples": sum(self._rates[st.cell_id].total for st in live),
+                  "samples_per_s": meter.rate_hz if meter is not None else 0.0,
+                  "samples": meter.total if meter is not None else 0,
                   "messages": self.part_messages.get(part.name, 0),
                   "cell_batches": sum(st.messages for st in live), "lost_frames": sum(st.lost for st in live),
                   "tared_cells": sum(st.tared for st in live)}

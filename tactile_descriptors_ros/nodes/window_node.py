@@ -15,7 +15,7 @@ already waiting on all the node's frames subscriptions (at most
 polls for finished windows once.  rclpy's executor costs about 0.2 ms of CPU
 per callback here, more than the conversion and the windowing together, so a
 node that has fallen behind catches up instead of paying that per message
-(``lab/docs/latency.md``).
+(``lab/docs/performance.md, section Latency``).
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
 its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a
@@ -30,8 +30,10 @@ replayed bags give the same windows.  Faults (unknown sensors, malformed
 messages, lost frames, the windower's out-of-order / duplicate / clock-jump
 counters) are counted and reported on ``/diagnostics``, with the latency
 path's timing: ``frames_age_ms_*`` (host time when a message is taken minus
-its newest sample's stamp: publishing, transport and queueing, meaningful
-when sensor stamps are host time, as the drivers' ``clock`` stamps are) and
+its newest sample's stamp: acquisition to intake, for sensor stamps on the
+host clock, as the drivers' ``clock`` stamps are; messages stamped on
+another clock, ``device`` stamps, are counted in ``frames_not_host_time``
+instead) and
 ``describe_ms_*`` (window cut to descriptor published), median, p95 and max
 over the last messages and windows.
 
@@ -54,7 +56,7 @@ from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
 from ..core.groups import check_groups, groups_of_channels, selection_name
 from ..core.robot import check_blocks, load_robot, select_body_parts
-from ..core.windowing import CellChunk, Window, Windower
+from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
@@ -65,12 +67,16 @@ from .conversions import (
     descriptor_to_msg,
     layout_id,
     message_kind,
-    skin_part_msg_to_chunks,
+    skin_part_msg_to_part_chunk,
 )
 from .parameters import NodeParameters
 from .qos import qos_of
 
-__all__ = ["WindowNode", "main"]
+__all__ = ["WindowNode", "main", "FRAMES_AGE_LIMIT_MS"]
+
+#: A frames message whose newest sample is further than this from the host clock [ms] is not stamped on
+#: it (``stamp_source: device``): it is counted (``frames_not_host_time``), not timed.
+FRAMES_AGE_LIMIT_MS = 3_600_000.0
 
 
 
@@ -153,8 +159,16 @@ class WindowNode(Node):
         self.largest_batch = 0
         # timing of the latency path (diagnostics): how old the frames are when taken, how long a window takes
         self._frames_age_ms: deque[float] = deque(maxlen=5000)
+        self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
+        # served cells as sorted arrays (a message's runs are checked at once): id, body part, batch numbers
+        served = sorted((c.id, k) for k, p in enumerate(self.robot.body_parts) for c in p.cells)
+        self._part_code = {p.name: k for k, p in enumerate(self.robot.body_parts)}
+        self._served_ids = np.array([c for c, _ in served], np.int64)
+        self._served_part = np.array([k for _, k in served], np.int64)
+        self._seq_high = np.zeros(len(served), np.int64)
+        self._seq_have = np.zeros(len(served), bool)
         self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("windows", self._status)
         params.finish()
@@ -213,21 +227,54 @@ class WindowNode(Node):
         self._last_seen[part] = time.monotonic()
 
     def _on_frames(self, msg) -> None:
-        """Frames callback: this message and every one already waiting, one windower batch, one poll."""
-        items = []
+        """Frames callback: this message and every one already waiting, into the windower, one poll.
+
+        A body part's ``SkinPartFrames`` goes in as one :class:`PartChunk`
+        (:meth:`Windower.add_part`: a few array operations whatever its
+        number of cells); BioTac batches (one cell each) go in together
+        through :meth:`Windower.add_many`.  Messages keep their order.
+        """
+        items: list[tuple[int, CellChunk]] = []
+        took = False
         now_ns = time.time_ns()
         for sub_msg, handle in self._drain(msg):
-            items += handle(sub_msg)
+            got = handle(sub_msg)
+            if isinstance(got, PartChunk):
+                took |= self._buffer(items)
+                items = []
+                took |= self._buffer_part(got)
+            else:
+                items += got
             newest = _newest_sample_ns(sub_msg)
             if newest is not None:
-                self._frames_age_ms.append((now_ns - newest) / 1e6)
-        if items:
-            try:
-                self.windower.add_many(items)
-            except SignalError as exc:  # the chunks before the offending one stay buffered
-                self.faults["malformed"] += 1
-                self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
+                age_ms = (now_ns - newest) / 1e6
+                if abs(age_ms) < FRAMES_AGE_LIMIT_MS:
+                    self._frames_age_ms.append(age_ms)
+                else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
+                    self.frames_not_host_time += 1
+        took |= self._buffer(items)
+        if took:
             self._emit(self.windower.poll())
+
+    def _buffer(self, items: list[tuple[int, CellChunk]]) -> bool:
+        if not items:
+            return False
+        try:
+            self.windower.add_many(items)
+        except SignalError as exc:  # the chunks before the offending one stay buffered
+            self.faults["malformed"] += 1
+            self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
+        return True
+
+    def _buffer_part(self, chunk: PartChunk) -> bool:
+        if not len(chunk):
+            return False
+        try:
+            self.windower.add_part(chunk)
+        except SignalError as exc:  # the runs before the offending one stay buffered
+            self.faults["malformed"] += 1
+            self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
+        return True
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
@@ -281,37 +328,60 @@ class WindowNode(Node):
         self._seen(part, int(msg.frame_count))
         return [(cid, chunk)]
 
-    def _on_skin_part(self, msg) -> list[tuple[int, CellChunk]]:
-        """One ``SkinPartFrames``: a chunk per cell run; runs of unknown or misplaced cells are dropped and counted."""
+    def _on_skin_part(self, msg) -> PartChunk | list:
+        """One ``SkinPartFrames`` as one chunk; runs of unknown or misplaced cells are dropped and counted.
+
+        The checks run over the message's runs at once: each cell's batch
+        number against the one it sent before (``lost_cell_batches``: a
+        cell's batches that never arrived; ``sequence_restart``: a driver
+        that started again), its ``bad_frames``.
+        """
         part = msg.body_part
         try:
-            runs = skin_part_msg_to_chunks(msg, self._extra.get(part, ()))
+            chunk = skin_part_msg_to_part_chunk(msg, self._extra.get(part, ()))
         except SignalError as exc:
             self.faults["malformed"] += 1
             self.get_logger().warning(f"malformed SkinPartFrames of body part {part!r}: {exc}",
                                       throttle_duration_sec=5.0)
             return []
-        items = []
-        seqs = _as_list(msg.sequence)
-        bad = _as_list(msg.bad_frames)
-        for (cid, chunk), seq, nbad in zip(runs, seqs, bad):
-            owner = self._cell_part.get(cid)
-            if owner is None:
-                self.faults["unknown_cell"] += 1
-                self.get_logger().warning(f"frames from cell {cid} which is not in the served body parts; dropped",
-                                          throttle_duration_sec=5.0)
-                continue
-            if owner != part:
-                self.faults["body_part_mismatch"] += 1
-                self.get_logger().warning(f"cell {cid} sent on body part {part!r} but the robot description "
-                                          f"puts it on {owner!r}; dropped", throttle_duration_sec=5.0)
-                continue
-            self._sequence(f"cell{cid}", int(seq), 1)
-            self.faults["bad_frames"] += int(nbad)
-            items.append((cid, chunk))
-        if items:
-            self._seen(part, len(items))
-        return items
+        ids = chunk.cell_ids
+        if not ids.size:
+            return []
+        pos = np.minimum(np.searchsorted(self._served_ids, ids), self._served_ids.size - 1)
+        known = self._served_ids[pos] == ids
+        mine = known & (self._served_part[pos] == self._part_code.get(part, -1))
+        if not known.all():
+            self.faults["unknown_cell"] += int((~known).sum())
+            self.get_logger().warning(f"frames from cell {int(ids[~known][0])} which is not in the served body parts; "
+                                      "dropped", throttle_duration_sec=5.0)
+        if (known & ~mine).any():
+            cid = int(ids[known & ~mine][0])
+            self.faults["body_part_mismatch"] += int((known & ~mine).sum())
+            self.get_logger().warning(f"cell {cid} sent on body part {part!r} but the robot description puts it on "
+                                      f"{self._cell_part[cid]!r}; dropped", throttle_duration_sec=5.0)
+        if not mine.any():
+            return []
+        self._sequence_cells(pos[mine], _as_array(msg.sequence, np.uint32)[mine])
+        self.faults["bad_frames"] += int(_as_array(msg.bad_frames, np.uint32)[mine].sum())
+        self._seen(part, int(mine.sum()))
+        return chunk.take(mine)
+
+    def _sequence_cells(self, cells: np.ndarray, seq: np.ndarray) -> None:
+        """Each cell's batch number (32-bit) after the one before: gaps are lost cell batches, a number at or
+        before the newest a restart of the driver's count (as ``SequenceTracker.track_run`` with one number)."""
+        if np.unique(cells).size < cells.size:  # a cell twice in one message: one run after the other
+            for c, q in zip(cells.tolist(), seq.tolist()):
+                self._sequence_cells(np.array([c]), np.array([q], np.int64))
+            return
+        seq = seq.astype(np.int64)
+        have = self._seq_have[cells]
+        d = (seq - (self._seq_high[cells] + 1)) % (1 << 32)
+        back = have & (d >= 1 << 31)
+        lost = np.where(have & ~back, d, 0)
+        self.faults["lost_cell_batches"] += int(lost.sum())
+        self.faults["sequence_restart"] += int(back.sum())
+        self._seq_high[cells] = np.where(have & ~back, self._seq_high[cells] + 1 + d, seq)
+        self._seq_have[cells] = True
 
     def _sequence(self, key: str, first: int, count: int) -> None:
         event, lost = self._sequences.track_run(key, first, max(count, 1))
@@ -394,6 +464,7 @@ class WindowNode(Node):
                         "frames_messages_taken": self.frames_taken,
                         "windower_buffer_mb": round(self.windower.buffer_bytes / 2**20, 3),
                         "largest_frames_batch": self.largest_batch,
+                        "frames_not_host_time": self.frames_not_host_time,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
         for name, samples in (("frames_age", self._frames_age_ms), ("describe", self._describe_ms)):
             if samples:
@@ -437,9 +508,11 @@ def _newest_sample_ns(msg) -> int | None:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + int(max(offsets))
 
 
-def _as_list(values) -> list[int]:
-    """An rclpy array field (``array.array``) or a rosbags one (ndarray) as a list of ints."""
-    return values.tolist() if hasattr(values, "tolist") else list(values)
+def _as_array(values, dtype) -> np.ndarray:
+    """An rclpy array field (``array.array``) or a rosbags one (ndarray) as a numpy array (no copy)."""
+    if isinstance(values, np.ndarray):
+        return values
+    return np.frombuffer(values, dtype=dtype) if len(values) else np.zeros(0, dtype)
 
 
 def main(args: Sequence[str] | None = None) -> int:

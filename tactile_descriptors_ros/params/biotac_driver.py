@@ -15,7 +15,7 @@ BIOTAC_DRIVER = NodeSchema("biotac_driver", driver_params(
                    "loopback (tests)",
     serial_port="/dev/ttyACM0", baudrate=921600, frames_depth=50,
     tare_on_start="baseline from the first frames (nothing is published before it; 0 = off)",
-    tare_window="frames averaged by ~/tare",
+    tare_window="the last frames ~/tare takes the resting level over",
     tare_window_tunable_text="; tare.track_band_n follows it unless set",
     specific=(
         Param("frame_pattern", "string", "frame pattern: default, paper_50hz, biotac_sp, or a channel list "

@@ -24,10 +24,11 @@ def driver_params(*, kind: str, transports: tuple[str, ...], transport: str, tra
         body_parts(f"every {kind} body part of the robot"),
         Param("transport", "string", transport_text, default=transport, choices=transports),
         *specific,
-        Param("stamp_source", "string", "time stamps: clock (the device's sample clock anchored to the node clock) "
-              "or device (the device's time as it is: simulations, bridges synchronised to ROS time)",
+        Param("stamp_source", "string", "time stamps: clock (the device's sample clock carried to the node clock "
+              "by an offset estimated from every read: when the sample was acquired, never in the future) or device "
+              "(the device's time as it is: simulations, bridges synchronised to ROS time)",
               default="clock", choices=("clock", "device")),
-        Param("resync_s", "double", "re-anchor clock stamps when they drift this far from the node clock "
+        Param("resync_s", "double", "a device clock jump larger than this re-anchors the clock stamps' offset "
               "(0 = never)", default=1.0, unit="s", range=(0.0, 3600.0)),
         Param("tare_on_start_s", "double", f"{tare_on_start}; at most the samples the driver keeps (BioTac: "
               "2000 frames, 20 s at 100 frames/s; skin cell: 500 force samples, 2 s at 250 Hz)", default=0.5, unit="s",

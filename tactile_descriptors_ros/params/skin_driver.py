@@ -14,7 +14,7 @@ SKIN_DRIVER = NodeSchema("skin_driver", driver_params(
     transport_text="device transport: can (python-can), serial (pyserial), simulated (sim.scene), loopback (tests)",
     serial_port="/dev/ttyUSB0", baudrate=3_000_000, frames_depth=200,
     tare_on_start="force baseline from the first samples (0 = off)",
-    tare_window="samples averaged by ~/tare",
+    tare_window="the last force samples ~/tare takes the resting level over",
     tare_window_tunable_text="",
     specific=(
         Param("batch_s", "double", "sample time per message (all cells of a body part)", default=0.05, unit="s",

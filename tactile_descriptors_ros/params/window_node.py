@@ -60,7 +60,7 @@ WINDOW_NODE = NodeSchema("window_node", join(
           default=0, range=(0, 999_999)),
     topic_pattern(FRAMES_TOPIC),
     Param("frames.drain_max", "integer", "frames messages taken from the queues per callback besides its own, "
-          "handed to the windower at once (0 = one per callback; lab/docs/latency.md)", default=1000,
+          "handed to the windower at once (0 = one per callback; lab/docs/performance.md#latency)", default=1000,
           range=(0, 1_000_000), unit="messages", tunable=True),
     diagnostics_period(),
     Param("diagnostics.silent_after_s", "double", "a served body part that sent no frames for this long is reported "

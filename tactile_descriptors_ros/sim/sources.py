@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..codecs.biotac_spi import PDC, TAC, TDC, BiotacSpiResponder, FramePattern, channel_name, encode_words
+from ..codecs.biotac_spi import IDLE, PDC, TAC, TDC, BiotacSpiResponder, FramePattern, channel_name, encode_words
 from ..codecs.bridge_serial import BridgeFrame, BridgeFrameType, encode_bridge_frame
 from ..errors import SceneError
 from .engine import FAULT_CORRUPT, FAULT_PARITY, SimResult, iter_simulate
@@ -157,6 +157,9 @@ def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None,
         if cell.kind != "biotac" or (chip_selects is not None and cs not in chip_selects):
             continue
         words, fault, seq, t_ns = biotac_frame_words(cell, pat)
+        # a bridge sends a frame once its last word was sampled (the bridge clock stamps the frame's start)
+        word_ns = 1e9 / (cell.streams["pdc"].rate_hz * pat.slot_count)
+        done_ns = int(round((int(np.flatnonzero(np.asarray(pat.slots) != IDLE)[-1]) + 1) * word_ns))
         raw = np.frombuffer(encode_words(words.ravel()), dtype=np.uint8).reshape(len(seq), -1).copy()
         parity = np.nonzero(fault == FAULT_PARITY)
         raw[parity[0], 2 * parity[1]] ^= 0x01  # wrong odd-parity bit of the high byte
@@ -170,7 +173,7 @@ def bridge_frames(result: SimResult, pattern: FramePattern | str | None = None,
                 b = bytearray(frame)
                 b[12 + (int(seq[i]) * 7) % raw.shape[1]] ^= 0x5A  # garbled on the line: the CRC no longer matches
                 frame = bytes(b)
-            out.append((int(t_ns[i]), cs, frame))
+            out.append((int(t_ns[i]) + done_ns, cs, frame))
     out.sort(key=lambda x: (x[0], x[1]))
     return [(t, f) for t, _, f in out]
 

@@ -5,9 +5,12 @@ SPI bus); :class:`BridgeFrameSource` reads our USB-serial bridge framing
 (``docs/protocols.md``).  Both return :class:`ReadItem` objects: the frames
 of one BioTac from one read with their device times and unwrapped sequence
 numbers.  :class:`BiotacStream` takes them per sensor: counts lost frames,
-stamps frames (``clock``: the device clock anchored to the host clock,
-re-anchored on drift; ``device``: as it is), holds the tare (start tare,
-``~/tare``, slow baseline tracking) and cuts batches of ``batch_frames``
+stamps frames (``clock``: the device clock carried to the host clock by a
+:class:`~.clock.DeviceClock` per BioTac, updated by every read, so a stamp
+is the acquisition time and never later than the read that returned it;
+``device``: as it is), holds the tare (start tare, ``~/tare``: the resting
+level of :func:`~..core.tare.resting_level` over the last window of frames;
+slow baseline tracking) and cuts batches of ``batch_frames``
 consecutive frames (:class:`~..nodes.conversions.BioTacBatch`; a gap ends a
 batch).  After the device was gone (:class:`~.link.DeviceLink`),
 :meth:`BiotacStream.resume` counts the time it was missing as lost frames.
@@ -25,7 +28,9 @@ import numpy as np
 from ..codecs.biotac_spi import BiotacFrameDecoder, BiotacFrames, FramePattern, WordCounts
 from ..codecs.bridge_serial import BridgeDecoder, BridgeFrameType
 from ..codecs.sequence import Unwrapper
-from ..errors import CodecError
+from ..core.tare import MIN_REST_SAMPLES, resting_level
+from ..errors import CodecError, SignalError
+from .clock import DeviceClock
 from .frames import BioTacBatch
 
 __all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream",
@@ -43,6 +48,7 @@ class ReadItem:
     frames: BiotacFrames
     device_t_ns: np.ndarray
     sequence: np.ndarray
+    clock_restart: bool = False  # the device clock does not continue the previous read's (re-anchor it)
 
 
 class SpiFrameSource:
@@ -87,16 +93,19 @@ class SpiFrameSource:
         due = self._t0 + self.frame * self.period_ns * 1e-9
         if due > now:
             time.sleep(due - now)
-        elif now - due > 0.5:  # fell behind by more than half a second: restart the schedule
+        restart = False
+        if due <= now and now - due > 0.5:  # fell behind by more than half a second: restart the schedule
             self.overruns += 1
             self._t0 = now - self.frame * self.period_ns * 1e-9
+            restart = True  # nothing was sampled meanwhile: the frame clock paused while real time went on
         replies = self._read_frame(self.spi, self.pattern, self.chip_selects, self.word_rate_hz)
         k = self.frame
         self.frame += 1
         out = []
         for cs in self.chip_selects:
             frames = self.decoder.decode_many(cs, replies[cs], first_sequence=k)
-            out.append(ReadItem(cs, frames, np.array([k * self.period_ns], np.int64), np.array([k], np.int64)))
+            out.append(ReadItem(cs, frames, np.array([k * self.period_ns], np.int64), np.array([k], np.int64),
+                                clock_restart=restart))
         return out
 
 
@@ -195,8 +204,10 @@ class SensorState:
 
     cfg: SensorConfig
     frames: list[tuple[int, int, BiotacFrames]] = field(default_factory=list)  # (seq, stamp_ns, frames)
-    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))  # (stamp_ns, pdc)
-    recent_el: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))  # (stamp_ns, electrodes)
+    # frames with a readable PDC, for ~/tare and the contact check: (stamp_ns, pdc) and, frame for frame,
+    # that frame's electrodes (float64, NaN where unreadable)
+    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))
+    recent_el: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))
     tare_pdc: float = 0.0
     tare_electrodes: np.ndarray | None = None
     tared: bool = False
@@ -212,6 +223,7 @@ class SensorState:
     last_host_ns: int | None = None
     resume_from_ns: int | None = None
     first_stamp_ns: int | None = None
+    last_sample_ns: int | None = None  # stamp of the newest PAC sample taken (stamps never step back)
 
 
 class BiotacStream:
@@ -225,15 +237,17 @@ class BiotacStream:
     batch_frames : int
         Frames per batch.
     stamp_source : {"clock", "device"}
+        ``clock``: device time plus the :class:`~.clock.DeviceClock` offset
+        estimated from every read; ``device``: device time as it is.
     resync_s : float
-        Re-anchor ``clock`` stamps when they drift from the host clock by more (0 = never).
+        Re-anchor a ``clock`` offset after a device clock jump of more than this (0 = never).
     tare_on_start_s : float
         Baseline from the first frames (nothing is emitted before); 0 = off.
     track_s, track_band_n : float
         Baseline tracking time constant [s] (0 = off) and the force band it works in [N].
     force_n_per_count : float
     now_ns : callable() -> int
-        The host (node) clock [ns] of ``clock`` stamps.
+        The host (node) clock [ns] of ``clock`` stamps, read once per read.
     faults : collections.Counter
         Shared fault counters (``clock_resync``).
     log : callable(level, text), optional
@@ -262,22 +276,59 @@ class BiotacStream:
         self._log = log or (lambda level, text: None)
         self._pac_off = pattern.pac_offsets_ns(word_rate_hz)
         self.state: dict[int, SensorState] = {cs: SensorState(cfg) for cs, cfg in sensors.items()}
-        self._offset_ns: int | None = None
+        self._key = {cs: i for i, cs in enumerate(sorted(sensors))}
+        self.clock = DeviceClock(len(self._key), jump_ns=int(round(self.resync_s * 1e9)))
+        # a frame's newest sample, relative to its device time: its last word slot
+        self._newest_ns = int(pattern.slot_offsets_ns(word_rate_hz)[-1])
 
     # ---------------------------------------------------------------- frames
-    def stamp(self, device_t_ns: int) -> int:
-        """The time stamp of a frame at device time ``device_t_ns``."""
+    def observe(self, items: Sequence[ReadItem], host_ns: int | None = None) -> None:
+        """Update the ``clock`` offsets with one read: each BioTac's newest sample against ``host_ns``.
+
+        ``host_ns`` is the host (node) clock when the read returned (default:
+        now).  :meth:`add_read` calls this before stamping the read's frames.
+        """
+        if self.stamp_source == "device":
+            return
+        newest: dict[int, int] = {}
+        restart: set[int] = set()
+        for item in items:
+            if item.chip_select not in self._key or not len(item.device_t_ns):
+                continue
+            t = int(np.max(item.device_t_ns))
+            newest[item.chip_select] = max(t, newest.get(item.chip_select, t))
+            if item.clock_restart:
+                restart.add(self._key[item.chip_select])
+        if not newest:
+            return
+        if restart:
+            self.clock.reset(np.fromiter(restart, np.int64))
+        before = self.clock.resyncs
+        keys = np.array([self._key[cs] for cs in newest], np.int64)
+        dev = np.fromiter(newest.values(), np.int64, len(newest)) + self._newest_ns
+        self.clock.observe(keys, dev, self._now() if host_ns is None else int(host_ns))
+        if self.clock.resyncs > before:
+            self.faults["clock_resync"] += self.clock.resyncs - before
+
+    def stamp(self, chip_select: int, device_t_ns: int) -> int:
+        """The time stamp of a frame of ``chip_select`` at device time ``device_t_ns`` (after :meth:`observe`)."""
         if self.stamp_source == "device":
             return int(device_t_ns)
-        now = self._now()
-        if self._offset_ns is None:
-            self._offset_ns = now - int(device_t_ns)
-        stamp = self._offset_ns + int(device_t_ns)
-        if self.resync_s > 0 and abs(stamp - now) > self.resync_s * 1e9:
-            self.faults["clock_resync"] += 1
-            self._offset_ns = now - int(device_t_ns)
-            stamp = now
-        return stamp
+        return int(self.clock.to_host(self._key[chip_select], int(device_t_ns)))
+
+    def add_read(self, items: Sequence[ReadItem], host_ns: int | None = None,
+                 now_ns: int | None = None) -> list[tuple[SensorState, BioTacBatch]]:
+        """Take the frames of one read (every BioTac's); return the batches completed (sensor, batch).
+
+        ``host_ns``: the monotonic host time of the read (lost frames across
+        an absence); ``now_ns``: the node clock at the read (the ``clock``
+        offsets; default: now).
+        """
+        self.observe(items, now_ns)
+        out: list[tuple[SensorState, BioTacBatch]] = []
+        for item in items:
+            out += self._add(item, host_ns)
+        return out
 
     def resume(self, gap_s: float) -> list[tuple[SensorState, BioTacBatch]]:
         """The device came back after ``gap_s`` away: emit what is pending, count the absence.
@@ -292,17 +343,21 @@ class BiotacStream:
             if batch is not None:
                 out.append((st, batch))
             st.next_seq = None
+            st.last_sample_ns = None
             st.resume_from_ns = st.last_host_ns
             st.last_gap_s = float(gap_s)
-        self._offset_ns = None
+        self.clock.reset()
         return out
 
     def add(self, item: ReadItem, host_ns: int | None = None) -> list[tuple[SensorState, BioTacBatch]]:
-        """Take the frames of one read of one BioTac; return the batches completed (sensor, batch)."""
+        """Take the frames of one BioTac from a read of its own (:meth:`add_read` of one item)."""
+        return self.add_read([item], host_ns)
+
+    def _add(self, item: ReadItem, host_ns: int | None = None) -> list[tuple[SensorState, BioTacBatch]]:
         st = self.state[item.chip_select]
         frames = item.frames
         host = time.monotonic_ns() if host_ns is None else int(host_ns)
-        stamp = self.stamp(int(item.device_t_ns[0]))
+        stamp = self.stamp(item.chip_select, int(item.device_t_ns[0]))
         seq = int(item.sequence[0])
         out = []
         st.frames_total += len(frames)
@@ -322,15 +377,22 @@ class BiotacStream:
                 out.append((st, batch))
         st.last_host_ns = host
         st.next_seq = seq + len(frames)
+        if self.stamp_source == "clock" and st.last_sample_ns is not None \
+                and stamp + int(self._pac_off[0]) <= st.last_sample_ns:
+            # The clock offset dropped (a read with a smaller delay than any before): this frame would start
+            # before the previous one ended.  Dropped and counted; the batch so far ends here.
+            self.faults["clock_step_back_frames"] += len(frames)
+            batch = self._flush(st)
+            return out + ([(st, batch)] if batch is not None else [])
+        st.last_sample_ns = stamp + int(self._pac_off[-1])
         if st.first_stamp_ns is None:
             st.first_stamp_ns = stamp
         for k in range(len(frames)):
             if frames.pdc_valid[k]:
                 st.recent_pdc.append((stamp, float(frames.pdc[k])))
+                st.recent_el.append(np.where(frames.electrodes_valid[k], frames.electrodes[k], np.nan))
                 if st.tared and self.track_alpha > 0:
                     self._track_baseline(st, float(frames.pdc[k]))
-            if frames.electrodes_valid[k].all():
-                st.recent_el.append((stamp, frames.electrodes[k].astype(np.float64)))
         if not st.tared and self.tare_on_start_s > 0:
             if stamp - st.first_stamp_ns >= self.tare_on_start_s * 1e9:
                 ok, why = self.tare_one(st, self.tare_on_start_s, check_contact=False)
@@ -386,20 +448,51 @@ class BiotacStream:
         return (float(np.mean(last)) - st.tare_pdc) * self.force_n_per_count
 
     def tare_one(self, st: SensorState, window_s: float, check_contact: bool,
-                 force_threshold_n: float = float("inf")) -> tuple[bool, str]:
-        """Zero the PDC and electrode baselines over the last ``window_s`` of frames."""
+                 force_threshold_n: float = float("inf"), *, rest_percentile: float = 100.0) -> tuple[bool, str]:
+        """Set the PDC and electrode baselines to their resting level over the last ``window_s`` of frames.
+
+        The level is :func:`~..core.tare.resting_level` of the frames with a
+        readable PDC in the window (the electrodes over the same frames), so a
+        span read offline gets the same level from the same samples.
+
+        Parameters
+        ----------
+        st : SensorState
+        window_s : float
+            Frames stamped within this long of the newest one [s].
+        check_contact : bool
+            Refuse while the force of the last frames is at or above ``force_threshold_n``.
+        force_threshold_n : float
+        rest_percentile : float
+            Share of the window known to rest (:func:`~..core.tare.resting_level`): 100
+            for ``~/tare`` and the start tare, which take a window without contact.
+
+        Returns
+        -------
+        (bool, str)
+            Whether the sensor was tared, and what was done or why not.  The
+            electrodes go untared (``tare_electrodes`` None) when fewer than
+            :data:`~..core.tare.MIN_REST_SAMPLES` frames of the window read all of them.
+        """
         if check_contact:
             f = self.force_now(st)
             if f is not None and f >= force_threshold_n:
                 return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {force_threshold_n} N)"
         if not st.recent_pdc:
             return False, f"{st.cfg.sensor_name}: no valid PDC samples yet"
-        newest = st.recent_pdc[-1][0]
-        pdc = [p for t, p in st.recent_pdc if t >= newest - window_s * 1e9]
-        el = [e for t, e in st.recent_el if t >= newest - window_s * 1e9]
-        if len(pdc) < 3:
-            return False, f"{st.cfg.sensor_name}: only {len(pdc)} valid PDC samples in the last {window_s} s"
-        st.tare_pdc = float(np.mean(pdc))
-        st.tare_electrodes = np.mean(el, axis=0) if el else None
+        stamps = np.array([t for t, _ in st.recent_pdc], dtype=np.int64)
+        take = stamps >= stamps[-1] - window_s * 1e9
+        if np.count_nonzero(take) < MIN_REST_SAMPLES:
+            return False, (f"{st.cfg.sensor_name}: only {np.count_nonzero(take)} valid PDC samples in the last "
+                           f"{window_s} s")
+        pdc = np.array([p for _, p in st.recent_pdc])[take]
+        el = np.array(st.recent_el)[take].T  # (electrodes, frames), frame for frame with the PDC
+        el_readable = np.count_nonzero(np.isfinite(el).all(axis=0)) >= MIN_REST_SAMPLES
+        try:
+            lvl = resting_level(pdc, el if el_readable else None, rest_percentile=rest_percentile)
+        except SignalError as e:
+            return False, f"{st.cfg.sensor_name}: {e}"
+        st.tare_pdc = float(lvl.reference[0])
+        st.tare_electrodes = lvl.channels if el_readable else None
         st.tared = True
-        return True, f"PDC baseline {st.tare_pdc:.1f} counts from {len(pdc)} frames"
+        return True, f"PDC baseline {st.tare_pdc:.1f} counts from {lvl.samples} frames"

@@ -14,10 +14,11 @@ This module holds everything about that layout that needs no ROS:
 * :func:`pack_skin_part` -- the driver side: per-cell
   :class:`~..nodes.conversions.SkinFrame` s -> one :class:`SkinPartFrames`;
 * :meth:`SkinPartFrames.frames` -- the exact inverse (the reference);
-* :func:`skin_part_chunks` -- the window node side: one
-  :class:`SkinPartFrames` -> a :class:`~..core.windowing.CellChunk` per run,
-  the per-sample work (validity, tared mean force, extra channels) done once
-  over the whole body part with array operations;
+* :func:`skin_part_chunk` -- the window node side: one
+  :class:`SkinPartFrames` -> one :class:`~..core.windowing.PartChunk`, the
+  per-sample work (validity, tared mean force, extra channels) done once
+  over the whole body part with array operations (:func:`skin_part_chunks`:
+  the same as a :class:`~..core.windowing.CellChunk` per run);
 * :class:`PartGatherer` -- collects the cells' batches of a body part until
   every cell that is sending has one, so a part goes out as one message per
   batch even when its cells' batches complete in different reads.
@@ -34,12 +35,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core.windowing import CellChunk
+from ..core.windowing import CellChunk, PartChunk
 from ..errors import SignalError
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 from .frames import SkinFrame
 
-__all__ = ["SkinPartFrames", "SkinRun", "pack_skin_part", "skin_part_chunks", "PartGatherer",
+__all__ = ["SkinPartFrames", "SkinRun", "pack_skin_part", "skin_part_chunks", "skin_part_chunk", "PartGatherer",
            "SKIN_PART_EXTRA_CHANNELS"]
 
 #: Extra channels (robot description ``extra_channels``) a ``SkinPartFrames`` carries.
@@ -210,7 +211,19 @@ def pack_skin_part(body_part: str, runs: Sequence[SkinRun], *, accel_mps2_per_co
 
 
 def skin_part_chunks(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -> list[tuple[int, CellChunk]]:
-    """One :class:`CellChunk` per run, in run order (vibration accelerometer, deformation force).
+    """One :class:`CellChunk` per run, in run order: :meth:`~..core.windowing.PartChunk.chunks` of
+    :func:`skin_part_chunk` (slices of the part's arrays).
+
+    Raises
+    ------
+    SignalError
+        For an extra channel this message does not carry.
+    """
+    return skin_part_chunk(part, extra_channels).chunks()
+
+
+def skin_part_chunk(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -> PartChunk:
+    """The whole message as one :class:`~..core.windowing.PartChunk` (vibration accelerometer, deformation force).
 
     Per sample exactly what ``skin_msg_to_chunk`` made of a ``SkinCellFrame``:
     force (contact gate, eq. 27) is the mean of the three tared force sensors
@@ -218,10 +231,9 @@ def skin_part_chunks(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -
     ``extra_channels`` (names of :data:`SKIN_PART_EXTRA_CHANNELS`) become the
     chunk's extra rows, one value per force sample: ``proximity`` in counts
     (NaN where ``INVALID_COUNT`` or absent), ``temperature`` the run's
-    ``temperature_c``.  The run's force tare becomes the deformation tare.
-
-    The per-sample work is done once over the whole body part; each chunk
-    holds slices of the part's arrays.
+    ``temperature_c``.  Each run's force tare becomes its deformation tare.
+    The per-sample work is done once over the whole body part, with no
+    Python loop over runs.
 
     Raises
     ------
@@ -232,8 +244,6 @@ def skin_part_chunks(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -
     if unknown:
         raise SignalError(f"SkinPartFrames carries no extra channel {unknown[0]!r}")
     n = len(part)
-    if not n:
-        return []
     ax, ay, az = part.accel[0], part.accel[1], part.accel[2]
     m_total = int(part.force.shape[1])
     acc = np.empty((3, ax.shape[0]), dtype=np.int32)
@@ -257,26 +267,10 @@ def skin_part_chunks(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -
                               else np.full(m_total, np.nan)),
                 "temperature": np.repeat(np.asarray(part.temperature_c, dtype=np.float64), f_count)}
         extra = np.stack([cols[c] for c in extra_channels])
-    a_end = np.cumsum(a_count).tolist()
-    f_end = np.cumsum(f_count).tolist()
-    out = []
-    a0 = f0 = 0
-    for i, cid in enumerate(np.asarray(part.cell_ids).tolist()):
-        a1, f1 = a_end[i], f_end[i]
-        out.append((int(cid), CellChunk(
-            vibration=acc[:, a0:a1],
-            vibration_t_ns=t_a[a0:a1],
-            deformation=forces[:, f0:f1],
-            deformation_t_ns=t_f[f0:f1],
-            force_n=force_n[f0:f1],
-            force_t_ns=t_f[f0:f1],
-            vibration_valid=vib_ok[a0:a1],
-            deformation_valid=f_ok[f0:f1],
-            extra=None if extra is None else extra[:, f0:f1],
-            deformation_tare=tare[i],
-        )))
-        a0, f0 = a1, f1
-    return out
+    return PartChunk(cell_ids=np.asarray(part.cell_ids, dtype=np.int64), vibration_count=a_count,
+                     deformation_count=f_count, vibration=acc, vibration_t_ns=t_a, deformation=forces,
+                     deformation_t_ns=t_f, force_n=force_n, vibration_valid=vib_ok, deformation_valid=f_ok,
+                     extra=extra, deformation_tare=tare)
 
 
 class PartGatherer:

@@ -29,7 +29,7 @@ predictions keep coming (up to 30 s after the last one).
 
 NAO's skin over CAN is about 175 000 frames per simulated second; the
 simulated bus hands them to the driver in batches, which decodes them with
-array operations faster than real time (``lab/docs/wire_throughput.md``).  On a
+array operations faster than real time (``lab/docs/performance.md, section Wire``).  On a
 busy machine ``--speed 0.5`` plays the scene at half of real time (the
 drivers stamp with the simulator's clock, so windows and descriptors are
 the same); ``--wire serial`` uses the skin serial framing.

@@ -251,7 +251,7 @@ def test_buffers_are_sized_from_the_robot_description_and_never_grow():
     w.add(1, _chunk(0, 0.0, rng))
     st = w._cells[1]
     streams = (st.vib, st.dfm, st.force, st.extra)
-    arrays = [s._v for s in streams]
+    arrays = [s.buf.v for s in streams]
     span_s = w._retain_ns / 1e9 + BUFFER_SLACK_S
     ct = robot.cell_types[robot.cell_index()[1][0].cell_type]
     assert st.vib.capacity == int(np.ceil(BUFFER_HEADROOM * span_s * ct.vibration.rate_hz))
@@ -272,7 +272,7 @@ def test_buffers_are_sized_from_the_robot_description_and_never_grow():
         t += 100 * MS
     w.add_many(burst)
     wins += w.poll()
-    assert all(s._v is a for s, a in zip(streams, arrays))  # never reallocated
+    assert all(s.buf.v is a for s, a in zip(streams, arrays))  # never reallocated
     # sized for what is kept (plus the slack and a chunk), not 2-4 times it
     assert st.vib.capacity <= BUFFER_HEADROOM * (max(kept) + (BUFFER_SLACK_S + 0.1) * ct.vibration.rate_hz)
     assert [x.exploration_id for x in wins] == [1, 2, 3]

@@ -118,11 +118,14 @@ def test_spi_sampling_on_a_simulated_bus_reads_serial_numbers(ros_context):
     drv, ex, got = _make(ros_context, {**PARAMS, "transport": "simulated", "wire": "spi", "stamp_source": "clock"},
                          factory)
     try:
-        assert spin_until(ex, lambda: got["index"] and got["thumb"])
+        # batches of 5 frames; a frame stamped before the previous one ended (the clock offset learnt a
+        # smaller delay) is dropped and ends its batch early (docs/nodes.md, Time stamps)
+        assert spin_until(ex, lambda: got["thumb"] and any(len(m.pac_offset_ns) == 5 * 22 for m in got["index"]))
         m = got["index"][0]
         assert m.serial_number == "BT00000000002000" and set(m.pac) == {2007} and set(m.pdc) == {2001}
         assert set(got["thumb"][0].electrodes) == {1002}
-        assert len(m.pac_offset_ns) == 5 * 22 and all(np.diff(m.pac_offset_ns) > 0)
+        for m in got["index"]:
+            assert len(m.pac_offset_ns) in (22, 44, 66, 88, 110) and all(np.diff(m.pac_offset_ns) > 0)
     finally:
         drv.close()
 

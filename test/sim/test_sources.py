@@ -165,7 +165,9 @@ def test_paced_source_hands_out_data_on_the_wall_clock():
     src = BiotacBridgeSource(_scene(HAND), speed=2.0, clock=lambda: now[0])
     src.open()
     frame_bytes = 12 + 88 + 4
-    assert len(src.read(1 << 20)) == 5 * frame_bytes  # the five BioTacs' frames at t = 0
+    assert src.read(1 << 20) == b""  # a frame is sent once its last word was sampled, 9.8 ms after its start
+    now[0] += 0.005
+    assert len(src.read(1 << 20)) == 5 * frame_bytes  # the five BioTacs' frames of t = 0
     now[0] += 0.125  # 0.25 s of simulated time at twice real time: 25 more frames each
     assert len(src.read(1 << 20)) == 5 * 25 * frame_bytes
     assert src.read(1 << 20) == b""

@@ -592,7 +592,7 @@ def targets(report: BenchReport) -> dict:
         "design_wait_ms": max(waits) if waits else None,
         "met": None if not waits else bool(max(waits) <= DESIGN_WAIT_TARGET_MS)}
     # 10,000 cells through drivers and window nodes in their own processes: a run of minutes and dozens of
-    # processes, measured on its own (lab/docs/scaling.md); its report carries the same entry with ``met``
+    # processes, measured on its own (lab/docs/performance.md, section Scale); its report carries the same entry with ``met``
     out["skin_10000_graph"] = {
         "target": "10000 skin cells through drivers and one window node per body part in real time (2 s windows, "
                   "0.5 s hop), zero lost frames (tactile bench --scale-graph --cells 10000)",
@@ -711,7 +711,7 @@ def _latency_lines(lat: dict) -> list[str]:
     lines = ["", f"latency through window_node + classifier_node, {mode} windows ({lat.get('nodes')}, "
                  f"{lat.get('cells')} cells, one message per body part per {1000 * lat.get('batch_s', 0.0):g} ms, "
                  f"lateness {1000 * lat.get('lateness_s', 0.0):g} ms, {lat.get('predictions')} predictions; "
-                 "lab/docs/latency.md):"]
+                 "lab/docs/performance.md, section Latency):"]
     rows = [("e2e", f"{ref} -> Prediction received"),
             ("wait", "waiting for the closing batch (design)"),
             ("processing", "closing batch published -> Prediction received"),

@@ -30,7 +30,7 @@ per-message work outside the executor: deserialisation, message -> chunk
 conversion, ``Windower.add`` / ``add_many``.  ``split_window_nodes=True``
 starts one window node per body part (``tactile launch --split-window-nodes``,
 :func:`~tactile_descriptors_ros.launching.graph.build_graph`).
-Write-up: ``lab/docs/latency.md``.
+Write-up: ``lab/docs/performance.md, section Latency``.
 """
 
 from __future__ import annotations

@@ -26,13 +26,12 @@ import numpy as np
 from tactile_descriptors_lab.datasets.bagfiles import find_bags, is_bag, read_bag_frames
 from tactile_descriptors_lab.datasets.mapping import Mapping, NameRule, load_mapping, parse_mapping
 from tactile_descriptors_lab.datasets.recording import (
-    REST_PERCENTILE,
     UNTARED_REST_COUNTS,
     BiotacRecording,
     CellRecording,
-    rest_level,
     spread_pac_stamps,
     tare_recording,
+    trial_rest,
 )
 from tactile_descriptors_lab.datasets.tables import (
     Unit,
@@ -44,7 +43,8 @@ from tactile_descriptors_lab.datasets.tables import (
     split_runs,
     table_channels,
 )
-from tactile_descriptors_ros.errors import ConfigError, DataFormatError
+from tactile_descriptors_ros.core.tare import TRIAL_REST_PERCENTILE, resting_level
+from tactile_descriptors_ros.errors import ConfigError, DataFormatError, SignalError
 
 __all__ = ["DEFAULT_MAPPING", "BAG_MAPPING", "LoadReport", "read_source", "resolve_mapping", "check_selection",
            "format_numbers", "align_classes"]
@@ -330,9 +330,12 @@ def _build(raw: list[_Trial], m: Mapping, tare_mode: str, report: LoadReport | N
         return [_tare_cell(r, m, tare_mode, report) for r in recs]
     out = []
     for r in recs:
-        untared = rest_level(r.pdc) > UNTARED_REST_COUNTS
-        if tare_mode == "per_trial" or (tare_mode == "auto" and untared):
-            r = tare_recording(r)
+        if tare_mode == "none":
+            out.append(r)
+            continue
+        rest = trial_rest(r)
+        if tare_mode == "per_trial" or rest.reference[0] > UNTARED_REST_COUNTS:
+            r = tare_recording(r, rest)
             if report is not None:
                 report.tared.append((r.class_name, r.trial, r.tare_counts[0]))
                 report.untared_detected |= tare_mode == "auto"
@@ -425,12 +428,16 @@ def _force_channels(ct, deformation: np.ndarray, extra: np.ndarray) -> np.ndarra
 def _tare_cell(r: CellRecording, m: Mapping, tare_mode: str, report: LoadReport | None) -> CellRecording:
     """Tare a cell's force channels when its resting force is not near zero (``tare: auto``) or always.
 
-    The resting level is the :data:`~.recording.REST_PERCENTILE` th percentile
-    of the mean force; a trial resting at or above F_t of the cell type's
-    robot (the contact gate would pass every frame) is untared.  Each force
-    channel's tare is its median over the resting frames; the counts stay as
-    recorded, the tare goes to ``deformation_tare`` (subtracted by the
-    ``levels`` group, as a driver's reported tare) and to the force.
+    The force channels' resting level is
+    :func:`~tactile_descriptors_ros.core.tare.resting_level` over the trial
+    (its frames whose mean force lies at or below the
+    :data:`~tactile_descriptors_ros.core.tare.TRIAL_REST_PERCENTILE` th
+    percentile; each channel's median over them), as a driver's ``~/tare``
+    takes it over its window.  A trial whose resting mean force is at or
+    above F_t of the cell type's robot (the contact gate would pass every
+    frame) is untared.  The counts stay as recorded, the tare goes to
+    ``deformation_tare`` (subtracted by the ``levels`` group, as a driver's
+    reported tare) and to the force.
     """
     from tactile_descriptors_ros.core.robot import load_robot
 
@@ -440,21 +447,23 @@ def _tare_cell(r: CellRecording, m: Mapping, tare_mode: str, report: LoadReport 
     assert ct is not None
     robot = load_robot(m.robot)
     npc = ct.force.n_per_count
-    finite = np.isfinite(r.force_counts)
-    if not finite.any():
+    if not np.isfinite(r.force_counts).any():
         raise DataFormatError(f"{r.path}: the force channels {', '.join(ct.force.channels)} hold no value")
-    level = float(np.percentile(r.force_counts[finite], REST_PERCENTILE))
+    forces = _force_channels(ct, r.deformation, r.extra)
+    try:
+        rest = resting_level(forces, rest_percentile=TRIAL_REST_PERCENTILE)
+    except SignalError as e:
+        raise DataFormatError(f"{r.path}: no resting force level: {e}") from None
+    tare = rest.reference
+    level = float(tare.mean())
     if tare_mode == "auto" and level * npc < robot.contact.force_threshold_n:
         return r
-    forces = _force_channels(ct, r.deformation, r.extra)
-    resting = finite & (r.force_counts <= level)
-    tare = np.median(forces[:, resting], axis=1)
     d_tare = np.zeros(r.deformation.shape[0])
     for c, v in zip(ct.force.channels, tare):
         if c in ct.deformation.channels:
             d_tare[ct.deformation.channels.index(c)] = v
     if report is not None:
-        report.tared.append((r.class_name, r.trial, float(level)))
+        report.tared.append((r.class_name, r.trial, level))
         report.untared_detected |= tare_mode == "auto"
     return replace(r, force_counts=(forces - tare[:, None]).mean(axis=0), deformation_tare=d_tare,
                    tare_counts=tuple(float(v) for v in tare))

@@ -14,21 +14,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tactile_descriptors_ros.errors import DataFormatError
+from tactile_descriptors_ros.core.tare import TRIAL_REST_PERCENTILE, RestingLevel, resting_level
+from tactile_descriptors_ros.errors import DataFormatError, SignalError
 
-__all__ = ["BiotacRecording", "CellRecording", "N_ELECTRODES", "spread_pac_stamps", "UNTARED_REST_COUNTS", "rest_level",
-           "tare_recording"]
+__all__ = ["BiotacRecording", "CellRecording", "N_ELECTRODES", "spread_pac_stamps", "UNTARED_REST_COUNTS",
+           "trial_rest", "tare_recording"]
 
 #: Impedance electrodes of a BioTac.
 N_ELECTRODES = 19
 
-#: A trial whose resting PDC (its 5th percentile) lies above this many counts has not been tared: a tared
+#: A trial whose resting PDC (:func:`trial_rest`) lies above this many counts has not been tared: a tared
 #: BioTac rests near 0 (the shared sliding recordings rest at 0 to 50 counts), an untared one at its
 #: absolute pressure (about 1,000 to 3,000 counts).
 UNTARED_REST_COUNTS = 300
-
-#: Percentile of a trial's PDC taken as its resting level.
-REST_PERCENTILE = 5.0
 
 
 class _Trial:
@@ -226,24 +224,37 @@ def spread_pac_stamps(frame_t_ns: np.ndarray, pac_per_frame: int, where: str) ->
     return (frame_t_ns[:, None] + (intervals[:, None] * steps[None, :]) // pac_per_frame).ravel()
 
 
-def rest_level(pdc: np.ndarray) -> float:
-    """Resting PDC of a trial: its :data:`REST_PERCENTILE` th percentile, in counts."""
-    return float(np.percentile(np.asarray(pdc, dtype=np.float64), REST_PERCENTILE))
+def trial_rest(rec: BiotacRecording) -> RestingLevel:
+    """Resting level of a trial's PDC and electrodes (:func:`~tactile_descriptors_ros.core.tare.resting_level`).
+
+    The trial touches most of the time: its resting frames are those whose
+    PDC lies at or below the :data:`~tactile_descriptors_ros.core.tare.TRIAL_REST_PERCENTILE`
+    th percentile, each channel's level its median over them [counts].
+
+    Raises
+    ------
+    DataFormatError
+        For a trial too short to rest on (fewer than three resting frames).
+    """
+    try:
+        return resting_level(rec.pdc, rec.electrodes, rest_percentile=TRIAL_REST_PERCENTILE)
+    except SignalError as e:
+        raise DataFormatError(f"{rec.path}: no resting level: {e}") from None
 
 
-def tare_recording(rec: BiotacRecording) -> BiotacRecording:
+def tare_recording(rec: BiotacRecording, rest: RestingLevel | None = None) -> BiotacRecording:
     """Tare one trial as a tared BioTac set-up would: subtract resting levels, clip at 0.
 
-    PDC loses its resting level (:func:`rest_level`); each electrode loses its
-    median over the resting frames (PDC at most the resting level); PAC, TAC
-    and TDC are left as they are (the descriptors use their variations).
-    Values are clipped at 0, as in the tared recordings this package was
-    developed on.
+    PDC and each electrode lose their resting level (:func:`trial_rest`, or
+    ``rest`` when already taken), rounded to the nearest count so the counts
+    stay integers like the sensor's; PAC, TAC and TDC are left as they are
+    (the descriptors use their variations).  Values are clipped at 0, as in
+    the tared recordings this package was developed on.  ``tare_counts``
+    holds the PDC counts subtracted.
     """
-    level = rest_level(rec.pdc)
-    tare = int(round(level))
-    resting = rec.pdc <= level
-    e_tare = np.round(np.median(rec.electrodes[:, resting], axis=1)).astype(np.int64)
+    rest = trial_rest(rec) if rest is None else rest
+    tare = int(np.round(rest.reference[0]))
+    e_tare = np.round(rest.channels).astype(np.int64)
     return replace(rec, pdc=np.clip(rec.pdc - tare, 0, None),
                    electrodes=np.clip(rec.electrodes - e_tare[:, None], 0, None),
                    tare_counts=(float(tare),))

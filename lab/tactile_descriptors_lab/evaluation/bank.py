@@ -67,6 +67,7 @@ from tactile_descriptors_ros.core.groups import (
     VIBRATION_BANDS_HZ,
     check_groups,
     feedable_groups,
+    fitted,
     parse_group,
     rocket_parameters,
     selection_labels,
@@ -308,27 +309,16 @@ def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, st
 def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
     """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.groups.selection_labels`)."""
     ct = cell_type or biotac_cell_type()
-    return {g: selection_labels(ct, (g,)) if _fitted(ct, g) else () for g in GROUPS}
+    return {g: selection_labels(ct, (g,)) if fitted(ct, g) else () for g in GROUPS}
 
 
 def _rocket_too_short(cell_type: CellType, window) -> bool:
     """True when a window is shorter than a fitted rocket transform's largest kernel (the group is then not computed)."""
-    if not _fitted(cell_type, "rocket"):
+    if not fitted(cell_type, "rocket"):
         return False
     params = rocket_parameters(cell_type)
     n_fast = window.pac.size if isinstance(window, BiotacRecording) else np.shape(window.vibration)[-1]
     return n_fast < params["vibration"].min_samples or window.n_frames < params["slow"].min_samples
-
-
-def _fitted(cell_type: CellType, group: str) -> bool:
-    """False for ``rocket`` on a cell type without fitted transforms (its bank columns are then none)."""
-    if group != "rocket":
-        return True
-    try:
-        rocket_parameters(cell_type)
-    except ConfigError:
-        return False
-    return True
 
 
 @dataclass
@@ -403,7 +393,7 @@ def window_bank(rec: BiotacRecording, start: int, n_frames: int, cell_type: Cell
     for g in GROUPS:
         if g not in feedable or (g == "rocket" and short):  # a group reading a channel the recording lacks (or
             # its cell type cannot feed, or a window shorter than the rocket transforms' largest kernel)
-            groups[g] = np.full(len(selection_labels(cell_type, (g,))) if _fitted(cell_type, g) else 0, np.nan)
+            groups[g] = np.full(len(selection_labels(cell_type, (g,))) if fitted(cell_type, g) else 0, np.nan)
             seconds[g] = 0.0
             continue
         t0 = time.perf_counter()

@@ -14,7 +14,7 @@ cell and group before timing; the report ends with the targets, met or not
 ``--latency`` also measures sensor stamp -> Prediction through the ROS node
 graph; ``--scale-graph --cells N`` instead runs N skin cells through skin
 drivers and one window node per body part, each its own process
-(lab/docs/scaling.md).  Reading the numbers: lab/docs/performance.md.
+(lab/docs/performance.md, section Scale).  Reading the numbers: lab/docs/performance.md.
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scale-graph", action="store_true",
                    help="instead of timing: run a synthetic skin of --cells cells through skin drivers and one "
                         "window node per body part, each its own process, and report CPU per process, lost "
-                        "frames, windows and whether it kept up in real time (lab/docs/scaling.md)")
+                        "frames, windows and whether it kept up in real time (lab/docs/performance.md, section Scale)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
     p.add_argument("--parts", type=int, default=None,
                    help="body parts of --scale-graph, one driver and one window node each (default: one per 500 "

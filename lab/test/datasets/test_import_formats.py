@@ -139,9 +139,12 @@ def test_untared_pressure_is_detected_and_tared_per_trial(csv_recs, tmp_path, ca
     raw = read_source(source, mapping, tare="none")
     assert all(np.all(r.force_n(0.05) >= 0.2) for r in raw)  # every frame "in contact"
     for t, r in zip(tared, raw):
-        level = np.percentile(r.pdc, 5)
-        assert t.tare_counts == (float(round(level)),)
+        resting = r.pdc <= np.percentile(r.pdc, 5)  # the resting frames; each channel's median over them
+        level = np.median(r.pdc[resting])
+        assert level >= offset and t.tare_counts == (float(round(level)),)
         np.testing.assert_array_equal(t.pdc, np.clip(r.pdc - round(level), 0, None))
+        e_level = np.round(np.median(r.electrodes[:, resting], axis=1))
+        np.testing.assert_array_equal(t.electrodes, np.clip(r.electrodes - e_level[:, None], 0, None))
         assert t.pdc.min() == 0 and np.mean(t.force_n(0.05) >= 0.2) < 1.0
     # the import says so, and prints the gate statistics of the tared data
     assert main(["import", str(source), "--mapping", str(mapping), "-o", str(tmp_path / "bag")]) == 0

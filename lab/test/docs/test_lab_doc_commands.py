@@ -11,14 +11,14 @@ PAGES = ["lab/README.md", *sorted(str(p.relative_to(REPO)) for p in (REPO / "lab
 SKIP: dict[tuple[str, str], str] = {
     ("lab/docs/performance.md", "make bench                                  # full table (about 5 minutes)"):
         "minutes of benchmarking; lab/test/bench/test_bench_command.py runs `tactile bench` on a small size",
-    ("lab/docs/latency.md", ".venv/bin/tactile bench --sizes 1000 --lengths 2 --latency --json > latency.json"):
+    ("lab/docs/performance.md", ".venv/bin/tactile bench --sizes 1000 --lengths 2 --latency --json > latency.json"):
         "a latency measurement of minutes; lab/test/bench/test_latency.py measures a short one",
-    ("lab/docs/scaling.md", "tactile bench --scale-graph --cells 10000 --parts 20 --seconds 30 --json > scale_10000.json"):
+    ("lab/docs/performance.md", "tactile bench --scale-graph --cells 10000 --parts 20 --seconds 30 --json > scale_10000.json"):
         "41 processes for minutes; the page's small run above and lab/test/bench/test_scale_graph.py run the same "
         "command on a small skin",
-    ("lab/docs/scaling.md", "tactile bench --scale-graph --cells 20 --parts 2 --hosts 2 --seconds 8"):
+    ("lab/docs/performance.md", "tactile bench --scale-graph --cells 20 --parts 2 --hosts 2 --seconds 8"):
         "lab/test/bench/test_multi_host.py runs these two-host graphs (the same commands, shorter) and the link drop",
-    ("lab/docs/scaling.md",
+    ("lab/docs/performance.md",
      "tactile bench --scale-graph --cells 10000 --parts 20 --hosts 2 --seconds 30 --json > hosts_10000.json"):
         "43 processes on three hosts for minutes; lab/test/bench/test_multi_host.py runs a small two-host graph",
     ("lab/docs/performance.md", "tactile bench --model-save"):

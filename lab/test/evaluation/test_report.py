@@ -44,6 +44,10 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
     assert set(res["length_cv"]) == {"combined | 1", "combined | 0.5-2"}
     assert len(res["length_cv"]["combined | 1"]["classifiers"]["svm"]["fold_accuracy"]) == 2
     assert "| combined | 1 s | random 0.5-2 s |" in md
+    # trial CV scores plain statistics (the floor) beside the descriptor, with their spread over folds
+    assert set(res["trial_cv"]) == {"paper | 1", "plain | 1"}
+    assert len(res["trial_cv"]["plain | 1"]["classifiers"]["svm"]["fold_accuracy"]) == 2
+    assert "| plain | " in md and "`plain` (mean, sd, min and max of every channel) is the floor" in md
 
     # --only length recomputes those sections alone, keeps the rest and renders the page again
     head_before = res["headline"]
@@ -64,3 +68,10 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
     assert all(p["features"] == FEATURE_DEFINITION for p in again["provenance"].values())
     md2 = (out / "results.md").read_text()
     assert "## Headline" in md2 and "## Robustness to touch length" in md2
+
+
+
+def test_the_full_report_scores_plain_statistics_beside_the_shipped_groups_by_trial():
+    from tactile_descriptors_lab.evaluation.report import FULL_PLAN
+
+    assert {"combined", "plain"} <= set(FULL_PLAN.trial_cv_modes)

@@ -1,0 +1,141 @@
+"""``Windower.add_part`` (a body part's message in one piece) buffers exactly what ``add_many`` does.
+
+Hypothesis builds messages of runs -- several cells of one body part, runs
+of any length, a cell twice in a message, and every fault the windower
+counts (duplicate, late, overlapping and unsorted stamps, clock jumps, empty
+runs, unknown cells, NaN force, invalid samples) -- and feeds them as one
+``PartChunk`` to one windower and as its per-run ``CellChunk`` s to another:
+the return values, the faults, every cell's buffers, smoothed force and
+contact state, and the windows cut from them are the same, in fixed and
+exploration mode.  In-order messages take the array path, the others the
+per-run reference; both are exercised (the test counts them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tactile_descriptors_ros.core.robot import load_robot
+from tactile_descriptors_ros.core.windowing import PartChunk, Windower
+
+MS = 1_000_000
+NAO = load_robot("nao")
+PART = NAO.body_part("left_hand")
+CELLS = [c.id for c in PART.cells][:4]
+UNKNOWN = max(NAO.cell_index()) + 1000
+
+KINDS = ("ok", "ok", "ok", "ok", "ok", "ok", "duplicate", "late", "overlap", "unsorted", "clock_jump", "empty",
+         "nan_force", "invalid", "unknown")
+
+messages = st.lists(
+    st.lists(st.tuples(st.sampled_from(range(len(CELLS))), st.sampled_from(KINDS), st.integers(1, 24),
+                       st.floats(0.0, 3.0)), min_size=1, max_size=6),
+    min_size=1, max_size=30,
+)
+
+
+def _messages(spec, seed: int) -> list[PartChunk]:
+    """One ``PartChunk`` per message; each cell keeps its own time cursor (accelerometer 1 kHz, force 250 Hz)."""
+    rng = np.random.default_rng(seed)
+    cursor = {c: 5_000 * MS for c in CELLS}
+    prev = {c: None for c in CELLS}
+    out = []
+    for runs in spec:
+        ids, acc, t_a, frc, t_f, force, va, vf, tare, n_a, n_f = [], [], [], [], [], [], [], [], [], [], []
+        for k, kind, n, f in runs:
+            cid = CELLS[k]
+            t0 = cursor[cid]
+            if kind == "duplicate" and prev[cid] is not None:
+                t0 = prev[cid]
+            elif kind in ("late", "overlap") and prev[cid] is not None:
+                t0 = prev[cid] - (n * MS if kind == "late" else MS)
+            elif kind == "clock_jump":
+                t0 = max(0, t0 - 3_000 * MS)
+            ta = t0 + np.arange(0 if kind == "empty" else n, dtype=np.int64) * MS
+            if kind == "unsorted" and n > 2:
+                ta[[0, 1]] = ta[[1, 0]]
+            tf = ta[::4].copy()
+            fn = np.full(tf.size, f)
+            if kind == "nan_force":
+                fn[::2] = np.nan
+            ids.append(UNKNOWN if kind == "unknown" else cid)
+            acc.append(rng.integers(-512, 512, (3, ta.size)).astype(np.int32))
+            frc.append(rng.integers(0, 4096, (3, tf.size)).astype(np.int32))
+            t_a.append(ta)
+            t_f.append(tf)
+            force.append(fn)
+            va.append(rng.random(ta.size) > 0.2 if kind == "invalid" else np.ones(ta.size, bool))
+            vf.append(rng.random(tf.size) > 0.2 if kind == "invalid" else np.ones(tf.size, bool))
+            tare.append(rng.normal(0, 5, 3))
+            n_a.append(ta.size)
+            n_f.append(tf.size)
+            if kind in ("ok", "nan_force", "invalid", "clock_jump") and ta.size:
+                prev[cid] = int(ta[0])
+                cursor[cid] = max(cursor[cid], int(ta[-1]) + MS) if kind != "clock_jump" else int(ta[-1]) + MS
+        out.append(PartChunk(
+            cell_ids=np.array(ids, np.int64), vibration_count=np.array(n_a, np.int64),
+            deformation_count=np.array(n_f, np.int64), vibration=np.concatenate(acc, axis=1),
+            vibration_t_ns=np.concatenate(t_a), deformation=np.concatenate(frc, axis=1),
+            deformation_t_ns=np.concatenate(t_f), force_n=np.concatenate(force),
+            vibration_valid=np.concatenate(va), deformation_valid=np.concatenate(vf),
+            extra=rng.normal(0, 1, (2, sum(n_f))), deformation_tare=np.array(tare)))
+    return out
+
+
+def _plain(a: np.ndarray) -> list:
+    """A list that compares NaN equal to NaN."""
+    return np.where(np.isnan(a), -1.0, a).tolist() if a.dtype.kind == "f" else a.tolist()
+
+
+def _state(w: Windower) -> dict:
+    cells = {}
+    for cid, s in w._cells.items():
+        streams = [x.between(-(2**62), 2**62) for x in (s.vib, s.dfm, s.force, s.extra)]
+        cells[cid] = ([_plain(a) for trip in streams for a in trip], s.last_force_n, s.hot_until_ns,
+                      None if s.tare is None else s.tare.tolist())
+    return {"faults": dict(w.faults), "latest": w._latest_ns, "cells": list(cells.items())}
+
+
+def _windows(ws) -> list:
+    return [(w.start_ns, w.end_ns, w.exploration_id, w.mode,
+             {cid: (c.vibration.tolist(), c.vibration_t_ns.tolist(), c.deformation.tolist(),
+                    c.deformation_t_ns.tolist(), _plain(c.force_n), c.valid, c.gap,
+                    c.invalid_samples) for cid, c in w.cells.items()}) for w in ws]
+
+
+def _run(chunks: list[PartChunk], mode: str, part: bool):
+    w = Windower(NAO, mode=mode, length_s=0.02, hop_s=0.01, min_duration_s=0.0, release_s=0.005,
+                 lateness_s=0.0, force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0,
+                 smooth_s=0.004)
+    accepted, windows = [], []
+    for chunk in chunks:
+        accepted += (w.add_part(chunk).tolist() if part else w.add_many(chunk.chunks()))
+        windows += w.poll()
+    windows += w.flush()
+    return accepted, _windows(windows), _state(w)
+
+
+
+@settings(max_examples=150, deadline=None)
+@given(messages, st.integers(0, 2**16), st.sampled_from(["fixed", "exploration"]))
+def test_add_part_equals_add_many(spec, seed, mode):
+    chunks = _messages(spec, seed)
+    ref = _run(chunks, mode, part=False)
+    got = _run(chunks, mode, part=True)
+    assert got[0] == ref[0]
+    assert got[2] == ref[2]
+    assert got[1] == ref[1]
+
+
+def test_an_in_order_message_takes_the_array_path_and_a_faulty_one_the_reference(monkeypatch):
+    """The array path must actually run (not only the per-run reference that add_part falls back to)."""
+    w = Windower(NAO, mode="exploration")
+    calls = []
+    monkeypatch.setattr(w, "add_many", lambda items: calls.append(1) or Windower.add_many(w, items))
+    ok = _messages([[(0, "ok", 10, 2.0), (1, "ok", 10, 2.0), (2, "ok", 10, 0.0)]], 1)[0]
+    assert w.add_part(ok).tolist() == [True, True, True] and not calls
+    assert len(w._cells[CELLS[0]].vib) == 10 and w._cells[CELLS[0]].hot_until_ns is not None
+    assert w.add_part(ok).tolist() == [False, False, False] and calls  # the same again: duplicates
+    assert w.faults["duplicate"] == 3
