@@ -55,12 +55,15 @@ def test_sim_speed_reaches_the_drivers_and_must_be_positive(capsys):
 
 
 @pytest.mark.ros
-def test_launch_stops_the_graph_when_a_node_dies(capsys, monkeypatch):
+def test_launch_stops_the_graph_when_a_node_dies(capsys, monkeypatch, tmp_path):
     """The BioTac driver cannot open its Cheetah adapter (none here) and exits; the launcher then stops the
     window and classifier nodes and exits non-zero, long before its duration."""
     import random
 
     monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    # the classifier locks its default model folder under $ROS_HOME: a shared ~/.ros held by another
+    # graph would make it exit first
+    monkeypatch.setenv("ROS_HOME", str(tmp_path))
     code = main(["launch", "shadow_hand", "--json", "--duration-s", "300",
                  "--set", "classifier_node.load_model=false", "--set", "classifier_node.save_after_update=false"])
     out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
