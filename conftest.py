@@ -111,6 +111,7 @@ def ros_message_examples() -> list:
     from tactile_descriptors_msgs.msg import (
         BioTacFrameBatch,
         Descriptor,
+        DescriptorLayout,
         Label,
         Prediction,
         SkinCellFrame,
@@ -169,4 +170,9 @@ def ros_message_examples() -> list:
     sp.accel_offset_ns = [0, 1_000_000, 2_000_000, 500_000]
     sp.force, sp.force_offset_ns, sp.proximity = [1, 2, SkinPartFrames.INVALID_COUNT], [0], [400]
     sp.accel_mps2_per_count, sp.force_n_per_count = 0.038, 0.00244
-    return [b, s, d, p, lab, sp]
+
+    lay = DescriptorLayout()
+    lay.header.frame_id = "shadow_hand"
+    lay.layout_id, lay.robot, lay.layout_mode, lay.channel_mode = "0123456789abcdef", "shadow_hand", "concat", "paper"
+    lay.body_parts, lay.labels = ["thumb", "index"], ["thumb/paper/A_S", "index/paper/A_S"]
+    return [b, s, d, p, lab, sp, lay]

@@ -11,6 +11,7 @@ from __future__ import annotations
 __all__ = [
     "TactileError",
     "ConfigError",
+    "SchemaError",
     "SignalError",
     "CodecError",
     "ParityError",
@@ -24,6 +25,7 @@ __all__ = [
     "SceneError",
     "DataFormatError",
     "BagError",
+    "NodeExitedError",
 ]
 
 
@@ -54,6 +56,14 @@ class ConfigError(TactileError, ValueError):
         if key:
             where += f"'{key}': "
         super().__init__(where + message)
+
+
+class SchemaError(ConfigError):
+    """A node's parameter schema is wrong (a name given twice, an unknown type, a default outside its range).
+
+    Keyed ``<executable>.<parameter>``; raised when the schema is built, so a
+    broken schema fails every import and test of its node.
+    """
 
 
 class SignalError(TactileError, ValueError):
@@ -110,3 +120,19 @@ class DataFormatError(TactileError, ValueError):
 
 class BagError(TactileError):
     """A bag could not be written, read or replayed."""
+
+
+class NodeExitedError(TactileError):
+    """A node of a launched graph ended on its own: the launch ends too, naming the node and its exit code.
+
+    Parameters
+    ----------
+    node : str
+    code : int
+    """
+
+    def __init__(self, node: str, code: int) -> None:
+        self.node = node
+        self.code = code
+        super().__init__(f"node {node} exited with code {code}: stopping the launch (a graph with a node "
+                         "missing recognises nothing)")

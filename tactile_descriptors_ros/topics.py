@@ -9,13 +9,18 @@ absolute forms (:func:`absolute`).  Remap them per node as usual
 
 from __future__ import annotations
 
-__all__ = ["FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC", "CONTACT_TOPIC", "WRENCH_TOPIC",
-           "MARKERS_TOPIC", "IMAGE_TOPIC", "CONTACTS_TOPIC", "TF_STATIC_TOPIC", "absolute", "frames_topic"]
+__all__ = ["FRAMES_TOPIC", "DESCRIPTOR_TOPIC", "DESCRIPTOR_LAYOUT_TOPIC", "LABEL_TOPIC", "PREDICTION_TOPIC",
+           "CONTACT_TOPIC", "WRENCH_TOPIC", "MARKERS_TOPIC", "IMAGE_TOPIC", "CONTACTS_TOPIC", "TF_STATIC_TOPIC",
+           "absolute", "frames_topic", "layout_topic"]
 
 #: Frames of one body part (``{body_part}`` filled in): ``BioTacFrameBatch`` or ``SkinPartFrames``.
 FRAMES_TOPIC = "tactile/{body_part}/frames"
 #: Descriptors of the window node (``Descriptor``).
 DESCRIPTOR_TOPIC = "tactile/descriptor"
+#: Suffix of the topic of a descriptor topic's layouts.
+_LAYOUT_SUFFIX = "_layout"
+#: Layouts of the descriptors (``DescriptorLayout``, latched): always the descriptor topic + ``_layout``.
+DESCRIPTOR_LAYOUT_TOPIC = DESCRIPTOR_TOPIC + _LAYOUT_SUFFIX
 #: True labels for the classifier (``Label``).
 LABEL_TOPIC = "tactile/label"
 #: Predictions of the classifier (``Prediction``).
@@ -35,6 +40,15 @@ TF_STATIC_TOPIC = "/tf_static"
 def frames_topic(body_part: str, fmt: str = FRAMES_TOPIC) -> str:
     """The frames topic of ``body_part`` (``fmt`` holds ``{body_part}``)."""
     return fmt.format(body_part=body_part)
+
+
+def layout_topic(descriptor_topic: str) -> str:
+    """The layout topic of a descriptor topic (``/hand/descriptor`` -> ``/hand/descriptor_layout``).
+
+    Nodes derive it from their descriptor endpoint's resolved name, so a
+    remapped descriptor topic takes its layouts along.
+    """
+    return descriptor_topic + _LAYOUT_SUFFIX
 
 
 def absolute(topic: str) -> str:

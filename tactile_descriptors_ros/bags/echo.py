@@ -13,8 +13,12 @@ from collections.abc import Iterator
 from typing import Any
 
 from ..errors import BagError
+from ..topics import layout_topic
 from .io import BagMessage, BagReader
 from .types import ensure_types, tactile_typestore
+
+_DESCRIPTOR = "tactile_descriptors_msgs/msg/Descriptor"
+_LAYOUT = "tactile_descriptors_msgs/msg/DescriptorLayout"
 
 __all__ = ["echo_bag", "echo_live", "type_constants"]
 
@@ -25,20 +29,28 @@ def type_constants(store: Any) -> dict[str, list]:
 
 
 def echo_bag(bag_path: str, topic: str, count: int | None = None) -> Iterator[tuple[BagMessage, Any]]:
-    """Decoded messages of one topic of a bag, in log-time order."""
+    """Decoded messages of one topic of a bag, in log-time order.
+
+    For a descriptor topic the bag's layouts (the topic + ``_layout``) come
+    along, so a summary can name the values; ``count`` counts only ``topic``.
+    """
     with BagReader(bag_path) as reader:
+        topics = [topic]
+        if layout_topic(topic) in reader.info.topics:
+            topics.append(layout_topic(topic))
         n = 0
-        for msg in reader.messages([topic]):
-            if count is not None and n >= count:
-                return
+        for msg in reader.messages(topics):
+            if msg.topic == topic:
+                if count is not None and n >= count:
+                    return
+                n += 1
             yield msg, reader.deserialize(msg)
-            n += 1
 
 
 def echo_live(topic: str, count: int | None = None, timeout_s: float | None = None,
               discovery_timeout_s: float = 5.0, msgtype: str | None = None, context: Any = None,
               depth: int = 100) -> Iterator[tuple[BagMessage, Any]]:
-    """Decoded messages arriving on a live topic.
+    """Decoded messages arriving on a live topic (a descriptor topic's layouts come along, latched).
 
     Parameters
     ----------
@@ -89,11 +101,20 @@ def echo_live(topic: str, count: int | None = None, timeout_s: float | None = No
                 raise BagError(f"{topic} is published with several types {types}; pass the type")
             msgtype = types[0]
         ensure_types(store, [msgtype])
-        inbox: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
+        inbox: queue.SimpleQueue[tuple[str, str, int, bytes]] = queue.SimpleQueue()
         clock = node.get_clock()
         node.create_subscription(message_class(msgtype), topic,
-                                 lambda data: inbox.put((clock.now().nanoseconds, data)),
+                                 lambda data: inbox.put((topic, msgtype, clock.now().nanoseconds, data)),
                                  subscription_qos_for(offers, depth), raw=True)
+        if msgtype == _DESCRIPTOR:  # the layouts name the values: latched beside the descriptors
+            from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+            ensure_types(store, [_LAYOUT])
+            companion = layout_topic(topic)
+            node.create_subscription(message_class(_LAYOUT), companion,
+                                     lambda data: inbox.put((companion, _LAYOUT, clock.now().nanoseconds, data)),
+                                     QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                                durability=DurabilityPolicy.TRANSIENT_LOCAL), raw=True)
         end = time.monotonic() + timeout_s if timeout_s is not None else None
         n = 0
         while node.context.ok():
@@ -103,12 +124,13 @@ def echo_live(topic: str, count: int | None = None, timeout_s: float | None = No
                 return
             executor.spin_once(timeout_sec=0.05)
             while not inbox.empty():
-                t_ns, data = inbox.get()
-                msg = BagMessage(topic, msgtype, t_ns, bytes(data))
-                yield msg, store.deserialize_cdr(msg.data, msgtype)
-                n += 1
-                if count is not None and n >= count:
-                    return
+                name, kind, t_ns, data = inbox.get()
+                msg = BagMessage(name, kind, t_ns, bytes(data))
+                yield msg, store.deserialize_cdr(msg.data, kind)
+                if name == topic:
+                    n += 1
+                    if count is not None and n >= count:
+                        return
     finally:
         executor.remove_node(node)
         executor.shutdown(timeout_sec=0.5)

@@ -31,6 +31,7 @@ import numpy as np
 import yaml
 
 from ..codecs.sequence import SequenceEvent, SequenceTracker
+from ..layouts import DescriptorLayouts
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 
 __all__ = [
@@ -46,6 +47,7 @@ _BATCH = "tactile_descriptors_msgs/msg/BioTacFrameBatch"
 _SKIN = "tactile_descriptors_msgs/msg/SkinCellFrame"
 _SKIN_PART = "tactile_descriptors_msgs/msg/SkinPartFrames"
 _DESCRIPTOR = "tactile_descriptors_msgs/msg/Descriptor"
+_LAYOUT = "tactile_descriptors_msgs/msg/DescriptorLayout"
 _PREDICTION = "tactile_descriptors_msgs/msg/Prediction"
 _LABEL = "tactile_descriptors_msgs/msg/Label"
 
@@ -174,6 +176,8 @@ class EchoTracker:
         self.top_k = top_k
         self.streams: dict[str, _Stream] = {}
         self._sequences = SequenceTracker(1 << 32, window=0)  # message sequence numbers are 32-bit
+        #: the labels of the descriptor layouts seen (``DescriptorLayout``), by layout id
+        self.layouts = DescriptorLayouts()
 
     # ------------------------------------------------------------------ streams
     def _stream(self, key: str, log_ns: int) -> _Stream:
@@ -241,6 +245,7 @@ class EchoTracker:
             _SKIN: self._skin,
             _SKIN_PART: self._skin_part,
             _DESCRIPTOR: self._descriptor,
+            _LAYOUT: self._layout,
             _PREDICTION: self._prediction,
             _LABEL: self._label,
         }.get(msgtype, self._generic)
@@ -445,9 +450,13 @@ class EchoTracker:
         for name in ("contact", "cells_in_contact", "cells_total", "mean_force_n", "quality"):
             if len(getattr(m, name)) != len(parts):
                 problems.append(f"{name} has {len(getattr(m, name))} entries for {len(parts)} body parts")
-        labels = list(m.labels)
         values = np.asarray(m.values, dtype=np.float64)
-        if len(labels) != values.size:
+        known = self.layouts.of(m)
+        labels = list(known) if known is not None else [f"value_{k}" for k in range(values.size)]
+        if known is None:
+            problems.append(f"layout {getattr(m, 'layout_id', '')!r} not seen (its DescriptorLayout is on the "
+                            "descriptor topic + '_layout'): values by index")
+        elif len(labels) != values.size:
             problems.append(f"{len(labels)} labels for {values.size} values")
         per_part: dict[str, Any] = {}
         for i, part in enumerate(parts):
@@ -482,6 +491,8 @@ class EchoTracker:
             "window_mode": m.window_mode,
             "layout_mode": m.layout_mode,
             "channel_mode": m.channel_mode,
+            "frame_id": m.header.frame_id,
+            "layout_id": getattr(m, "layout_id", ""),
             "n_values": int(values.size),
             "body_parts": per_part,
             "problems": problems,
@@ -490,6 +501,15 @@ class EchoTracker:
         if other:
             out["values"] = other
         return out
+
+    def _layout(self, topic: str, msgtype: str, m: Any, log_ns: int) -> dict[str, Any]:
+        """A ``DescriptorLayout``: learned, so the descriptors naming it show their labels."""
+        self.layouts.add(m)
+        problems = [] if m.layout_id in self.layouts.labels else ["layout_id is not the id of its labels"]
+        self._stream(topic, log_ns)
+        return {"layout_id": m.layout_id, "robot": m.robot, "layout_mode": m.layout_mode,
+                "channel_mode": m.channel_mode, "frame_id": m.header.frame_id, "body_parts": list(m.body_parts),
+                "n_labels": len(m.labels), "problems": problems}
 
     def _prediction(self, topic: str, msgtype: str, m: Any, log_ns: int) -> dict[str, Any]:
         names = list(m.class_names)

@@ -41,8 +41,8 @@ MSG_PACKAGE = "tactile_descriptors_msgs"
 #: The project's message types (full ROS 2 names).
 TACTILE_TYPES = tuple(
     f"{MSG_PACKAGE}/msg/{name}"
-    for name in ("BioTacFrameBatch", "SkinPartFrames", "SkinCellFrame", "Descriptor", "Prediction", "Label", "Contact",
-                 "ContactArray")
+    for name in ("BioTacFrameBatch", "SkinPartFrames", "SkinCellFrame", "Descriptor", "DescriptorLayout", "Prediction",
+                 "Label", "Contact", "ContactArray")
 )
 
 #: Base stores by distribution name.

@@ -84,7 +84,12 @@ class BodyPart:
 
 @dataclass(frozen=True)
 class ContactSpec:
-    """Contact gate parameters (eq. 13): ``force_threshold_n`` is F_t."""
+    """Contact gate parameters (eq. 13): ``force_threshold_n`` is F_t.
+
+    The field defaults are what a robot description that leaves a key out
+    gets, and so the default of the nodes' parameters of the same names
+    (``contact.force_threshold_n`` of the window node and the drivers).
+    """
 
     force_threshold_n: float = 0.2
     release_threshold_n: float = 0.1  # hysteresis for exploration windows
@@ -292,9 +297,10 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
         parts.append(BodyPart(pname, ctype, tuple(cells)))
 
     cr_ = root.child("contact", {})
+    # the defaults of a file that leaves a key out are the spec classes' (one home: node parameters too)
     contact = ContactSpec(
-        force_threshold_n=cr_.number("force_threshold_n", 0.2, minimum=0.0),
-        release_threshold_n=cr_.number("release_threshold_n", 0.1, minimum=0.0),
+        force_threshold_n=cr_.number("force_threshold_n", ContactSpec.force_threshold_n, minimum=0.0),
+        release_threshold_n=cr_.number("release_threshold_n", ContactSpec.release_threshold_n, minimum=0.0),
     )
     cr_.check_unknown()
     if contact.release_threshold_n > contact.force_threshold_n:
@@ -302,12 +308,12 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
 
     wr = root.child("window", {})
     window = WindowSpec(
-        mode=wr.get("mode", "exploration", str),
-        length_s=wr.number("length_s", 2.0, positive=True),
-        hop_s=wr.number("hop_s", 0.5, positive=True),
-        min_duration_s=wr.number("min_duration_s", 1.0, minimum=0.0),
-        max_duration_s=wr.number("max_duration_s", 10.0, positive=True),
-        release_s=wr.number("release_s", 0.1, minimum=0.0),
+        mode=wr.get("mode", WindowSpec.mode, str),
+        length_s=wr.number("length_s", WindowSpec.length_s, positive=True),
+        hop_s=wr.number("hop_s", WindowSpec.hop_s, positive=True),
+        min_duration_s=wr.number("min_duration_s", WindowSpec.min_duration_s, minimum=0.0),
+        max_duration_s=wr.number("max_duration_s", WindowSpec.max_duration_s, positive=True),
+        release_s=wr.number("release_s", WindowSpec.release_s, minimum=0.0),
     )
     wr.check_unknown()
     if window.mode not in WINDOW_MODES:
@@ -335,7 +341,7 @@ def parse_robot(data: Any, source: str = "<dict>") -> RobotDescription:
 
 def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts: list[BodyPart]) -> DescriptorSpec:
     """``descriptor``: layout and feature groups (``groups``, or the legacy ``channels`` alias)."""
-    layout = dr.get("layout", "concat", str)
+    layout = dr.get("layout", DescriptorSpec.layout, str)
     if layout not in LAYOUT_MODES:
         raise dr.error("layout", f"must be one of {LAYOUT_MODES}, got {layout!r}")
     has_groups, has_channels = "groups" in dr.data, "channels" in dr.data
@@ -347,12 +353,13 @@ def _parse_descriptor(dr: YamlReader, cell_types: Mapping[str, CellType], parts:
             raise dr.error("groups", "needs a non-empty list of feature group names")
         channels, groups = "", tuple(raw)
     else:
-        channels = dr.get("channels", "averaged", str)
+        channels = dr.get("channels", DescriptorSpec.channels, str)
         if channels not in CHANNEL_MODES:
             raise dr.error("channels", f"must be one of {CHANNEL_MODES}, got {channels!r}")
         groups = groups_of_channels(channels)
-    block_s = dr.number("block_s", 0.0)
-    block_hop_s = dr.number("block_hop_s", min(0.5, block_s) if block_s else 0.5)
+    block_s = dr.number("block_s", DescriptorSpec.block_s)
+    block_hop_s = dr.number("block_hop_s", min(DescriptorSpec.block_hop_s, block_s) if block_s else
+                            DescriptorSpec.block_hop_s)
     dr.check_unknown()
     used = [cell_types[n] for n in dict.fromkeys(p.cell_type for p in parts)]
     check_blocks(block_s, block_hop_s, key=dr.path("block_s").rsplit(".", 1)[0], source=dr.source,

@@ -594,12 +594,14 @@ class Windower:
                           "window.min_duration_s", allow_zero=True)
         self.max_ns = _ns(max_duration_s if max_duration_s is not None else w.max_duration_s, "window.max_duration_s")
         if self.min_ns > self.max_ns:
-            raise ConfigError("min_duration_s must not exceed max_duration_s", key="window.min_duration_s")
+            raise ConfigError(f"must not exceed window.max_duration_s ({self.max_ns / 1e9:g} s), got "
+                              f"{self.min_ns / 1e9:g} s", key="window.min_duration_s")
         self.release_ns = _ns(release_s if release_s is not None else w.release_s, "window.release_s", allow_zero=True)
         self.onset_n = float(force_threshold_n if force_threshold_n is not None else c.force_threshold_n)
         self.release_n = float(release_threshold_n if release_threshold_n is not None else c.release_threshold_n)
         if self.release_n > self.onset_n:
-            raise ConfigError("release threshold must not exceed the onset threshold", key="contact.release_threshold_n")
+            raise ConfigError(f"release threshold must not exceed the onset threshold contact.force_threshold_n "
+                              f"({self.onset_n:g} N), got {self.release_n:g} N", key="contact.release_threshold_n")
         self.lateness_ns = _ns(lateness_s, "lateness_s", allow_zero=True)
         self.clock_jump_ns = _ns(clock_jump_s, "clock_jump_s")
         self.smooth_ns = _ns(smooth_s, "smooth_s", allow_zero=True)
@@ -638,19 +640,15 @@ class Windower:
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
     # ------------------------------------------------------------- settings
-    #: Settings :meth:`retune` may change while data flows.
-    TUNABLE = ("length_s", "hop_s", "min_duration_s", "max_duration_s", "release_s", "force_threshold_n",
-               "release_threshold_n", "lateness_s")
-
     def settings(self) -> dict[str, float]:
-        """The current values of :attr:`TUNABLE` (seconds and newtons)."""
+        """The settings :meth:`retune` may change while data flows, with their current values (s and N)."""
         return {"length_s": self.length_ns / 1e9, "hop_s": self.hop_ns / 1e9, "min_duration_s": self.min_ns / 1e9,
                 "max_duration_s": self.max_ns / 1e9, "release_s": self.release_ns / 1e9,
                 "force_threshold_n": self.onset_n, "release_threshold_n": self.release_n,
                 "lateness_s": self.lateness_ns / 1e9}
 
     def retune(self, dry_run: bool = False, **changes: float) -> None:
-        """Change some of :attr:`TUNABLE` while running; the buffered data and the current window are kept.
+        """Change some of :meth:`settings` while running; the buffered data and the current window are kept.
 
         The new values are checked together with the unchanged ones, exactly
         as the constructor checks them; on an error nothing changes.  A new
@@ -663,10 +661,11 @@ class Windower:
         ConfigError
             For an unknown setting or an invalid combination (naming it).
         """
-        unknown = sorted(set(changes) - set(self.TUNABLE))
+        current = self.settings()
+        unknown = sorted(set(changes) - set(current))
         if unknown:
-            raise ConfigError(f"cannot retune {unknown[0]!r} (tunable: {', '.join(self.TUNABLE)})", key=unknown[0])
-        merged = {**self.settings(), **changes}
+            raise ConfigError(f"cannot retune {unknown[0]!r} (tunable: {', '.join(current)})", key=unknown[0])
+        merged = {**current, **changes}
         probe = Windower(self.robot, mode=self.mode, clock_jump_s=self.clock_jump_ns / 1e9,
                          smooth_s=self.smooth_ns / 1e9, max_invalid_fraction=self.max_invalid_fraction, **merged)
         if dry_run:

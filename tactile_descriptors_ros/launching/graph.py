@@ -27,6 +27,7 @@ without ROS.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -43,7 +44,9 @@ __all__ = [
     "PACKAGE",
     "EXECUTABLES",
     "DRIVERS",
+    "LOG_LEVELS",
     "NodeSpec",
+    "read_params_file",
     "build_graph",
     "flatten_parameters",
     "parameters_document",
@@ -51,6 +54,8 @@ __all__ = [
 ]
 
 PACKAGE = "tactile_descriptors_ros"
+#: ``--log-level`` values of rcl.
+LOG_LEVELS = ("debug", "info", "warn", "error", "fatal")
 #: Executables of the package (console scripts in setup.py).
 EXECUTABLES = ("biotac_driver", "skin_driver", "window_node", "classifier_node", "contact_node", "tf_publisher")
 #: Executables that talk to hardware (and switch to a simulated transport with ``--sim``).
@@ -73,6 +78,8 @@ class NodeSpec:
     remappings : tuple of (str, str)
     namespace : str
     package : str
+    log_level : str
+        ``--log-level`` of the node (``""``: rcl's default, info).
     """
 
     name: str
@@ -81,6 +88,7 @@ class NodeSpec:
     remappings: tuple[tuple[str, str], ...] = ()
     namespace: str = ""
     package: str = PACKAGE
+    log_level: str = ""
 
     @property
     def fully_qualified_name(self) -> str:
@@ -169,7 +177,8 @@ def _entry(robot: RobotDescription, name: str, raw: Any) -> dict[str, Any]:
 def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: str | os.PathLike[str] | None = None,
                 sim_speed: float | None = None, split_window_nodes: bool = False, model_path: str | None = None,
                 use_sim_time: bool = False, overrides: Mapping[str, Mapping[str, Any]] | None = None,
-                namespace: str = "") -> list[NodeSpec]:
+                namespace: str = "", drivers: bool = True,
+                params_file: str | os.PathLike[str] | None = None, log_level: str = "") -> list[NodeSpec]:
     """The nodes to start for a robot.
 
     Parameters
@@ -198,6 +207,15 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
         Node name -> parameters merged last (nested or dotted names).
     namespace : str
         Namespace of nodes that do not set their own.
+    drivers : bool
+        Start the device drivers; without them only the window and
+        classifier nodes run, for a bag replayed into them (``tactile replay``).
+    params_file : str or path, optional
+        A ROS 2 parameters file (``{node: {ros__parameters: {...}}}``; a node
+        by name, fully qualified name or ``/**`` for every node declaring the
+        parameter), merged over the graph's parameters and under ``overrides``.
+    log_level : str
+        ``--log-level`` of every node (:data:`LOG_LEVELS`; ``""``: info).
 
     Returns
     -------
@@ -208,9 +226,10 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     ------
     ConfigError
         For an empty or malformed ``nodes:`` section, an unknown body part,
-        executable or override target, a parameter the node does not declare
-        or of the wrong type (:func:`~.parameters.check_parameters`), or
-        contradictory options.
+        executable or override target, a parameter the node does not declare,
+        of the wrong type or refused by its schema
+        (:func:`~.parameters.check_parameters`), an unreadable parameters
+        file, or contradictory options (a scene without drivers).
     """
     if not isinstance(robot, RobotDescription):
         robot = load_robot(robot)
@@ -220,6 +239,11 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     robot_param = str(Path(robot.source).resolve()) if robot.source and Path(robot.source).is_file() else robot.name
     if sim_speed is not None and not (float(sim_speed) > 0 and float(sim_speed) != float("inf")):
         raise ConfigError(f"must be a finite number above 0, got {sim_speed!r}", key="sim_speed")
+    if log_level and log_level not in LOG_LEVELS:
+        raise ConfigError(f"must be one of {', '.join(LOG_LEVELS)}, got {log_level!r}", key="log_level")
+    if not drivers and sim_scene is not None and str(sim_scene):
+        raise ConfigError("a simulated scene plays through the drivers: drop sim, or start the drivers",
+                          key="sim")
     scene_param = None
     if sim_scene is not None and str(sim_scene):
         from ..sim.scene import scene_path
@@ -253,17 +277,24 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
 
     if split_window_nodes:
         specs = _split_window_nodes(robot, specs)
+    if not drivers:
+        specs = [s for s in specs if s.executable not in DRIVERS]
+        if not specs:
+            raise ConfigError("the graph has only drivers", key="drivers", source=robot.source)
+    if params_file is not None and str(params_file):
+        specs = _apply_params_file(specs, params_file)
 
     names = {s.name for s in specs}
     for target, values in overrides.items():
         if target not in names:
             raise ConfigError(f"no node named {target!r} to override (nodes: {', '.join(sorted(names))})",
                               key=f"overrides.{target}")
-        specs = [NodeSpec(s.name, s.executable, {**s.parameters, **values}, s.remappings, s.namespace, s.package)
-                 if s.name == target else s for s in specs]
-    # every parameter declared by its executable, with its type (an integer for a double widens)
-    specs = [NodeSpec(s.name, s.executable, check_parameters(s.name, s.executable, s.parameters), s.remappings,
-                      s.namespace, s.package) for s in specs]
+        specs = [dataclasses.replace(s, parameters={**s.parameters, **values}) if s.name == target else s
+                 for s in specs]
+    # every parameter declared by its executable, with its type (an integer for a double widens) and a value
+    # its schema accepts
+    specs = [dataclasses.replace(s, parameters=check_parameters(s.name, s.executable, s.parameters),
+                                 log_level=log_level) for s in specs]
     fq = [s.fully_qualified_name for s in specs]
     dup = sorted({n for n in fq if fq.count(n) > 1})
     if dup:
@@ -291,8 +322,62 @@ def _split_window_nodes(robot: RobotDescription, specs: list[NodeSpec]) -> list[
             params = copy.deepcopy(s.parameters)
             params.update({"body_parts": [part], "descriptor.layout": "pooled",
                            "exploration_id_stride": total, "exploration_id_offset": index})
-            out.append(NodeSpec(f"{s.name}_{part}", s.executable, params, s.remappings, s.namespace, s.package))
+            out.append(dataclasses.replace(s, name=f"{s.name}_{part}", parameters=params))
             index += 1
+    return out
+
+
+def read_params_file(path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """A ROS 2 parameters file: node key (name, ``/ns/name`` or ``/**``) -> flat parameters.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file: unreadable, not YAML, or not the ``{node: {ros__parameters: {...}}}`` layout.
+    """
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ConfigError(f"cannot read the parameters file: {exc.strerror or exc}", key="params_file",
+                          source=str(path)) from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"not YAML: {exc}", key="params_file", source=str(path)) from None
+    if not isinstance(doc, Mapping) or not doc:
+        raise ConfigError("expected a mapping of node names to {ros__parameters: {...}}", key="params_file",
+                          source=str(path))
+    out: dict[str, dict[str, Any]] = {}
+    for node, entry in doc.items():
+        if not isinstance(entry, Mapping) or set(entry) != {"ros__parameters"} or \
+                not isinstance(entry["ros__parameters"], Mapping):
+            raise ConfigError("expected {ros__parameters: {...}}", key=str(node), source=str(path))
+        out[str(node)] = flatten_parameters(entry["ros__parameters"], key=str(node), source=str(path))
+    return out
+
+
+def _apply_params_file(specs: list[NodeSpec], path: str | os.PathLike[str]) -> list[NodeSpec]:
+    """``specs`` with a parameters file's values merged in (a ``/**`` value: into every node declaring it)."""
+    from .parameters import PARAMETER_TYPES
+
+    entries = read_params_file(path)
+    out = list(specs)
+    for key, values in entries.items():
+        if key == "/**":
+            for name, value in values.items():
+                takers = [i for i, s in enumerate(out) if name in PARAMETER_TYPES[s.executable]]
+                if not takers:
+                    raise ConfigError(f"no node of the graph declares {name!r}", key=f"/**.{name}",
+                                      source=str(path))
+                for i in takers:
+                    out[i] = dataclasses.replace(out[i], parameters={**out[i].parameters, name: value})
+            continue
+        hits = [i for i, s in enumerate(out) if key in (s.name, s.fully_qualified_name)]
+        if not hits:
+            known = ", ".join(s.fully_qualified_name for s in out)
+            raise ConfigError(f"no node {key!r} in the graph (nodes: {known}; /** for all)", key=key,
+                              source=str(path))
+        for i in hits:
+            out[i] = dataclasses.replace(out[i], parameters={**out[i].parameters, **values})
     return out
 
 

@@ -1,19 +1,20 @@
-"""The parameters each executable declares, by type: launch-time checks without starting a node.
+"""The parameters each executable declares, from its schema: launch-time checks without starting a node.
 
 A ROS 2 node ignores a parameter it does not declare, and rclpy refuses a
 value of another type than the declared one (an integer ``3`` for a
 ``double`` parameter kills the node at start).  :func:`check_parameters`
-catches both before anything starts: ``tactile launch --set``, ``--print``,
-the robot YAML's ``nodes:`` section and the launch files all go through
-:func:`~.graph.build_graph`, which calls it.  An integer given for a
-``double`` parameter becomes a float (YAML and the command line write
-``3`` for ``3.0``); every other mismatch is a
-:class:`~tactile_descriptors_ros.errors.ConfigError` naming the node and the
-parameter.
+catches both, and every value its schema refuses (out of range, not among
+the choices), before anything starts: ``tactile launch --set``, ``--print``,
+``params_file``, the robot YAML's ``nodes:`` section and the launch files
+all go through :func:`~.graph.build_graph`, which calls it.  An integer
+given for a ``double`` parameter becomes a float (YAML and the command line
+write ``3`` for ``3.0``); every other mismatch is a
+:class:`~tactile_descriptors_ros.errors.ConfigError` naming the node and
+the parameter.
 
-:data:`PARAMETER_TYPES` is checked against what the nodes really declare by
-``test/launching/test_parameters.py`` (it starts each node in-process), so a
-parameter added to a node without an entry here fails a test.
+:data:`PARAMETER_TYPES` is built from the node schemas
+(:data:`tactile_descriptors_ros.params.SCHEMAS`), the same ones the nodes
+declare from.
 
 Plain data: no rclpy import.
 """
@@ -25,74 +26,16 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..errors import ConfigError
+from ..params import SCHEMAS
+from ..params.schema import TYPES, check_value
 
 __all__ = ["PARAMETER_TYPES", "BUILTIN_PARAMETERS", "check_parameters", "TYPES"]
-
-#: Type names (as ``ros2 param describe`` prints them, lower case).
-TYPES = ("bool", "integer", "double", "string", "string_array", "integer_array", "double_array", "bool_array")
 
 #: Parameters rclpy declares on every node.
 BUILTIN_PARAMETERS: dict[str, str] = {"use_sim_time": "bool", "start_type_description_service": "bool"}
 
-_QOS = ("reliability", "durability", "depth")
-
-
-def _qos(*endpoints: str) -> dict[str, str]:
-    return {f"qos.{e}.{k}": ("integer" if k == "depth" else "string") for e in endpoints for k in _QOS}
-
-
-_DRIVER = {
-    "robot": "string", "body_parts": "string_array", "transport": "string", "stamp_source": "string",
-    "resync_s": "double", "tare_on_start_s": "double", "tare.window_s": "double", "contact_threshold_n": "double",
-    "frames_topic": "string", "serial.port": "string", "serial.baudrate": "integer", "sim.scene": "string",
-    "sim.speed": "double", "autostart": "bool", "diagnostics_period_s": "double", "reconnect_s": "double",
-    "read_period_s": "double",
-    **_qos("frames"),
-}
-
-#: executable -> parameter name -> type name (see :data:`TYPES`).
-PARAMETER_TYPES: dict[str, dict[str, str]] = {
-    "biotac_driver": {
-        **_DRIVER, "frame_pattern": "string", "word_rate_hz": "double", "batch_frames": "integer",
-        "wire": "string", "tare.track_s": "double", "tare.track_band_n": "double", "pdc_pa_per_count": "double",
-        "cheetah.port": "integer", "cheetah.bitrate_khz": "integer",
-    },
-    "skin_driver": {
-        **_DRIVER, "batch_s": "double", "can.interface": "string", "can.channel": "string",
-        "can.bitrate": "integer", "sim.wire": "string", "sim.loop": "bool",
-    },
-    "window_node": {
-        "robot": "string", "body_parts": "string_array", "window.mode": "string", "descriptor.layout": "string",
-        "descriptor.channels": "string", "descriptor.groups": "string_array", "descriptor.block_s": "double",
-        "descriptor.block_hop_s": "double", "window.length_s": "double",
-        "window.hop_s": "double",
-        "window.min_duration_s": "double", "window.max_duration_s": "double", "window.release_s": "double",
-        "window.lateness_s": "double", "contact.force_threshold_n": "double",
-        "contact.release_threshold_n": "double", "frame_id": "string", "exploration_id_stride": "integer",
-        "exploration_id_offset": "integer", "frames_topic": "string", "frames.drain_max": "integer",
-        "diagnostics_period_s": "double", **_qos("frames", "descriptor"),
-    },
-    "classifier_node": {
-        "robot": "string", "model_path": "string", "eta": "double", "log_activity": "bool",
-        "standardize": "bool", "pa_update": "string", "pa_average": "bool", "label_horizon": "integer",
-        "save_after_update": "bool", "load_model": "bool", "frame_id": "string", "diagnostics_period_s": "double",
-        "label_expiry_explorations": "integer", "max_class_name_chars": "integer", "label_wait_s": "double",
-        "max_classes": "integer", "max_exploration_id_step": "integer", "label_hold_s": "double",
-        "prediction_order": "string", "clock_jump_s": "double", "enable_reset": "bool",
-        "qos.label.history": "string", **_qos("descriptor", "label", "prediction"),
-    },
-    "contact_node": {
-        "robot": "string", "body_parts": "string_array", "contact.force_threshold_n": "double",
-        "contact.floor_n": "double", "view.rate_hz": "double", "view.force_max_n": "double",
-        "view.stale_s": "double", "view.image_size_px": "integer", "view.refresh_s": "double",
-        "view.markers": "bool", "view.images": "bool", "frames_topic": "string", "frames.drain_max": "integer",
-        "diagnostics_period_s": "double",
-        **_qos("frames", "contact", "view", "prediction"),
-    },
-    "tf_publisher": {
-        "robot": "string", "publish_links": "bool", "publish_sites": "bool", "diagnostics_period_s": "double",
-    },
-}
+#: executable -> parameter name -> type name (see :data:`TYPES`), from the node schemas.
+PARAMETER_TYPES: dict[str, dict[str, str]] = {exe: schema.types() for exe, schema in SCHEMAS.items()}
 
 
 def _is(value: Any, kind: str) -> bool:
@@ -134,7 +77,8 @@ def check_parameters(node: str, executable: str, parameters: Mapping[str, Any]) 
     ------
     ConfigError
         Keyed ``<node>.<parameter>``: a parameter the executable does not
-        declare (with the closest known names), or a value of another type.
+        declare (with the closest known names), a value of another type, or
+        one its schema refuses (range, choices, length, its own check).
     """
     known = {**BUILTIN_PARAMETERS, **PARAMETER_TYPES[executable]}
     out: dict[str, Any] = {}
@@ -149,5 +93,6 @@ def check_parameters(node: str, executable: str, parameters: Mapping[str, Any]) 
         if not _is(value, kind):
             raise ConfigError(f"expects a {kind.replace('_', ' ')}, got {value!r} ({type(value).__name__})",
                               key=f"{node}.{name}")
-        out[name] = value
+        param = SCHEMAS[executable].get(name)
+        out[name] = check_value(param, value, node=node) if param is not None else value
     return out

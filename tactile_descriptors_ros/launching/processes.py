@@ -5,7 +5,7 @@ What ``ros2 launch`` does for the package's own nodes, on a machine without
 :class:`~.graph.NodeSpec` becomes one process::
 
     <python> -m tactile_descriptors_ros.nodes.<executable> --ros-args
-        -r __node:=<name> [-r __ns:=/<namespace>] --params-file <tmp yaml> [-r from:=to ...]
+        -r __node:=<name> [-r __ns:=/<namespace>] --params-file <tmp yaml> [--log-level L] [-r from:=to ...]
 
 started with this interpreter (the venv's own python: the ROS wheels'
 bootstrapper has set the library paths of this process, and children
@@ -58,6 +58,8 @@ def node_command(spec: NodeSpec, params_file: str | os.PathLike[str], python: st
     if ns:
         cmd += ["-r", f"__ns:=/{ns}"]
     cmd += ["--params-file", os.fspath(params_file)]
+    if spec.log_level:
+        cmd += ["--log-level", spec.log_level]
     for src, dst in spec.remappings:
         cmd += ["-r", f"{src}:={dst}"]
     return cmd
@@ -163,16 +165,18 @@ class GraphProcesses:
         """Nodes whose process has ended."""
         return [n for n in self.nodes if n.returncode is not None]
 
-    def wait(self, timeout_s: float | None = None, poll_s: float = 0.2) -> list[RunningNode]:
-        """Block until a node exits (returned) or ``timeout_s`` passes (``[]``)."""
+    def wait(self, timeout_s: float | None = None, poll_s: float = 0.2,
+             stop: threading.Event | None = None) -> list[RunningNode]:
+        """Block until a node exits (returned), ``timeout_s`` passes or ``stop`` is set (``[]``)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        stop = stop if stop is not None else threading.Event()
         while True:
             done = self.exited()
             if done:
                 return done
-            if deadline is not None and time.monotonic() >= deadline:
+            if stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
                 return []
-            time.sleep(poll_s)
+            stop.wait(poll_s if deadline is None else max(0.0, min(poll_s, deadline - time.monotonic())))
 
     # ----------------------------------------------------------------- stop
     def stop(self, sigint_timeout_s: float = 10.0, sigterm_timeout_s: float = 3.0) -> dict[str, int | None]:
@@ -221,25 +225,28 @@ def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None
                           stop_when_one_exits: bool = True) -> dict[str, int | None]:
     """Start ``procs`` and supervise them until Ctrl-C, SIGTERM or ``duration_s``; then stop them.
 
-    A node that exits on its own is reported on stderr and recorded in
-    ``procs.died``; with ``stop_when_one_exits`` (the default: a graph with a
-    node missing does not recognise anything, so it should not look alive,
-    like ``ros2 launch`` with ``on_exit=Shutdown()``) the others are then
-    stopped, else they keep running.  Returns the exit codes.
+    A node that exits on its own is reported on stderr (its name and exit
+    code) and recorded in ``procs.died``; with ``stop_when_one_exits`` (the
+    default: a graph with a node missing does not recognise anything, so it
+    should not look alive, like ``ros2 launch`` with ``on_exit=Shutdown()``)
+    the others are then stopped, else they keep running.  Ctrl-C and SIGTERM
+    only set an event the supervising loop waits on (nothing is raised into
+    the running code).  Returns the exit codes.
     """
-    def on_term(signum, frame):  # SIGTERM to the launcher: stop the graph like Ctrl-C
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGTERM, on_term) if threading.current_thread() is threading.main_thread() else None
+    stop = threading.Event()
+    old: dict[int, object] = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old[sig] = signal.signal(sig, lambda signum, frame: stop.set())
     deadline = None if duration_s is None else time.monotonic() + float(duration_s)
     reported: set[str] = set()
     try:
         procs.start()
-        while True:
+        while not stop.is_set():
             remaining = None if deadline is None else deadline - time.monotonic()
             if remaining is not None and remaining <= 0:
                 break
-            done = procs.wait(timeout_s=0.5 if remaining is None else min(0.5, remaining))
+            done = procs.wait(timeout_s=0.5 if remaining is None else min(0.5, remaining), stop=stop)
             for n in done:
                 if n.spec.name not in reported:
                     reported.add(n.spec.name)
@@ -249,10 +256,8 @@ def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None
                           file=sys.stderr, flush=True)
             if len(reported) == len(procs.nodes) or (reported and stop_when_one_exits):
                 break
-    except KeyboardInterrupt:
-        pass
     finally:
         codes = procs.stop()
-        if old is not None:
-            signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
     return codes

@@ -48,18 +48,22 @@ from rclpy.lifecycle import TransitionCallbackReturn
 
 from ..codecs.biotac_spi import MAX_SENSORS, BiotacFrameDecoder, FramePattern
 from ..errors import ConfigError
-from ..streams.biotac import BiotacStream, BridgeFrameSource, ReadItem, SensorConfig, SensorState, SpiFrameSource
+from ..params.biotac_driver import BIOTAC_DRIVER
+from ..streams.biotac import (
+    RECENT_FRAMES,
+    BiotacStream,
+    BridgeFrameSource,
+    ReadItem,
+    SensorConfig,
+    SensorState,
+    SpiFrameSource,
+)
 from ..streams.frames import BioTacBatch
-from ..topics import FRAMES_TOPIC
-from .common import RateMeter, Status, declare, run_node
+from .common import RateMeter, Status, run_node
 from .conversions import biotac_batch_to_msg
 from .driver_base import DriverBase
-from .qos import QosDefaults, declare_qos
 
 __all__ = ["BiotacDriver", "SensorConfig", "SpiFrameSource", "BridgeFrameSource", "main"]
-
-TRANSPORTS = ("cheetah", "serial", "simulated", "loopback")
-
 
 class BiotacDriver(DriverBase):
     """The BioTac driver; ``kwargs`` go to :class:`rclpy.lifecycle.LifecycleNode`.
@@ -75,35 +79,18 @@ class BiotacDriver(DriverBase):
 
     def __init__(self, node_name: str = "biotac_driver", transport_factory=None, **kwargs) -> None:
         super().__init__(node_name, transport_factory, **kwargs)
-        full, self.robot = self._declare_robot("biotac", "shadow_hand", "BioTac")
-        self.transport_name = declare(self, "transport", "cheetah", "device transport", choices=TRANSPORTS)
-        self.pattern = FramePattern.parse(declare(self, "frame_pattern", "default",
-                                                  "frame pattern: default | paper_50hz | biotac_sp | channel list"))
-        self.word_rate_hz = declare(self, "word_rate_hz", 4400.0, "SPI word slots per second", minimum=1.0)
-        self.batch_frames = declare(self, "batch_frames", 10, "frames per message", minimum=1)
-        self.wire = declare(self, "wire", "auto", "framing on the transport: spi (SPI sampling), bridge (our "
-                            "serial framing); auto = spi for cheetah, bridge otherwise", choices=("auto", "spi", "bridge"))
-        self._declare_stamps_and_tare(full.contact.force_threshold_n, "baseline from the first frames [s] (0 = off)",
-                                      "the last frames ~/tare takes the resting level over [s]")
-        self.track_s = declare(self, "tare.track_s", 0.5, "PDC baseline follows drift with this time constant while "
-                               "the force is below tare.track_band_n [s] (0 = tare only at start and on ~/tare)",
-                               minimum=0.0, on_set=lambda v: lambda: self._set_track_s(v))
-        self.track_band_n = declare(self, "tare.track_band_n", self.contact_threshold_n,
-                                    "baseline tracking only while |force| is below this [N]", minimum=0.0,
-                                    on_set=lambda v: lambda: self._set_track_band_n(v))
-        self.pdc_pa_per_count = declare(self, "pdc_pa_per_count", 0.0,
-                                        "static pressure scale [Pa/count] (0 = not calibrated)", minimum=0.0)
-        self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
+        full, self.robot = self._declare_parameters(BIOTAC_DRIVER, "biotac", "shadow_hand", "BioTac")
+        params = self.params
+        self.pattern = FramePattern.parse(params["frame_pattern"])
+        self.word_rate_hz = params["word_rate_hz"]
+        self.batch_frames = params["batch_frames"]
+        self.wire = params["wire"]
+        self.pdc_pa_per_count = params["pdc_pa_per_count"]
         self.tp = {
-            "cheetah": {"port": declare(self, "cheetah.port", -1, "Cheetah port (-1 = first free)"),
-                        "bitrate_khz": declare(self, "cheetah.bitrate_khz", 4400, "SPI clock [kHz]", minimum=1)},
-            "serial": {"port": declare(self, "serial.port", "/dev/ttyACM0", "bridge serial port or pyserial URL"),
-                       "baudrate": declare(self, "serial.baudrate", 921600, "baud rate", minimum=1)},
+            "cheetah": {"port": params["cheetah.port"], "bitrate_khz": params["cheetah.bitrate_khz"]},
+            "serial": {"port": params["serial.port"], "baudrate": params["serial.baudrate"]},
         }
-        self.sim_scene = declare(self, "sim.scene", "", "scene played by the simulated transport")
-        self.sim_speed = declare(self, "sim.speed", 1.0, "simulated time per wall time", minimum=1e-3)
-        autostart = declare(self, "autostart", True, "configure and activate at start")
-        self.qos_frames = declare_qos(self, "frames", QosDefaults("reliable", "volatile", 50))
+        params.on_set("tracking", self._retune_tracking)
 
         ct = self.robot.cell_types[self.robot.body_parts[0].cell_type]
         self.force_n_per_count = ct.force.n_per_count
@@ -129,24 +116,31 @@ class BiotacDriver(DriverBase):
         self._rates: dict[int, tuple[RateMeter, RateMeter]] = {}
         self._last_frame: dict[int, float] = {}
         self.publishers_by_cs: dict[int, object] = {}
-        self._start(autostart, [("transport", self._transport_status)]
+        self._start([("transport", self._transport_status)]
                     + [(cfg.sensor_name, lambda cs=cs: self._sensor_status(cs))
                        for cs, cfg in sorted(self.sensors.items())])
 
-    def _set_track_s(self, track_s: float) -> None:
-        """``ros2 param set ... tare.track_s``: the running stream's weight of one frame follows (0 = off)."""
-        self.track_s = track_s
-        if self.stream is not None:
-            frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
-            with self._lock:
-                self.stream.track_alpha = min(1.0, 1.0 / (frame_hz * track_s)) if track_s > 0 else 0.0
+    def _tare_history(self) -> tuple[float, str]:
+        frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
+        return RECENT_FRAMES / frame_hz, (f"{RECENT_FRAMES} frames at {frame_hz:g} frames/s from word_rate_hz and "
+                                          "frame_pattern")
 
-    def _set_track_band_n(self, band_n: float) -> None:
-        """``ros2 param set ... tare.track_band_n``: for the running stream too."""
-        self.track_band_n = band_n
-        if self.stream is not None:
-            with self._lock:
-                self.stream.track_band_n = band_n
+    def _track_alpha(self, track_s: float) -> float:
+        """The weight of one frame in the baseline that follows drift with time constant ``track_s`` (0 = off)."""
+        frame_hz = self.pattern.rates(self.word_rate_hz).frame_rate_hz
+        return min(1.0, 1.0 / (frame_hz * track_s)) if track_s > 0 else 0.0
+
+    def _retune_tracking(self, values, changed):
+        """``ros2 param set ... tare.track_s / tare.track_band_n``: the running stream follows."""
+        alpha, band_n = self._track_alpha(values["tare.track_s"]), values["tare.track_band_n"]
+
+        def apply() -> None:
+            if self.stream is not None:
+                with self._lock:
+                    self.stream.track_alpha = alpha
+                    self.stream.track_band_n = band_n
+
+        return apply
 
     # ------------------------------------------------------------- lifecycle
     def _simulated_source(self):
@@ -193,7 +187,7 @@ class BiotacDriver(DriverBase):
     def _configured(self) -> TransitionCallbackReturn:
         self.stream = BiotacStream(
             self.sensors, self.pattern, self.word_rate_hz, self.batch_frames, self.stamp_source, self.resync_s,
-            self.tare_on_start_s, self.track_s, self.track_band_n, self.force_n_per_count,
+            self.tare_on_start_s, self.params["tare.track_s"], self.params["tare.track_band_n"], self.force_n_per_count,
             lambda: self.get_clock().now().nanoseconds, self.faults, self._log_stream)
         self._rates = {cs: (RateMeter(), RateMeter()) for cs in self.sensors}
         self._last_frame = {}
@@ -271,14 +265,14 @@ class BiotacDriver(DriverBase):
             touching = []
             for st in self.state.values():
                 f = self.stream.force_now(st)
-                if f is not None and f >= self.contact_threshold_n:
+                if f is not None and f >= self.params["contact.force_threshold_n"]:
                     touching.append(f"{st.cfg.sensor_name} ({f:.2f} N)")
             if touching:
                 response.success = False
                 response.message = (f"refused: in contact: {', '.join(touching)}; release the fingers "
-                                    f"(force < {self.contact_threshold_n} N) and call ~/tare again")
+                                    f"(force < {self.params['contact.force_threshold_n']} N) and call ~/tare again")
                 return response
-            results = [self.stream.tare_one(st, self.tare_window_s, check_contact=False)
+            results = [self.stream.tare_one(st, self.params["tare.window_s"], check_contact=False)
                        for st in self.state.values()]
         response.success = all(ok for ok, _ in results)
         response.message = "; ".join(f"{st.cfg.sensor_name}: {why}" for st, (ok, why) in zip(self.state.values(),

@@ -58,44 +58,19 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.groups import groups_in_labels, selection_name
-from ..core.labels import (
-    DEFAULT_CLOCK_JUMP_S,
-    DEFAULT_LABEL_HOLD_S,
-    DEFAULT_LABEL_WAIT_S,
-    DEFAULT_MAX_CLASS_NAME_CHARS,
-    DEFAULT_MAX_CLASSES,
-    DEFAULT_MAX_ID_STEP,
-    EXPIRED,
-    HELD,
-    LEARN,
-    MAX_CLASS_NAME_CHARS,
-    MAX_CLASSES,
-    MAX_HORIZON,
-    MAX_ID_STEP,
-    MAX_WAIT_S,
-    REFUSED,
-    LabelDecision,
-    LabelProtocol,
-    StampOrder,
-)
-from ..core.learning import PA_UPDATES, RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE, OnlineClassifier
+from ..core.labels import EXPIRED, HELD, LEARN, REFUSED, LabelDecision, LabelProtocol, StampOrder
+from ..core.learning import OnlineClassifier
 from ..core.model_store import ModelLock, ModelStore, layout_file_name
 from ..core.robot import load_robot
-from ..errors import ConfigError, ModelError, SignalError
-from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC
-from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
-from .conversions import DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
-from .qos import QosDefaults, declare_qos
+from ..errors import ModelError, SignalError
+from ..params.classifier_node import CLASSIFIER_NODE
+from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC, layout_topic
+from .common import Diagnostics, Status, run_node
+from .conversions import DescriptorLayouts, DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
+from .parameters import NodeParameters
+from .qos import qos_of
 
-__all__ = ["ClassifierNode", "default_model_folder", "check_frame_id", "PREDICTION_ORDERS", "main", "layout_mismatch"]
-
-#: ``prediction_order``: predict a descriptor on arrival, or in stamp order (bit-identical replays).
-PREDICTION_ORDERS = ("immediate", "stamp")
-
-#: Bounds of the learning rate eta (eq. 32): a larger or smaller one is a typo, and inf cannot be saved.
-ETA_RANGE = (1e-6, 1e6)
-#: Longest ``frame_id`` [characters].
-MAX_FRAME_ID_CHARS = 256
+__all__ = ["ClassifierNode", "default_model_folder", "main", "layout_mismatch"]
 
 
 def default_model_folder(node_name: str, namespace: str = "/", robot: str = "") -> Path:
@@ -124,14 +99,6 @@ def _model_path(value: str, default_folder: Path) -> str:
     return f"{path}{os.sep}" if value.endswith(("/", os.sep)) else path
 
 
-def check_frame_id(value: str) -> str:
-    """``frame_id``: at most 256 printable characters ('' = the descriptor's frame)."""
-    if len(value) > MAX_FRAME_ID_CHARS or not value.isprintable():
-        raise ConfigError(f"must be at most {MAX_FRAME_ID_CHARS} printable characters, got "
-                          f"{len(value)} characters", key="frame_id")
-    return value
-
-
 @dataclass(frozen=True)
 class _Predicted:
     """A descriptor the protocol keeps for its label, with the class predicted before the label came."""
@@ -157,72 +124,41 @@ class ClassifierNode(Node):
         from rclpy.event_handler import SubscriptionEventCallbacks
         from std_srvs.srv import Trigger
 
-        from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+        from tactile_descriptors_msgs.msg import Descriptor, DescriptorLayout, Label, Prediction
         from tactile_descriptors_msgs.srv import LearnLabel
 
+        # set first: destroy_node releases them, also after a constructor that raised (a refused parameter)
+        self.store: ModelStore | None = None
+        self.folder_lock: ModelLock | None = None
         self.holder = self.get_fully_qualified_name()
-        robot_arg = declare(self, "robot", "", "robot name or YAML path: the default model folder is per robot "
-                            "('' = no robot folder)")
+        self.params = params = NodeParameters(self, CLASSIFIER_NODE)
+        robot_arg = params.declare("robot")
         self.robot_name = load_robot(robot_arg).name if robot_arg else ""
         folder = default_model_folder(self.get_name(), self.get_namespace(), self.robot_name)
-        path = declare(self, "model_path", "",
-                       "model file (JSON), or a folder (ending in /) of one model per descriptor layout; '' = the "
-                       "folder $ROS_HOME/tactile_descriptors_ros/<robot>/<namespace>/<node>/ (the parameter reads "
-                       "it)", resolve=lambda p: _model_path(p, folder))
+        params.declare_all(resolve={"model_path": lambda p: _model_path(p, folder)})
+        path = params["model_path"]
         #: the model file given, or None: one per layout in :attr:`model_folder`
         self.given_path: Path | None = Path(path) if not path.endswith(os.sep) else None
         self.model_folder: Path | None = None if self.given_path else Path(path)
-        self.eta = declare(self, "eta", 1.0, "PA-I aggressiveness (eq. 32; the paper uses 1); from the next update on",
-                           minimum=ETA_RANGE[0], maximum=ETA_RANGE[1], on_set=self._set_eta)
-        self.log_activity = declare(self, "log_activity", True, "use log(Activity) features")
-        self.standardize = declare(self, "standardize", True, "running standardisation of features")
-        self.pa_update = declare(self, "pa_update", RECOMMENDED_PA_UPDATE,
-                                 "online update: max_loss, prediction (the paper's eq. 30-32), or arow "
-                                 "(second-order, shared covariance)", choices=PA_UPDATES)
-        self.pa_average = declare(self, "pa_average", RECOMMENDED_PA_AVERAGE,
-                                  "predict with the running mean of the PA weights (false: the paper's PA-I)")
-        self.horizon = declare(self, "label_horizon", 100,
-                               "descriptors kept for late labels (and early labels held)", minimum=1,
-                               maximum=MAX_HORIZON, on_set=self._set_horizon)
-        self.labels = LabelProtocol(
-            self.horizon,
-            declare(self, "label_expiry_explorations", 10,
-                    "a held label expires when a descriptor this many ids past it arrives", minimum=1,
-                    maximum=MAX_HORIZON),
-            declare(self, "max_class_name_chars", DEFAULT_MAX_CLASS_NAME_CHARS,
-                    "longest class name accepted [characters]", minimum=1, maximum=MAX_CLASS_NAME_CHARS),
-            declare(self, "max_classes", DEFAULT_MAX_CLASSES, "most classes: a label naming a new class beyond "
-                    "them is refused", minimum=1, maximum=MAX_CLASSES),
-            declare(self, "max_exploration_id_step", DEFAULT_MAX_ID_STEP, "an exploration id farther than this "
-                    "from the latest is refused for labels (and, for a descriptor, moves nothing)", minimum=1,
-                    maximum=MAX_ID_STEP),
-            declare(self, "label_hold_s", DEFAULT_LABEL_HOLD_S, "a label held for an exploration not seen yet "
-                    "expires after this long [s]", minimum=0.1, maximum=MAX_WAIT_S, on_set=self._set_label_hold))
-        order = declare(self, "prediction_order", PREDICTION_ORDERS[0],
-                        "immediate: predict a descriptor on arrival; stamp: after the labels stamped before its "
-                        "window end (a replay gives the same bits)", choices=PREDICTION_ORDERS)
+        self.log_activity = params["log_activity"]
+        self.standardize = params["standardize"]
+        self.pa_update = params["pa_update"]
+        self.pa_average = params["pa_average"]
+        self.labels = LabelProtocol(params["label_horizon"], params["label_expiry_explorations"],
+                                    params["max_class_name_chars"], params["max_classes"],
+                                    params["max_exploration_id_step"], params["label_hold_s"])
+        order = params["prediction_order"]
         self.order: StampOrder[DescriptorSample, _Predicted] = StampOrder(
-            self.labels, self._predict, self._apply,
-            declare(self, "label_wait_s", DEFAULT_LABEL_WAIT_S,
-                    "longest wait of a stamped label for its descriptor, and with prediction_order stamp of a "
-                    "descriptor for the label due before it [s] (0: arrival order)", minimum=0.0,
-                    maximum=MAX_WAIT_S, on_set=self._set_label_wait),
-            hold_descriptors=order == "stamp",
-            jump_s=declare(self, "clock_jump_s", DEFAULT_CLOCK_JUMP_S, "a stamp this far behind the latest of "
-                           "its stream starts a new session (a replay started again) [s]", minimum=0.001,
-                           maximum=MAX_WAIT_S))
-        self.save_after_update = declare(self, "save_after_update", True, "save the model after every update",
-                                         on_set=lambda v: lambda: setattr(self, "save_after_update", v))
-        self.load_on_start = declare(self, "load_model", True, "load the model file if it exists")
-        self.enable_reset = declare(self, "enable_reset", False, "answer ~/reset (it erases the model; off: "
-                                    "anyone on the ROS domain could call it)")
-        self.frame_id = declare(self, "frame_id", "", "header.frame_id of the predictions ('' = the descriptor's)",
-                                on_set=self._set_frame_id)
-        check_frame_id(self.frame_id)
+            self.labels, self._predict, self._apply, params["label_wait_s"], hold_descriptors=order == "stamp",
+            jump_s=params["clock_jump_s"])
+        params.on_set("eta", self._set_eta)
+        params.on_set("label_horizon", self._set_horizon)
+        params.on_set("label_hold_s", self._set_label_hold)
+        params.on_set("label_wait_s", self._set_label_wait)
+        self.load_on_start = params["load_model"]
+        self.enable_reset = params["enable_reset"]
 
         self.model: OnlineClassifier | None = None
-        self.store: ModelStore | None = None
-        self.folder_lock: ModelLock | None = None
         self.layout_error: str | None = None
         # ModelError: another node holds the file or folder, or the file is corrupt -> refuse to start
         if self.given_path is not None:
@@ -237,15 +173,20 @@ class ClassifierNode(Node):
         self.scored_labels = 0
         self.last_save_error: str | None = None
 
-        qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 50))
+        qos_desc = qos_of(params, "descriptor")
         # A reliable KEEP_ALL reader replaces nothing; what a publisher's own history drops is reported by
         # DDS as lost and counted (docs/nodes.md).
-        qos_label = declare_qos(self, "label", QosDefaults("reliable", "volatile", 1000, history="keep_all"))
-        qos_pred = declare_qos(self, "prediction", QosDefaults("reliable", "volatile", 50))
+        qos_label = qos_of(params, "label")
+        qos_pred = qos_of(params, "prediction")
         self.pub = self.create_publisher(Prediction, PREDICTION_TOPIC, qos_pred)
         self.sub_desc = self.create_subscription(
             Descriptor, DESCRIPTOR_TOPIC, self._on_descriptor, qos_desc,
             event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("descriptors_lost", e)))
+        # the labels of the descriptors' values, sent once per layout on the (latched) layout topic; a descriptor
+        # that arrives before its layout waits for it (at most LAYOUT_WAIT_S, at most label_horizon of them)
+        self.layouts = DescriptorLayouts(max_held=params["label_horizon"], wait_s=self.LAYOUT_WAIT_S)
+        self.sub_layout = self.create_subscription(DescriptorLayout, layout_topic(self.sub_desc.topic_name),
+                                                   self._on_layout, qos_of(params, "layout"))
         self.sub_label = self.create_subscription(
             Label, LABEL_TOPIC, self._on_label, qos_label,
             event_callbacks=SubscriptionEventCallbacks(message_lost=lambda e: self._lost("labels_lost", e)))
@@ -255,12 +196,11 @@ class ClassifierNode(Node):
                                              callback_group=ReentrantCallbackGroup())
         self.srv_save = self.create_service(Trigger, "~/save", self._srv_save)
         self.srv_reset = self.create_service(Trigger, "~/reset", self._srv_reset)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01, maximum=MAX_WAIT_S))
+        self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("classifier", self._status)
         # what waits in stamp order is released when its wait runs out, even if nothing else arrives
-        self.order_timer = self.create_timer(0.05, lambda: self.order.poll(time.monotonic()))
-        report_unknown_overrides(self)
+        self.order_timer = self.create_timer(0.05, self._poll)
+        params.finish()
         where = self.given_path or self.model_folder / "<layout>.json"
         self.get_logger().info(f"model file {where}; predictions on {self.pub.topic_name} "
                                f"({order} prediction order); ~/reset {'enabled' if self.enable_reset else 'disabled'}")
@@ -273,35 +213,36 @@ class ClassifierNode(Node):
         return self.given_path or self.model_folder
 
     # ------------------------------------------------------------- parameters
-    def _set_eta(self, value: float):
-        """``ros2 param set ... eta``: the model learns with the new aggressiveness from its next update."""
+    def _set_eta(self, values, changed):
+        """``ros2 param set ... eta``: the model learns with the new aggressiveness from its next update (a model
+        loaded from a file keeps its own until then)."""
+        value = values["eta"]
+
         def apply() -> None:
-            self.eta = value
             if self.model is not None:
                 self.model.pa.eta = value
 
         return apply
 
-    def _set_horizon(self, value: int):
+    def _set_horizon(self, values, changed):
         """``ros2 param set ... label_horizon``: a smaller horizon forgets the oldest kept descriptors now."""
+        value = values["label_horizon"]
+
         def apply() -> None:
-            self.horizon = value
             for decision in self.labels.set_horizon(value):
                 self._apply(decision)
 
         return apply
 
-    def _set_label_hold(self, value: float):
+    def _set_label_hold(self, values, changed):
         """``ros2 param set ... label_hold_s``: held labels expire after the new time from the next poll on."""
+        value = values["label_hold_s"]
         return lambda: setattr(self.labels, "hold_s", value)
 
-    def _set_label_wait(self, value: float):
+    def _set_label_wait(self, values, changed):
         """``ros2 param set ... label_wait_s``: from the next message (or poll) on."""
+        value = values["label_wait_s"]
         return lambda: self.order.set_wait(value)
-
-    def _set_frame_id(self, value: str):
-        check_frame_id(value)
-        return lambda: setattr(self, "frame_id", value)
 
     # ------------------------------------------------------------------ model
     def _adopt_store(self) -> None:
@@ -320,8 +261,8 @@ class ClassifierNode(Node):
 
     def _new_model(self, labels) -> OnlineClassifier:
         """An empty model of a descriptor layout, with this node's learning parameters."""
-        return OnlineClassifier(labels, eta=self.eta, log_activity=self.log_activity, standardize=self.standardize,
-                                update=self.pa_update, average=self.pa_average)
+        return OnlineClassifier(labels, eta=self.params["eta"], log_activity=self.log_activity,
+                                standardize=self.standardize, update=self.pa_update, average=self.pa_average)
 
     def _model_for(self, sample: DescriptorSample) -> OnlineClassifier:
         """The model descriptors of this layout are predicted with (opening the layout's file with a default path)."""
@@ -332,10 +273,35 @@ class ClassifierNode(Node):
             self.model = self._new_model(sample.labels)
         return self.model
 
+    #: longest wait of a descriptor for its layout [s]
+    LAYOUT_WAIT_S = 10.0
+
+    def _poll(self) -> None:
+        """Timer: release what waits in stamp order past its wait; drop descriptors whose layout never came."""
+        now = time.monotonic()
+        for msg in self.layouts.expire(now):
+            self.get_logger().warning(
+                f"descriptor of exploration {msg.exploration_id} names layout {msg.layout_id!r}, which did not come "
+                f"on {self.sub_layout.topic_name} within {self.LAYOUT_WAIT_S:g} s: dropped", throttle_duration_sec=5.0)
+        self.order.poll(now)
+
+    def _on_layout(self, msg) -> None:
+        """A ``DescriptorLayout``: learn its labels, then take the descriptors that waited for it."""
+        held = self.layouts.add(msg)
+        if msg.layout_id not in self.layouts.labels:
+            self.get_logger().warning(f"layout {msg.layout_id!r} refused: its id is not the id of its labels",
+                                      throttle_duration_sec=5.0)
+        for waiting in held:
+            self._on_descriptor(waiting)
+
     # ------------------------------------------------------------ descriptors
     def _on_descriptor(self, msg) -> None:
+        labels = self.layouts.of(msg)
+        if labels is None:
+            self.layouts.hold(msg, time.monotonic())
+            return
         try:
-            sample = descriptor_from_msg(msg)
+            sample = descriptor_from_msg(msg, labels)
         except SignalError as exc:
             self.counts["malformed_descriptor"] += 1
             self.get_logger().warning(f"malformed descriptor: {exc}", throttle_duration_sec=5.0)
@@ -369,7 +335,7 @@ class ClassifierNode(Node):
         name, scores = model.predict(sample.values)
         self.pub.publish(prediction_to_msg(sample, class_name=name, class_names=model.classes, scores=scores,
                                            model_version=model.version, updates=model.pa.updates,
-                                           frame_id=self.frame_id))
+                                           frame_id=self.params["frame_id"]))
         self.counts["predictions"] += 1
         self.latest = sample
         return _Predicted(sample, name)
@@ -430,7 +396,7 @@ class ClassifierNode(Node):
         new_class = name not in self.model.classes
         loss = self.model.learn(sample.values, name)
         self.counts["updates"] += 1
-        saved = self._record() if self.save_after_update else None
+        saved = self._record() if self.params["save_after_update"] else None
         text = (f"learned exploration {sample.exploration_id}: {name!r}{' (new class)' if new_class else ''}, "
                 f"loss {loss:.3f}, {len(self.model.classes)} classes")
         if saved is False:  # _record logged the error: in memory only, never reported as saved
@@ -511,7 +477,7 @@ class ClassifierNode(Node):
 
     def close(self) -> None:
         """At shutdown: compact the journal into the model file (a clean stop leaves one file), release the locks."""
-        if self.store is not None and self.model is not None and self.save_after_update \
+        if self.store is not None and self.model is not None and self.params["save_after_update"] \
                 and self.store.journal.exists():
             self._save()
         self._release()
@@ -543,7 +509,9 @@ class ClassifierNode(Node):
                   "kept_descriptors": self.labels.kept, "pending_labels": self.labels.held,
                   "waiting_in_stamp_order": self.order.waiting,
                   "compactions": store.compactions if store else 0,
-                  "compaction_failures": store.compaction_failures if store else 0}
+                  "compaction_failures": store.compaction_failures if store else 0,
+                  "layouts": len(self.layouts.labels), "waiting_for_layout": self.layouts.held,
+                  "unknown_layout": self.layouts.unknown, "bad_layout": self.layouts.bad}
         values.update({k: v for k, v in sorted((self.counts + self.labels.counts + self.order.counts).items())})
         if self.layout_error:
             return Status("error", self.layout_error, values)
@@ -554,6 +522,9 @@ class ClassifierNode(Node):
                           values)
         refused = {k: v for k, v in sorted(self.labels.counts.items()) if v and k not in ("labels_learned",
                                                                                           "early_labels")}
+        if self.layouts.unknown or self.layouts.bad:
+            return Status("warn", f"{self.layouts.unknown} descriptors whose layout never came on "
+                                  f"{self.sub_layout.topic_name}, {self.layouts.bad} layouts refused", values)
         lost = {k: self.counts[k] for k in ("labels_lost", "descriptors_lost", "reset_refused") if self.counts[k]}
         if refused or lost or self.counts["malformed_descriptor"]:
             what = ", ".join(f"{k}={v}" for k, v in {**refused, **lost}.items())

@@ -48,20 +48,21 @@ from ..core.geometry import Taxels, layout_2d
 from ..core.robot import BodyPart, load_robot, select_body_parts
 from ..core.tactile_image import ImageLayout, image_layout, render
 from ..errors import ConfigError, SignalError
+from ..params.contact_node import CONTACT_NODE
 from ..topics import (
     CONTACT_TOPIC,
     CONTACTS_TOPIC,
     DESCRIPTOR_TOPIC,
-    FRAMES_TOPIC,
     IMAGE_TOPIC,
     MARKERS_TOPIC,
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node, steady_clock
+from .common import Diagnostics, Status, run_node, steady_clock
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
-from .qos import QosDefaults, declare_qos
+from .parameters import NodeParameters
+from .qos import qos_of
 
 __all__ = ["ContactNode", "main"]
 
@@ -105,43 +106,40 @@ class ContactNode(Node):
             SkinPartFrames,
         )
 
-        robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
+        self.params = params = NodeParameters(self, CONTACT_NODE)
+        robot_arg = params.declare("robot")
         if not robot_arg:
             raise ConfigError("parameter 'robot' is required (e.g. shadow_hand, nao or a YAML path)", key="robot")
         full = load_robot(robot_arg)
-        served = declare(self, "body_parts", [p.name for p in full.body_parts], "body parts this node serves")
-        self.robot = select_body_parts(full, served)
+        self.robot = select_body_parts(full, params.declare("body_parts", default=[p.name for p in full.body_parts]))
         if self.robot.geometry is None:
             raise ConfigError(f"robot {self.robot.name!r} has no geometry section: contact location and the views "
                               "need where the cells are (docs/view.md)", key="robot", source=self.robot.source)
         geo = self.robot.geometry
         view = self.robot.view
-        self.threshold_n = declare(self, "contact.force_threshold_n", self.robot.contact.force_threshold_n,
-                                   "F_t: a cell at or above it is active, its body part in contact [N]", minimum=0.0,
-                                   on_set=lambda v: lambda: self._set_threshold(v))
-        self.floor_n = declare(self, "contact.floor_n", 0.05, "cells below this force carry none (their noise stays "
-                               "out of the total and the centre of pressure) [N]", minimum=0.0,
-                               on_set=lambda v: lambda: self._set_floor(v))
-        self.rate_hz = declare(self, "view.rate_hz", view.rate_hz, "display rate of markers, images and "
-                               "tactile/contacts [Hz] (0 = none of them)", minimum=0.0)
-        self.force_max_n = declare(self, "view.force_max_n", view.force_max_n, "top of the colour scale [N]",
-                                   minimum=1e-3, on_set=lambda v: lambda: setattr(self, "force_max_n", v))
-        stale_s = declare(self, "view.stale_s", view.stale_s, "a cell with no valid sample this long is grey [s]",
-                          minimum=1e-3)
-        size_px = declare(self, "view.image_size_px", 96, "width and height of the tactile images", minimum=16,
-                          maximum=1024)
-        refresh_s = declare(self, "view.refresh_s", 1.0, "every marker and image is sent at least this often "
-                            "(in between only what changed) [s]", minimum=0.0)
-        self.markers_on = declare(self, "view.markers", True, "publish tactile/<body part>/markers")
-        self.images_on = declare(self, "view.images", True, "publish tactile/<body part>/image")
-        topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
-        self.drain_max = declare(self, "frames.drain_max", 100, "frames taken from the queues per callback besides "
-                                 "its own (0 = one per callback)", minimum=0,
-                                 on_set=lambda v: lambda: setattr(self, "drain_max", v))
-        qos_frames = declare_qos(self, "frames", QosDefaults("best_effort", "volatile", 256))
-        qos_contact = declare_qos(self, "contact", QosDefaults("reliable", "volatile", 10))
-        qos_view = declare_qos(self, "view", QosDefaults("reliable", "volatile", 10))
-        qos_pred = declare_qos(self, "prediction", QosDefaults("reliable", "volatile", 50))
+        params.declare_all(robot=self.robot, defaults={"view.rate_hz": view.rate_hz,
+                                                       "view.force_max_n": view.force_max_n,
+                                                       "view.stale_s": view.stale_s})
+        self.threshold_n = params["contact.force_threshold_n"]
+        self.floor_n = params["contact.floor_n"]
+        self.rate_hz = params["view.rate_hz"]
+        self.force_max_n = params["view.force_max_n"]
+        stale_s = params["view.stale_s"]
+        size_px = params["view.image_size_px"]
+        refresh_s = params["view.refresh_s"]
+        self.markers_on = params["view.markers"]
+        self.images_on = params["view.images"]
+        topic_fmt = params["frames_topic"]
+        self.drain_max = params["frames.drain_max"]
+        params.on_set("threshold", lambda values, _names: lambda: self._set_threshold(
+            values["contact.force_threshold_n"]))
+        params.on_set("floor", lambda values, _names: lambda: self._set_floor(values["contact.floor_n"]))
+        params.on_set("scale", lambda values, _names: lambda: setattr(self, "force_max_n", values["view.force_max_n"]))
+        params.on_set("drain", lambda values, _names: lambda: setattr(self, "drain_max", values["frames.drain_max"]))
+        qos_frames = qos_of(params, "frames")
+        qos_contact = qos_of(params, "contact")
+        qos_view = qos_of(params, "view")
+        qos_pred = qos_of(params, "prediction")
 
         self.parts: dict[str, _Part] = {}
         self.subs = []
@@ -199,10 +197,9 @@ class ContactNode(Node):
         self.frames_taken = 0
         self._age_ms: deque[float] = deque(maxlen=5000)
         self._tick_ms: deque[float] = deque(maxlen=500)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01))
+        self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("contact", self._status)
-        report_unknown_overrides(self)
+        params.finish()
         # the display period: a timer, and the frames callback when a period is due (a flood of frames, which
         # the executor serves before it waits again, would otherwise hold the timer off for seconds)
         self._period_s = 1.0 / self.rate_hz if self.rate_hz > 0 else math.inf

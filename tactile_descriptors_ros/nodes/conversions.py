@@ -24,6 +24,7 @@ from ..core.aggregation import RobotDescriptor
 from ..core.robot import CellType
 from ..core.windowing import CellChunk, PartChunk, Window
 from ..errors import ConfigError, SignalError
+from ..layouts import DescriptorLayouts, layout_id
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 from ..streams.frames import BioTacBatch, SkinFrame
 
@@ -44,7 +45,10 @@ __all__ = [
     "skin_part_msg_to_part_chunk",
     "BIOTAC_EXTRA_CHANNELS",
     "SKIN_EXTRA_CHANNELS",
+    "layout_id",
     "descriptor_to_msg",
+    "descriptor_layout_to_msg",
+    "DescriptorLayouts",
     "DescriptorSample",
     "descriptor_from_msg",
     "prediction_to_msg",
@@ -446,8 +450,12 @@ def skin_part_msg_to_part_chunk(msg, extra_channels: Sequence[str] = ()) -> Part
 
 
 def descriptor_to_msg(desc: RobotDescriptor, window: Window, *, frame_id: str = "",
-                      exploration_id: int | None = None):
-    """Build a ``Descriptor`` message for one window (stamp = window end)."""
+                      exploration_id: int | None = None, layout: str | None = None):
+    """Build a ``Descriptor`` message for one window (stamp = window end).
+
+    The labels are not sent: ``layout_id`` names them (``layout``, or the id of
+    ``desc.labels``), and :func:`descriptor_layout_to_msg` carries them once.
+    """
     from tactile_descriptors_msgs.msg import Descriptor
 
     msg = Descriptor()
@@ -467,8 +475,24 @@ def descriptor_to_msg(desc: RobotDescriptor, window: Window, *, frame_id: str = 
     msg.cells_total = _arr("H", np.array([bp.cells_total for bp in parts]), np.uint16)
     msg.mean_force_n = _arr("d", np.array([bp.mean_force_n for bp in parts], dtype=np.float64), np.float64)
     msg.quality = _arr("I", np.array([bp.quality for bp in parts]), np.uint32)
-    msg.labels = list(desc.labels)
+    msg.layout_id = layout if layout is not None else layout_id(desc.labels)
     msg.values = _arr("d", np.asarray(desc.values, dtype=np.float64), np.float64)
+    return msg
+
+
+def descriptor_layout_to_msg(desc: RobotDescriptor, *, frame_id: str = "", stamp_ns: int = 0):
+    """The ``DescriptorLayout`` of a descriptor: its labels, once, under :func:`layout_id`."""
+    from tactile_descriptors_msgs.msg import DescriptorLayout
+
+    msg = DescriptorLayout()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.layout_id = layout_id(desc.labels)
+    msg.robot = desc.robot
+    msg.layout_mode = desc.layout
+    msg.channel_mode = desc.channels
+    msg.body_parts = [bp.name for bp in desc.body_parts]
+    msg.labels = list(desc.labels)
     return msg
 
 
@@ -487,12 +511,18 @@ class DescriptorSample:
     frame_id: str = ""
 
 
-def descriptor_from_msg(msg) -> DescriptorSample:
-    """``Descriptor`` -> :class:`DescriptorSample` (raises SignalError for a malformed message)."""
+def descriptor_from_msg(msg, labels: Sequence[str] | None = None) -> DescriptorSample:
+    """``Descriptor`` -> :class:`DescriptorSample` (raises SignalError for a malformed message).
+
+    ``labels`` are the labels of the message's layout (:class:`DescriptorLayouts`);
+    a message that carries its own labels needs none.
+    """
     values = _np(msg.values, np.float64)
-    labels = tuple(msg.labels)
+    own = tuple(getattr(msg, "labels", ()) or ())
+    labels = own if own else tuple(labels or ())
     if values.size != len(labels):
-        raise SignalError(f"descriptor has {values.size} values but {len(labels)} labels")
+        raise SignalError(f"descriptor has {values.size} values but its layout "
+                          f"{getattr(msg, 'layout_id', '') or '(none)'} {len(labels)} labels")
     n_parts = len(msg.body_parts)
     if len(msg.contact) != n_parts:
         raise SignalError(f"descriptor has {n_parts} body parts but {len(msg.contact)} contact flags")

@@ -33,10 +33,13 @@ from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackRet
 
 from ..core.robot import RobotDescription, load_robot, select_body_parts
 from ..errors import ConfigError, TactileError, TransportError
+from ..params.schema import NodeSchema
 from ..streams.link import DeviceLink
 from ..transports import create_transport
-from .common import Diagnostics, Status, declare, report_unknown_overrides
+from .common import Diagnostics, Status
 from .conversions import message_kind
+from .parameters import NodeParameters
+from .qos import qos_of
 
 __all__ = ["DriverBase"]
 
@@ -83,12 +86,14 @@ class DriverBase(LifecycleNode):
         self.reads = 0
 
     # ---------------------------------------------------------- parameters
-    def _declare_robot(self, kind: str, example: str, parts_what: str
-                       ) -> tuple[RobotDescription, RobotDescription]:
-        """Declare ``robot`` and ``body_parts``; return the full robot and the served body parts.
+    def _declare_parameters(self, schema: NodeSchema, kind: str, example: str,
+                            parts_what: str) -> tuple[RobotDescription, RobotDescription]:
+        """Declare every parameter of ``schema``; return the full robot and the served body parts.
 
         Parameters
         ----------
+        schema : NodeSchema
+            The driver's parameters.
         kind : str
             Message kind of the body parts served (``biotac`` or ``skin``).
         example : str
@@ -96,46 +101,62 @@ class DriverBase(LifecycleNode):
         parts_what : str
             What the body parts are, for the error when the robot has none.
         """
-        robot_arg = declare(self, "robot", "", "robot description: shipped name or YAML path")
+        self.params = params = NodeParameters(self, schema)
+        robot_arg = params.declare("robot")
         if not robot_arg:
             raise ConfigError(f"parameter 'robot' is required (e.g. {example} or a YAML path)", key="robot")
         full = load_robot(robot_arg)
         parts = [p.name for p in full.body_parts if message_kind(full.cell_types[p.cell_type]) == kind]
         if not parts:
             raise ConfigError(f"robot {full.name!r} has no {parts_what} body parts", key="body_parts")
-        return full, select_body_parts(full, declare(self, "body_parts", parts, "body parts served"))
+        served = select_body_parts(full, params.declare("body_parts", default=parts))
+        params.declare_all(robot=full)
+        self.transport_name = params["transport"]
+        self.stamp_source = params["stamp_source"]
+        self.resync_s = params["resync_s"]
+        self.tare_on_start_s = params["tare_on_start_s"]
+        self.reconnect_s = params["reconnect_s"]
+        self.read_period_s = params["read_period_s"]
+        self.sim_scene = params["sim.scene"]
+        self.sim_speed = params["sim.speed"]
+        self.topic_fmt = params["frames_topic"]
+        self.qos_frames = qos_of(params, "frames")
+        return full, served
 
-    def _declare_stamps_and_tare(self, contact_threshold_n: float, tare_on_start_what: str,
-                                 tare_window_what: str) -> None:
-        """Declare ``stamp_source``, ``resync_s``, ``tare_on_start_s``, ``tare.window_s``, ``contact_threshold_n``."""
-        self.stamp_source = declare(self, "stamp_source", "clock", "time stamps", choices=("clock", "device"))
-        self.resync_s = declare(self, "resync_s", 1.0, "re-anchor clock stamps beyond this drift [s] (0 = never)",
-                                minimum=0.0)
-        self.tare_on_start_s = declare(self, "tare_on_start_s", 0.5, tare_on_start_what, minimum=0.0)
-        self.tare_window_s = declare(self, "tare.window_s", 0.2, tare_window_what, minimum=0.01,
-                                     on_set=lambda v: lambda: setattr(self, "tare_window_s", v))
-        self.contact_threshold_n = declare(self, "contact_threshold_n", contact_threshold_n,
-                                           "~/tare is refused at or above this force [N]", minimum=0.0,
-                                           on_set=lambda v: lambda: setattr(self, "contact_threshold_n", v))
+    def _tare_history(self) -> tuple[float, str]:
+        """How long the stream keeps samples for a tare [s], and what decides it (for a refusal's reason)."""
+        raise NotImplementedError
 
-    def _start(self, autostart: bool, tasks: Iterable[tuple[str, Callable[[], Status]]]) -> None:
+    def _check_tare_window(self, name: str, window_s: float) -> None:
+        """A tare averages the samples the stream keeps: a longer window would silently be a shorter one.
+
+        Raises
+        ------
+        ConfigError
+            Naming ``name`` and what decides the history.
+        """
+        history_s, why = self._tare_history()
+        if window_s > history_s:
+            raise ConfigError(f"{window_s:g} s is longer than the {history_s:g} s of samples the driver keeps for a "
+                              f"tare ({why})", key=name)
+
+    def _tare_window_hook(self, values, changed):
+        """``ros2 param set ... tare.window_s``: checked against the history; the next ``~/tare`` reads it."""
+        self._check_tare_window("tare.window_s", values["tare.window_s"])
+
+    def _start(self, tasks: Iterable[tuple[str, Callable[[], Status]]]) -> None:
         """Create ``~/tare`` and the diagnostics (``tasks``), then configure and activate if ``autostart``."""
         from std_srvs.srv import Trigger
 
-        self.reconnect_s = declare(self, "reconnect_s", 0.25, "retry period of reopening a lost device [s]",
-                                   minimum=0.01)
-        self.read_period_s = declare(self, "read_period_s", 0.0,
-                                     "shortest time between two reads of the device [s]: frames queue meanwhile and "
-                                     "are decoded and published together (0 = read as soon as any is there)",
-                                     minimum=0.0)
-
+        for name in ("tare_on_start_s", "tare.window_s"):
+            self._check_tare_window(name, self.params[name])
+        self.params.on_set("tare", self._tare_window_hook)
         self.tare_srv = self.create_service(Trigger, "~/tare", self._srv_tare)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01), hardware_id=self.transport_name)
+        self.diagnostics = Diagnostics(self, self.params["diagnostics_period_s"], hardware_id=self.transport_name)
         for name, task in tasks:
             self.diagnostics.add(name, task)
-        report_unknown_overrides(self)
-        if autostart:
+        self.params.finish()
+        if self.params["autostart"]:
             if self.trigger_configure() != TransitionCallbackReturn.SUCCESS:
                 raise TransportError(f"configure failed: {self.last_error}")
             if self.trigger_activate() != TransitionCallbackReturn.SUCCESS:

@@ -25,28 +25,11 @@ foreign publisher or subscriber most likely does:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from ..errors import ConfigError
 
-__all__ = ["QosDefaults", "RELIABILITIES", "DURABILITIES", "HISTORIES", "MAX_DEPTH", "declare_qos", "qos_profile"]
+__all__ = ["RELIABILITIES", "DURABILITIES", "HISTORIES", "qos_of", "qos_profile"]
 
-RELIABILITIES = ("reliable", "best_effort", "system_default")
-DURABILITIES = ("volatile", "transient_local", "system_default")
-HISTORIES = ("keep_last", "keep_all")
-#: Deepest history accepted (a deeper one is a typo, and preallocates that many samples).
-MAX_DEPTH = 1_000_000
-
-
-@dataclass(frozen=True)
-class QosDefaults:
-    """Default QoS of one endpoint (overridable by parameters)."""
-
-    reliability: str = "reliable"
-    durability: str = "volatile"
-    depth: int = 10
-    #: ``keep_last`` or ``keep_all``; None: KEEP_LAST, and no ``history`` parameter
-    history: str | None = None
+from ..params.common import DURABILITIES, HISTORIES, MAX_QOS_DEPTH, RELIABILITIES
 
 
 def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "?", history: str = "keep_last"):
@@ -65,8 +48,8 @@ def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "
         raise ConfigError(f"must be one of {RELIABILITIES}, got {reliability!r}", key=f"qos.{endpoint}.reliability")
     if dur not in DURABILITIES:
         raise ConfigError(f"must be one of {DURABILITIES}, got {durability!r}", key=f"qos.{endpoint}.durability")
-    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= MAX_DEPTH:
-        raise ConfigError(f"must be an integer from 1 to {MAX_DEPTH}, got {depth!r}", key=f"qos.{endpoint}.depth")
+    if isinstance(depth, bool) or not isinstance(depth, int) or not 1 <= depth <= MAX_QOS_DEPTH:
+        raise ConfigError(f"must be an integer from 1 to {MAX_QOS_DEPTH}, got {depth!r}", key=f"qos.{endpoint}.depth")
     if history not in HISTORIES:
         raise ConfigError(f"must be one of {HISTORIES}, got {history!r}", key=f"qos.{endpoint}.history")
     return QoSProfile(
@@ -79,24 +62,10 @@ def qos_profile(reliability: str, durability: str, depth: int, endpoint: str = "
     )
 
 
-def declare_qos(node, endpoint: str, defaults: QosDefaults):
-    """Declare ``qos.<endpoint>.{reliability,durability,depth}`` on ``node`` and return the profile.
-
-    Read-only: an endpoint's QoS is fixed when it is created.  The choices
-    and the depth's range are in the descriptors (``ros2 param describe``).
-    """
-    from .common import declare
-
+def qos_of(params, endpoint: str):
+    """The :class:`rclpy.qos.QoSProfile` of ``endpoint`` from a node's declared ``qos.<endpoint>.*`` parameters
+    (:mod:`tactile_descriptors_ros.params.common`, read-only: an endpoint's QoS is fixed when it is made)."""
     prefix = f"qos.{endpoint}"
-    rel = declare(node, f"{prefix}.reliability", defaults.reliability, f"QoS reliability of '{endpoint}'",
-                  choices=RELIABILITIES, resolve=str.lower)
-    dur = declare(node, f"{prefix}.durability", defaults.durability, f"QoS durability of '{endpoint}'",
-                  choices=DURABILITIES, resolve=str.lower)
-    depth = declare(node, f"{prefix}.depth", defaults.depth, f"QoS history depth of '{endpoint}' (KEEP_LAST)",
-                    minimum=1, maximum=MAX_DEPTH)
-    history = "keep_last"
-    if defaults.history is not None:
-        history = declare(node, f"{prefix}.history", defaults.history,
-                          f"QoS history of '{endpoint}' (keep_all: no sample replaced, losses counted)",
-                          choices=HISTORIES, resolve=str.lower)
-    return qos_profile(rel, dur, depth, endpoint, history)
+    history = params.get(f"{prefix}.history", "keep_last")
+    return qos_profile(params[f"{prefix}.reliability"], params[f"{prefix}.durability"], params[f"{prefix}.depth"],
+                       endpoint, history)

@@ -45,18 +45,14 @@ from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality, SkinS
 from ..codecs.skin_can import SkinCanDecoder
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
-from ..streams.skin import MAX_BACKLOG_S, READ_FRAMES, CellState, SkinStream, drain_frames
+from ..params.skin_driver import SKIN_DRIVER
+from ..streams.skin import MAX_BACKLOG_S, READ_FRAMES, RECENT_FORCE, CellState, SkinStream, drain_frames
 from ..streams.skin_parts import SkinPartFrames
-from ..topics import FRAMES_TOPIC
-from .common import RateMeter, Status, declare, run_node
+from .common import RateMeter, Status, run_node
 from .conversions import skin_part_to_msg
 from .driver_base import DriverBase
-from .qos import QosDefaults, declare_qos
 
 __all__ = ["SkinDriver", "main"]
-
-TRANSPORTS = ("can", "serial", "simulated", "loopback")
-
 
 class SkinDriver(DriverBase):
     """The skin driver; ``kwargs`` go to :class:`rclpy.lifecycle.LifecycleNode`.
@@ -69,31 +65,17 @@ class SkinDriver(DriverBase):
 
     def __init__(self, node_name: str = "skin_driver", transport_factory=None, **kwargs) -> None:
         super().__init__(node_name, transport_factory, **kwargs)
-        self.full_robot, self.robot = self._declare_robot("skin", "nao", "skin-cell")
-        self.transport_name = declare(self, "transport", "can", "device transport", choices=TRANSPORTS)
-        self.batch_s = declare(self, "batch_s", 0.05, "sample time per message (all cells of a body part) [s]",
-                               minimum=0.001)
-        self._declare_stamps_and_tare(self.full_robot.contact.force_threshold_n,
-                                      "force baseline from the first samples [s]",
-                                      "the last force samples ~/tare takes the resting level over [s]")
-        self.topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
+        self.full_robot, self.robot = self._declare_parameters(SKIN_DRIVER, "skin", "nao", "skin-cell")
+        params = self.params
+        self.batch_s = params["batch_s"]
         self.tp = {
-            "can": {"interface": declare(self, "can.interface", "socketcan", "python-can interface"),
-                    "channel": declare(self, "can.channel", "can0", "python-can channel")},
-            "serial": {"port": declare(self, "serial.port", "/dev/ttyUSB0", "serial port or pyserial URL"),
-                       "baudrate": declare(self, "serial.baudrate", 3000000, "baud rate", minimum=1)},
+            "can": {"interface": params["can.interface"], "channel": params["can.channel"]},
+            "serial": {"port": params["serial.port"], "baudrate": params["serial.baudrate"]},
         }
-        bitrate = declare(self, "can.bitrate", 0, "CAN bitrate (0 = leave as configured)", minimum=0)
-        if bitrate:
-            self.tp["can"]["bitrate"] = bitrate
-        self.sim_scene = declare(self, "sim.scene", "", "scene played by the simulated transport")
-        self.sim_speed = declare(self, "sim.speed", 1.0, "simulated time per wall time", minimum=1e-3)
-        self.sim_wire = declare(self, "sim.wire", "can", "framing of the simulated bus: can (skin CAN layout) or "
-                                "serial (skin serial framing)", choices=("can", "serial"))
-        self.sim_loop = declare(self, "sim.loop", False, "play the scene over and over, simulated once (CAN): a "
-                                "large skin at full rate for as long as wanted")
-        autostart = declare(self, "autostart", True, "configure and activate at start")
-        self.qos_frames = declare_qos(self, "frames", QosDefaults("reliable", "volatile", 200))
+        if params["can.bitrate"]:
+            self.tp["can"]["bitrate"] = params["can.bitrate"]
+        self.sim_wire = params["sim.wire"]
+        self.sim_loop = params["sim.loop"]
 
         ct = self.robot.cell_types[self.robot.body_parts[0].cell_type]
         self.accel_rate_hz = ct.vibration.rate_hz
@@ -117,8 +99,12 @@ class SkinDriver(DriverBase):
         self._arrival_ns: int | None = None
         self.part_publishers: dict[str, object] = {}
         self.part_messages: dict[str, int] = {p.name: 0 for p in self.robot.body_parts}
-        self._start(autostart, [("bus", self._bus_status)]
+        self._start([("bus", self._bus_status)]
                     + [(part.name, lambda p=part: self._part_status(p)) for part in self.robot.body_parts])
+
+    def _tare_history(self) -> tuple[float, str]:
+        return RECENT_FORCE / self.force_rate_hz, (f"{RECENT_FORCE} force samples at the robot's "
+                                                   f"{self.force_rate_hz:g} Hz")
 
     # ------------------------------------------------------------- lifecycle
     def _simulated_source(self):
@@ -234,14 +220,16 @@ class SkinDriver(DriverBase):
                                      f"{stale[0]}: nothing in the last {self.stale_after_s} s; {why}); a tare needs "
                                      "current frames")
                 return response
+            threshold_n = self.params["contact.force_threshold_n"]
             touching = [(c.cell_id, f) for c in self.cells.values()
-                        if (f := self.stream.force_n(c, self.force_n_per_count)) is not None and f >= self.contact_threshold_n]
+                        if (f := self.stream.force_n(c, self.force_n_per_count)) is not None and f >= threshold_n]
             if touching:
                 response.success = False
                 response.message = (f"refused: {len(touching)} cells in contact (e.g. cell {touching[0][0]}: "
-                                    f"{touching[0][1]:.2f} N >= {self.contact_threshold_n} N)")
+                                    f"{touching[0][1]:.2f} N >= {threshold_n} N)")
                 return response
-            results = {c.cell_id: self.stream.tare_cell(c, self.tare_window_s) for c in self.cells.values()}
+            window_s = self.params["tare.window_s"]
+            results = {c.cell_id: self.stream.tare_cell(c, window_s) for c in self.cells.values()}
         failed = {cid: why for cid, (ok, why) in results.items() if not ok}
         response.success = not failed
         response.message = (f"tared {len(results) - len(failed)} cells" +

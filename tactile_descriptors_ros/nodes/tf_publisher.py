@@ -20,9 +20,11 @@ from rclpy.node import Node
 
 from ..core.robot import load_robot
 from ..errors import ConfigError
+from ..params.tf_publisher import TF_PUBLISHER
 from ..topics import TF_STATIC_TOPIC
-from .common import Diagnostics, Status, declare, report_unknown_overrides, run_node
+from .common import Diagnostics, Status, run_node
 from .contact_msgs import frames_to_tf_message
+from .parameters import NodeParameters
 
 __all__ = ["TfPublisher", "static_tf_qos", "main"]
 
@@ -42,25 +44,24 @@ class TfPublisher(Node):
         super().__init__(node_name, **kwargs)
         from tf2_msgs.msg import TFMessage
 
-        robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
+        self.params = params = NodeParameters(self, TF_PUBLISHER)
+        robot_arg = params.declare("robot")
         if not robot_arg:
             raise ConfigError("parameter 'robot' is required (e.g. shadow_hand, nao or a YAML path)", key="robot")
         self.robot = load_robot(robot_arg)
         if self.robot.geometry is None:
             raise ConfigError(f"robot {self.robot.name!r} has no geometry section: no frames to publish "
                               "(docs/view.md)", key="robot", source=self.robot.source)
-        links = declare(self, "publish_links", True, "also publish the links' rest pose (no robot_state_publisher: "
-                        "simulation, bags)")
-        sites = declare(self, "publish_sites", True, "also publish a frame per sensing site (BioTac electrodes)")
+        params.declare_all(robot=self.robot)
+        links, sites = params["publish_links"], params["publish_sites"]
         self.frames = self.robot.geometry.frames(self.robot, links=links, sites=sites)
         self.pub = self.create_publisher(TFMessage, TF_STATIC_TOPIC, static_tf_qos())
         self.pub.publish(frames_to_tf_message(self.frames, self.get_clock().now().nanoseconds))
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0, "diagnostics period [s]",
-                                                     minimum=0.01))
+        self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("frames", lambda: Status("ok", f"{len(self.frames)} static frames under "
                                                             f"{self.robot.geometry.root_frame}",
                                                       {"frames": len(self.frames), "links": links, "sites": sites}))
-        report_unknown_overrides(self)
+        params.finish()
         self.get_logger().info(f"robot {self.robot.name}: {len(self.frames)} static frames under "
                                f"{self.robot.geometry.root_frame} on {TF_STATIC_TOPIC}"
                                + ("" if links else " (links left to robot_state_publisher)"))

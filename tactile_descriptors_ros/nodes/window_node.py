@@ -55,18 +55,22 @@ from ..codecs.sequence import SequenceEvent, SequenceTracker
 from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
 from ..core.groups import check_groups, groups_of_channels, selection_name
-from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES, check_blocks, load_robot, select_body_parts
+from ..core.robot import check_blocks, load_robot, select_body_parts
 from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
-from ..topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC
-from .common import Diagnostics, RateMeter, Status, declare, report_unknown_overrides, run_node, steady_clock
+from ..params.window_node import WINDOW_NODE
+from ..topics import DESCRIPTOR_TOPIC, layout_topic
+from .common import Diagnostics, RateMeter, Status, run_node, steady_clock
 from .conversions import (
     biotac_msg_to_chunk,
+    descriptor_layout_to_msg,
     descriptor_to_msg,
+    layout_id,
     message_kind,
     skin_part_msg_to_part_chunk,
 )
-from .qos import QosDefaults, declare_qos
+from .parameters import NodeParameters
+from .qos import qos_of
 
 __all__ = ["WindowNode", "main", "FRAMES_AGE_LIMIT_MS"]
 
@@ -81,61 +85,32 @@ class WindowNode(Node):
 
     def __init__(self, node_name: str = "window_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, SkinPartFrames
+        from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout, SkinPartFrames
 
-        robot_arg = declare(self, "robot", "", "robot description: a shipped name (shadow_hand, nao) or a YAML path")
+        self.params = params = NodeParameters(self, WINDOW_NODE)
+        robot_arg = params.declare("robot")
         if not robot_arg:
             raise ConfigError("parameter 'robot' is required (e.g. shadow_hand, nao or a YAML path)", key="robot")
         full = load_robot(robot_arg)
-        served = declare(self, "body_parts", [p.name for p in full.body_parts],
-                         "body parts this node serves (scale-out: one window node per body part)")
-        self.robot = select_body_parts(full, served)
-        w, c, d = self.robot.window, self.robot.contact, self.robot.descriptor
-        mode = declare(self, "window.mode", w.mode, "window mode", choices=WINDOW_MODES)
-        self.layout = declare(self, "descriptor.layout", d.layout, "descriptor layout", choices=LAYOUT_MODES)
-        self.groups = self._declare_groups()
-        self.block_s, self.block_hop_s = check_blocks(
-            declare(self, "descriptor.block_s", d.block_s, "block averaging: describe a window by the mean over "
-                    "its blocks of this many seconds (Activity in log); 0 = one descriptor of the whole window",
-                    minimum=0.0),
-            declare(self, "descriptor.block_hop_s", d.block_hop_s, "largest step between blocks [s], at most "
-                    "descriptor.block_s", minimum=1e-3),
-            rates_hz=[ct.deformation.rate_hz for ct in self.robot.cell_types.values()])
-        # What a user tunes on a running robot: checked together by the windower, applied from the next
-        # window (length, hop) or onset/release decision (thresholds) on.
-        tune = self._retune_windower
-        self.windower = Windower(
-            self.robot, mode=mode,
-            length_s=declare(self, "window.length_s", w.length_s, "fixed window length [s]", minimum=1e-3,
-                             on_set_group=tune),
-            hop_s=declare(self, "window.hop_s", w.hop_s, "fixed window hop [s]", minimum=1e-3, on_set_group=tune),
-            min_duration_s=declare(self, "window.min_duration_s", w.min_duration_s,
-                                   "shortest exploration kept [s]", minimum=0.0, on_set_group=tune),
-            max_duration_s=declare(self, "window.max_duration_s", w.max_duration_s,
-                                   "longest exploration window [s]", minimum=1e-3, on_set_group=tune),
-            release_s=declare(self, "window.release_s", w.release_s,
-                              "force below the release threshold this long ends an exploration [s]", minimum=0.0,
-                              on_set_group=tune),
-            force_threshold_n=declare(self, "contact.force_threshold_n", c.force_threshold_n,
-                                      "contact gate F_t (eq. 13) [N]", minimum=0.0, on_set_group=tune),
-            release_threshold_n=declare(self, "contact.release_threshold_n", c.release_threshold_n,
-                                        "exploration release threshold [N]", minimum=0.0, on_set_group=tune),
-            lateness_s=declare(self, "window.lateness_s", 0.05, "wait for late cells after a fixed window [s]",
-                               minimum=0.0, on_set_group=tune),
-        )
-        self.force_threshold_n = self.windower.onset_n
+        self.robot = select_body_parts(full, params.declare("body_parts", default=[p.name for p in full.body_parts]))
         root = self.robot.geometry.root_frame if self.robot.geometry is not None else self.robot.name
-        self.frame_id = declare(self, "frame_id", root,
-                                "header.frame_id of the descriptors (default: the robot's root frame, its name "
-                                "without a geometry section)",
-                                on_set=lambda v: lambda: setattr(self, "frame_id", v))
-        self.id_stride = declare(self, "exploration_id_stride", 1,
-                                 "published exploration id = local id * stride + offset", minimum=1)
-        self.id_offset = declare(self, "exploration_id_offset", 0, "see exploration_id_stride", minimum=0)
+        params.declare_all(robot=self.robot, defaults={"frame_id": root})
+        self.layout = params["descriptor.layout"]
+        self.groups = self._groups()
+        self.block_s, self.block_hop_s = check_blocks(
+            params["descriptor.block_s"], params["descriptor.block_hop_s"],
+            rates_hz=[ct.deformation.rate_hz for ct in self.robot.cell_types.values()])
+        # What a user tunes on a running robot (the schema's "windower" parameters): checked together by the
+        # windower, applied from the next window (length, hop) or onset/release decision (thresholds) on.
+        self.windower = Windower(self.robot, mode=params["window.mode"], **_windower_settings(params))
+        params.on_set("windower", self._retune_windower)
+        self.force_threshold_n = self.windower.onset_n
+        self.id_stride = params["exploration_id_stride"]
+        self.id_offset = params["exploration_id_offset"]
         if self.id_offset >= self.id_stride and self.id_stride > 1:
             raise ConfigError(f"must be below exploration_id_stride ({self.id_stride})",
                               key="exploration_id_offset")
-        topic_fmt = declare(self, "frames_topic", FRAMES_TOPIC, "frames topic of a body part ({body_part})")
+        topic_fmt = params["frames_topic"]
         self.descriptors_published = 0
         self.last_quality: dict[str, int] = {}
         self.faults: Counter[str] = Counter()
@@ -152,14 +127,15 @@ class WindowNode(Node):
         self.kernel_info: dict | None = None
         self.held_windows: list[Window] = []
         self.windows_held_at_start = 0
-        qos_frames = declare_qos(self, "frames", QosDefaults("best_effort", "volatile", 256))
-        qos_desc = declare_qos(self, "descriptor", QosDefaults("reliable", "volatile", 10))
+        qos_frames = qos_of(params, "frames")
+        qos_desc = qos_of(params, "descriptor")
         self.pub = self.create_publisher(Descriptor, DESCRIPTOR_TOPIC, qos_desc)
+        # the labels of the values, once per layout, latched beside the descriptors (remapped with them)
+        self.layout_pub = self.create_publisher(DescriptorLayout, layout_topic(self.pub.topic_name),
+                                                qos_of(params, "layout"))
+        self.layouts_published: set[str] = set()
         self._cells_by_name: dict[tuple[str, str], int] = {}
         self._extra: dict[str, tuple[str, ...]] = {}  # body part -> its cell type's extra channels
-        self.drain_max = declare(self, "frames.drain_max", 1000,
-                                 "frames taken from the queues per callback besides its own (0 = one per callback)",
-                                 minimum=0, on_set=lambda v: lambda: setattr(self, "drain_max", v))
         self.subs = []
         self._handlers: dict[object, object] = {}
         for part in self.robot.body_parts:
@@ -194,10 +170,9 @@ class WindowNode(Node):
         self._served_part = np.array([k for _, k in served], np.int64)
         self._seq_high = np.zeros(len(served), np.int64)
         self._seq_have = np.zeros(len(served), bool)
-        self.diagnostics = Diagnostics(self, declare(self, "diagnostics_period_s", 1.0,
-                                                     "diagnostics period [s]", minimum=0.01))
+        self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("windows", self._status)
-        report_unknown_overrides(self)
+        params.finish()
         self._release_timer = self.create_timer(0.05, self._release_held, clock=steady_clock())
         self._warm_thread = threading.Thread(target=self._warm_up, daemon=True, name="kernel-warm-up")
         self._warm_thread.start()
@@ -211,7 +186,7 @@ class WindowNode(Node):
             f"{self.layout} descriptors of feature groups {selection_name(self.groups)} on {self.pub.topic_name}"
             + (f", mean over {self.block_s:g} s blocks" if self.block_s else ""))
 
-    def _declare_groups(self) -> tuple[str, ...]:
+    def _groups(self) -> tuple[str, ...]:
         """``descriptor.groups`` (or the legacy ``descriptor.channels``), checked against every served cell type.
 
         Raises
@@ -221,12 +196,8 @@ class WindowNode(Node):
             served cell type cannot feed; for both parameters changed at once.
         """
         d = self.robot.descriptor
-        channels = declare(self, "descriptor.channels", d.channels,
-                           "legacy channel mode: averaged = groups [paper], per_channel = [per_channel]; "
-                           "'' = descriptor.groups decides", choices=("", *CHANNEL_MODES))
-        groups = tuple(declare(self, "descriptor.groups", list(d.groups),
-                               "feature groups in descriptor order: paper, per_channel, bands, levels "
-                               "(or levels:<ch>,<ch>), statistics (docs/nodes.md)"))
+        channels = self.params["descriptor.channels"]
+        groups = tuple(self.params["descriptor.groups"])
         if channels != d.channels and channels:
             if groups != d.groups:
                 raise ConfigError("set descriptor.groups or the legacy descriptor.channels, not both",
@@ -240,20 +211,13 @@ class WindowNode(Node):
     WARM_UP_WAIT_S = 5.0
 
     # ------------------------------------------------------- parameters
-    #: parameter -> Windower setting
-    _WINDOWER_SETTINGS = {"window.length_s": "length_s", "window.hop_s": "hop_s",
-                          "window.min_duration_s": "min_duration_s", "window.max_duration_s": "max_duration_s",
-                          "window.release_s": "release_s", "window.lateness_s": "lateness_s",
-                          "contact.force_threshold_n": "force_threshold_n",
-                          "contact.release_threshold_n": "release_threshold_n"}
-
-    def _retune_windower(self, values: dict[str, float]):
+    def _retune_windower(self, values, changed):
         """``ros2 param set`` of window/contact settings: checked together now, applied by the returned function."""
-        changes = {self._WINDOWER_SETTINGS[k]: v for k, v in values.items()}
-        self.windower.retune(dry_run=True, **changes)  # ConfigError: refused, nothing changed
+        settings = _windower_settings(values)
+        self.windower.retune(dry_run=True, **settings)  # ConfigError: refused, nothing changed
 
         def apply() -> None:
-            self.windower.retune(**changes)
+            self.windower.retune(**settings)
             self.force_threshold_n = self.windower.onset_n
 
         return apply
@@ -316,7 +280,7 @@ class WindowNode(Node):
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
         out = [(first, self._by_type[type(first)])]
-        budget = self.drain_max
+        budget = self.params["frames.drain_max"]
         while budget > 0:
             took = 0
             for sub in self.subs:
@@ -474,7 +438,12 @@ class WindowNode(Node):
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
             return
         eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
-        msg = descriptor_to_msg(desc, window, frame_id=self.frame_id, exploration_id=eid)
+        layout = layout_id(desc.labels)
+        if layout not in self.layouts_published:  # before the first descriptor that names it
+            self.layout_pub.publish(descriptor_layout_to_msg(desc, frame_id=self.params["frame_id"],
+                                                             stamp_ns=self.get_clock().now().nanoseconds))
+            self.layouts_published.add(layout)
+        msg = descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid, layout=layout)
         self.pub.publish(msg)
         self._describe_ms.append(1e3 * (time.perf_counter() - started))
         self.descriptors_published += 1
@@ -508,7 +477,7 @@ class WindowNode(Node):
         for part, meter in self._rates.items():
             values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin cell batches/s
             seen = self._last_seen.get(part)
-            if seen is None or now - seen > 2.0:
+            if seen is None or now - seen > self.params["diagnostics.silent_after_s"]:
                 silent.append(part)
         values.update({f"fault_{k}": v for k, v in sorted(faults.items())})
         values.update({f"quality_{k}": v for k, v in self.last_quality.items()})
@@ -523,6 +492,11 @@ class WindowNode(Node):
             return Status("warn", "faults: " + ", ".join(f"{k}={v}" for k, v in sorted(bad.items())), values)
         return Status("ok", f"{self.descriptors_published} descriptors", values)
 
+
+
+def _windower_settings(values) -> dict[str, float]:
+    """The schema's ``windower`` parameters as :class:`Windower` keywords (``window.length_s`` -> ``length_s``)."""
+    return {name.rsplit(".", 1)[1]: values[name] for name in WINDOW_NODE.apply_groups()["windower"]}
 
 
 def _newest_sample_ns(msg) -> int | None:

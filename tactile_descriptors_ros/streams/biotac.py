@@ -33,7 +33,11 @@ from ..errors import CodecError, SignalError
 from .clock import DeviceClock
 from .frames import BioTacBatch
 
-__all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream"]
+__all__ = ["ReadItem", "SpiFrameSource", "BridgeFrameSource", "SensorConfig", "SensorState", "BiotacStream",
+           "RECENT_FRAMES"]
+
+#: Frames kept per BioTac for ~/tare and the contact check.
+RECENT_FRAMES = 2000
 
 
 @dataclass
@@ -202,8 +206,8 @@ class SensorState:
     frames: list[tuple[int, int, BiotacFrames]] = field(default_factory=list)  # (seq, stamp_ns, frames)
     # frames with a readable PDC, for ~/tare and the contact check: (stamp_ns, pdc) and, frame for frame,
     # that frame's electrodes (float64, NaN where unreadable)
-    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=2000))
-    recent_el: deque = field(default_factory=lambda: deque(maxlen=2000))
+    recent_pdc: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))
+    recent_el: deque = field(default_factory=lambda: deque(maxlen=RECENT_FRAMES))
     tare_pdc: float = 0.0
     tare_electrodes: np.ndarray | None = None
     tared: bool = False
@@ -444,7 +448,7 @@ class BiotacStream:
         return (float(np.mean(last)) - st.tare_pdc) * self.force_n_per_count
 
     def tare_one(self, st: SensorState, window_s: float, check_contact: bool,
-                 contact_threshold_n: float = float("inf"), *, rest_percentile: float = 100.0) -> tuple[bool, str]:
+                 force_threshold_n: float = float("inf"), *, rest_percentile: float = 100.0) -> tuple[bool, str]:
         """Set the PDC and electrode baselines to their resting level over the last ``window_s`` of frames.
 
         The level is :func:`~..core.tare.resting_level` of the frames with a
@@ -457,8 +461,8 @@ class BiotacStream:
         window_s : float
             Frames stamped within this long of the newest one [s].
         check_contact : bool
-            Refuse while the force of the last frames is at or above ``contact_threshold_n``.
-        contact_threshold_n : float
+            Refuse while the force of the last frames is at or above ``force_threshold_n``.
+        force_threshold_n : float
         rest_percentile : float
             Share of the window known to rest (:func:`~..core.tare.resting_level`): 100
             for ``~/tare`` and the start tare, which take a window without contact.
@@ -472,8 +476,8 @@ class BiotacStream:
         """
         if check_contact:
             f = self.force_now(st)
-            if f is not None and f >= contact_threshold_n:
-                return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {contact_threshold_n} N)"
+            if f is not None and f >= force_threshold_n:
+                return False, f"{st.cfg.sensor_name} is in contact ({f:.2f} N >= {force_threshold_n} N)"
         if not st.recent_pdc:
             return False, f"{st.cfg.sensor_name}: no valid PDC samples yet"
         stamps = np.array([t for t, _ in st.recent_pdc], dtype=np.int64)

@@ -53,8 +53,10 @@ def run(args: argparse.Namespace) -> int:
             rclpy.init(context=rclpy_context)
             source = echo_live(args.topic, args.count, args.timeout, msgtype=args.msgtype, context=rclpy_context)
         for msg, decoded in source:
-            msgtype = msg.msgtype
             summary = tracker.summarize(msg.topic, msg.msgtype, decoded, msg.log_time_ns)
+            if msg.topic.lstrip("/") != args.topic.lstrip("/"):
+                continue  # a descriptor topic's layout: learned by the tracker, not shown
+            msgtype = msg.msgtype
             if args.json:
                 if args.raw:
                     collected.append({"log_time_ns": msg.log_time_ns, "message": message_to_dict(decoded)})

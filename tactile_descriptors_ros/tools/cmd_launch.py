@@ -6,9 +6,11 @@ subprocesses of this interpreter with ``--ros-args --params-file <tmp yaml>
 -r from:=to``; their output is forwarded with a ``[node]`` prefix; Ctrl-C
 stops them cleanly (SIGINT to each, then SIGTERM/SIGKILL by PID).  When a
 node ends on its own the others are stopped too and the exit code is 1.
-``--set NODE.PARAM=VALUE`` and the robot's ``nodes:`` section are checked
-against the parameters each node declares (name and type) before anything
-starts, also with ``--print``.
+``--set NODE.PARAM=VALUE``, ``--params-file`` and the robot's ``nodes:``
+section are checked against the parameters each node declares (name, type
+and accepted values) before anything starts, also with ``--print``.
+``--no-drivers`` starts only the window and classifier nodes, for a bag
+replayed into them (``tactile replay``).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import sys
 import yaml
 
 from ..errors import ConfigError
-from ..launching.graph import build_graph, parameters_document
+from ..launching.graph import LOG_LEVELS, build_graph, parameters_document
 from ..launching.processes import GraphProcesses, localhost_environment, node_command, run_until_interrupted
 from .cmd_demo import positive_float
 
@@ -44,7 +46,8 @@ def specs_from_args(args: argparse.Namespace):
     return build_graph(args.robot, sim_scene=args.sim, sim_speed=args.sim_speed,
                        split_window_nodes=args.split_window_nodes,
                        model_path=args.model_path, use_sim_time=args.use_sim_time,
-                       overrides=parse_set(args.set), namespace=args.namespace)
+                       overrides=parse_set(args.set), namespace=args.namespace, drivers=args.drivers,
+                       params_file=args.params_file, log_level=args.log_level or "")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -84,7 +87,12 @@ def register(subparsers) -> None:
                    "1.0; a machine too busy for real time needs less)")
     p.add_argument("--split-window-nodes", action="store_true",
                    help="one window node per body part (scale-out; pooled descriptors)")
+    p.add_argument("--no-drivers", dest="drivers", action="store_false",
+                   help="start only the window and classifier nodes (replay a bag into them: tactile replay)")
     p.add_argument("--model-path", default=None, help="classifier model file")
+    p.add_argument("--params-file", default=None, metavar="YAML",
+                   help="a ROS 2 parameters file merged over the graph's parameters (checked like them)")
+    p.add_argument("--log-level", choices=LOG_LEVELS, default=None, help="log level of every node")
     p.add_argument("--use-sim-time", action="store_true", help="set use_sim_time on every node (bag replay)")
     p.add_argument("--namespace", default="", help="namespace of the nodes")
     p.add_argument("--set", action="append", metavar="NODE.PARAM=VALUE", help="override a parameter (repeatable)")

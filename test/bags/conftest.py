@@ -38,7 +38,23 @@ def make_label(store, stamp_ns: int, name: str = "cork"):
                                                              class_name=name)
 
 
-def make_descriptor(store, stamp_ns: int):
+#: The labels of :func:`make_descriptor`'s values.
+DESCRIPTOR_LABELS = ["thumb/A_pac", "index/A_pac", "index/M_pac"]
+
+
+def make_layout(store, stamp_ns: int, labels=DESCRIPTOR_LABELS):
+    """The rosbags DescriptorLayout of ``labels``."""
+    from tactile_descriptors_ros.layouts import layout_id
+
+    return store.types["tactile_descriptors_msgs/msg/DescriptorLayout"](
+        header=_header(store, stamp_ns, "shadow_hand"), layout_id=layout_id(labels), robot="shadow_hand",
+        layout_mode="concat", channel_mode="paper", body_parts=["thumb", "index"], labels=list(labels))
+
+
+def make_descriptor(store, stamp_ns: int, inline: bool = True):
+    """A rosbags Descriptor: its labels inline (a publisher without a layout topic), or only its layout's id."""
+    from tactile_descriptors_ros.layouts import layout_id
+
     cls = store.types["tactile_descriptors_msgs/msg/Descriptor"]
     return cls(
         header=_header(store, stamp_ns, ""), robot="shadow_hand", exploration_id=4,
@@ -48,7 +64,8 @@ def make_descriptor(store, stamp_ns: int):
         cells_in_contact=np.array([0, 1], dtype=np.uint16), cells_total=np.array([1, 1], dtype=np.uint16),
         mean_force_n=np.array([0.0, 1.25]),
         quality=np.array([cls.QUALITY_NO_CONTACT | cls.QUALITY_SHORT, cls.QUALITY_INVALID | 1024], dtype=np.uint32),
-        labels=["thumb/A_pac", "index/A_pac", "index/M_pac"], values=np.array([0.0, 1500.0, 310.5]),
+        layout_id=layout_id(DESCRIPTOR_LABELS), labels=list(DESCRIPTOR_LABELS) if inline else [],
+        values=np.array([0.0, 1500.0, 310.5]),
     )
 
 

@@ -142,3 +142,26 @@ def test_skin_part_statistics_per_cell_health_and_lengths(store):
     bad = _skin_part(store, T0, 0)
     bad.force_count = np.array([3, 2], np.uint32)
     assert any("force must be" in p for p in EchoTracker().summarize("/x", msgtype, bad, T0)["problems"])
+
+
+def test_echo_names_the_values_from_the_layout_in_the_bag(tmp_path, store, capsys):
+    """Descriptors without their labels (the window node's) are named from the bag's layout topic; without it,
+    the summary says so and lists the values by index."""
+    from conftest import make_layout
+
+    desc, layout = "tactile_descriptors_msgs/msg/Descriptor", "tactile_descriptors_msgs/msg/DescriptorLayout"
+    path = tmp_path / "bag"
+    with BagWriter(path) as bag:
+        bag.add_topic("/tactile/descriptor", desc)
+        bag.add_topic("/tactile/descriptor_layout", layout)
+        bag.write("/tactile/descriptor_layout", T0, make_layout(store, T0))
+        for k in range(2):
+            bag.write("/tactile/descriptor", T0 + (k + 1) * 10**9, make_descriptor(store, T0 + k * 10**9, inline=False))
+    assert main(["echo", "/tactile/descriptor", "--bag", str(path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["count"] == 2 and out["type"] == desc  # the layout is read, not shown
+    assert out["messages"][0]["body_parts"]["index"]["values"] == {"A_pac": 1500.0, "M_pac": 310.5}
+    assert not out["messages"][0]["problems"]
+    alone = EchoTracker(type_constants(store)).summarize("/d", desc, make_descriptor(store, T0, inline=False), T0)
+    assert alone["problems"][0].startswith(f"layout {alone['layout_id']!r} not seen")
+    assert alone["values"] == {"value_0": 0.0, "value_1": 1500.0, "value_2": 310.5}

@@ -139,3 +139,37 @@ def test_demo_chance_is_a_guess_among_the_classes_taught_before_each_scored_pred
             {"truth": "box", "first_of_class": True, "classes_known": 3}]  # taught, never scored
     assert chance_level(rows) == pytest.approx((1 / 2 + 1 / 3 + 1 / 3) / 3)
     assert chance_level(rows[:2]) is None
+
+
+def test_params_file_is_merged_and_checked(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({
+        "classifier_node": {"ros__parameters": {"eta": 0.25}},
+        "/window_node": {"ros__parameters": {"window": {"length_s": 3}}},
+        "/**": {"ros__parameters": {"diagnostics_period_s": 2}},
+    }))
+    specs = {s.name: s for s in build_graph("shadow_hand", params_file=params,
+                                            overrides={"classifier_node": {"eta": 0.5}})}
+    assert specs["classifier_node"].parameters["eta"] == 0.5  # --set wins over the file
+    assert specs["window_node"].parameters["window.length_s"] == 3.0  # widened, as everywhere
+    assert {s.parameters["diagnostics_period_s"] for s in specs.values()} == {2.0}
+    for doc, match in (({"elbow_node": {"ros__parameters": {"eta": 1.0}}}, "no node 'elbow_node' in the graph"),
+                       ({"/**": {"ros__parameters": {"bogus": 1}}}, "no node of the graph declares 'bogus'"),
+                       ({"window_node": {"eta": 1.0}}, r"expected \{ros__parameters"),
+                       ({"window_node": {"ros__parameters": {"window.length_s": 1e300}}}, "must be within")):
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(yaml.safe_dump(doc))
+        with pytest.raises(ConfigError, match=match):
+            build_graph("shadow_hand", params_file=bad)
+    with pytest.raises(ConfigError, match="cannot read the parameters file"):
+        build_graph("shadow_hand", params_file=tmp_path / "missing.yaml")
+
+
+def test_without_drivers_and_with_a_log_level():
+    specs = build_graph("nao", drivers=False, log_level="warn")
+    assert [s.executable for s in specs] == ["window_node", "classifier_node"]
+    assert node_command(specs[0], "p.yaml")[-2:] == ["--log-level", "warn"]
+    with pytest.raises(ConfigError, match="'sim': a simulated scene plays through the drivers"):
+        build_graph("nao", drivers=False, sim_scene="demo_nao")
+    with pytest.raises(ConfigError, match="'log_level': must be one of"):
+        build_graph("nao", log_level="loud")

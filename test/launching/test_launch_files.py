@@ -36,13 +36,17 @@ def _stubs(monkeypatch):
     actions = types.ModuleType("launch.actions")
     actions.DeclareLaunchArgument = record("arg")
     actions.OpaqueFunction = record("opaque")
+    actions.RegisterEventHandler = record("handler")
+    handlers = types.ModuleType("launch.event_handlers")
+    handlers.OnProcessExit = record("on_exit")
     subs = types.ModuleType("launch.substitutions")
     subs.LaunchConfiguration = _Config
     launch_ros = types.ModuleType("launch_ros")
     ros_actions = types.ModuleType("launch_ros.actions")
     ros_actions.Node = record("node")
     for name, mod in {"launch": launch, "launch.actions": actions, "launch.substitutions": subs,
-                      "launch_ros": launch_ros, "launch_ros.actions": ros_actions}.items():
+                      "launch.event_handlers": handlers, "launch_ros": launch_ros,
+                      "launch_ros.actions": ros_actions}.items():
         monkeypatch.setitem(sys.modules, name, mod)
     return made
 
@@ -56,12 +60,16 @@ def test_launch_file_nodes_match_graph(repo_dir, monkeypatch, robot, sim, split)
     spec.loader.exec_module(module)
     ld = module.generate_launch_description()
     args = {a.args[0]: a.kwargs["default_value"] for a in made["arg"]}
-    assert set(args) == {"robot", "sim", "sim_speed", "split_window_nodes", "model_path", "use_sim_time", "namespace"}
+    assert set(args) == {"robot", "sim", "sim_speed", "split_window_nodes", "drivers", "model_path", "params_file",
+                         "log_level", "use_sim_time", "namespace"}
     context = dict(args, sim=f"demo_{robot}" if sim else "", split_window_nodes=split,
                    sim_speed="0.04" if sim else "")
     opaque = made["opaque"][0]
     assert opaque in ld.actions
-    nodes = opaque.kwargs["function"](context)
+    actions = opaque.kwargs["function"](context)
+    nodes = [a for a in actions if a.kind == "node"]
+    # every node watched: one that ends on its own ends the launch
+    assert [h.args[0].kwargs["target_action"] for h in actions if h.kind == "handler"] == nodes
     expected = build_graph(robot, sim_scene=context["sim"] or None, split_window_nodes=split == "true",
                            sim_speed=0.04 if sim else None)
     assert len(nodes) == len(expected)
@@ -73,3 +81,48 @@ def test_launch_file_nodes_match_graph(repo_dir, monkeypatch, robot, sim, split)
             (s.executable, s.name, s.namespace)
         assert node.kwargs["parameters"] == [s.parameters]
         assert node.kwargs["remappings"] == list(s.remappings)
+        assert node.kwargs["ros_arguments"] == ["--log-level", "info"]
+
+
+def _launch_actions(repo_dir, monkeypatch, robot="shadow_hand", **values):
+    made = _stubs(monkeypatch)
+    spec = importlib.util.spec_from_file_location(f"launch_{robot}", repo_dir / "launch" / f"{robot}.launch.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.generate_launch_description()
+    context = {a.args[0]: a.kwargs["default_value"] for a in made["arg"]}
+    context.update(values)
+    return made["opaque"][0].kwargs["function"](context)
+
+
+@pytest.mark.parametrize("name, value, match", [
+    ("split_window_nodes", "yes_please", r"'split_window_nodes': must be true or false, got 'yes_please'"),
+    ("drivers", "no", r"'drivers': must be true or false"),
+    ("use_sim_time", "", r"'use_sim_time': must be true or false"),
+    ("sim_speed", "fast", r"'sim_speed': must be a number above 0"),
+    ("sim_speed", "inf", r"'sim_speed': must be a finite number above 0"),
+    ("log_level", "loud", r"'log_level': must be one of debug, info, warn, error, fatal"),
+    ("params_file", "/no/such/params.yaml", r"'params_file': no such file"),
+])
+def test_an_ill_typed_launch_argument_is_an_error_naming_it(repo_dir, monkeypatch, name, value, match):
+    from tactile_descriptors_ros.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=match):
+        _launch_actions(repo_dir, monkeypatch, **{name: value})
+
+
+def test_an_unknown_launch_argument_is_an_error_naming_the_valid_ones():
+    from tactile_descriptors_ros.errors import ConfigError
+    from tactile_descriptors_ros.launching.launch_file import check_argument_names
+
+    with pytest.raises(ConfigError, match=r"'model_pth': unknown launch argument; did you mean model_path\? "
+                                          r"\(valid: robot, sim, sim_speed, split_window_nodes, drivers, model_path"):
+        check_argument_names(["sim", "model_pth"])
+    check_argument_names(["robot", "drivers", "launch-prefix"])  # ros2 launch's own are fine
+
+
+def test_drivers_false_starts_the_window_and_classifier_nodes_only(repo_dir, monkeypatch):
+    actions = _launch_actions(repo_dir, monkeypatch, robot="nao", drivers="false", log_level="debug")
+    nodes = [a for a in actions if a.kind == "node"]
+    assert [n.kwargs["executable"] for n in nodes] == ["window_node", "classifier_node"]
+    assert all(n.kwargs["ros_arguments"] == ["--log-level", "debug"] for n in nodes)

@@ -369,3 +369,108 @@ def test_ctrl_c_with_split_window_nodes(tmp_path):
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     assert_clean_shutdown(alive, text, [s.executable for s in specs])
+
+
+# ------------------------------------------------------------------ launch arguments and node deaths
+def _launch_until_it_ends(*args: str, env: dict[str, str], log: Path, timeout_s: float) -> tuple[int, str]:
+    """``ros2 launch ARGS`` run until it ends on its own (a bound, not a wait: a launch still running at the
+    bound is killed and fails the test); return its exit code and output."""
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, *args], stdout=fh, stderr=subprocess.STDOUT,
+                                env=env, preexec_fn=_sigint_default, start_new_session=True)
+    try:
+        code = proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            proc.wait(timeout=4 * SIGTERM_AFTER_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        raise AssertionError(f"ros2 launch {' '.join(args)} still running after {timeout_s:.0f} s:\n"
+                             f"{log.read_text()[-3000:]}") from None
+    return code, log.read_text(errors="replace")
+
+
+@pytest.mark.parametrize("argument, says", [
+    ("model_pth:=/tmp/model.json", r"'model_pth': unknown launch argument; did you mean model_path\? \(valid: robot, "),
+    ("split_window_nodes:=yes_please", r"'split_window_nodes': must be true or false, got 'yes_please'"),
+])
+def test_a_bad_launch_argument_ends_the_launch_naming_what_is_valid(tmp_path, argument, says):
+    code, text = _launch_until_it_ends("shadow_hand.launch.py", argument, env=_ros_env(tmp_path / "ros_home"),
+                                       log=tmp_path / "launch.log", timeout_s=CLI_S)
+    assert code != 0 and re.search(says, text), text[-3000:]
+    assert "process started" not in text, text[-3000:]  # nothing was started
+
+
+def test_a_node_that_dies_ends_the_launch_with_its_name_and_exit_code(tmp_path):
+    """Without a scene the BioTac driver cannot open its Cheetah adapter (none here) and exits 2: the launch
+    says so, stops the window and classifier nodes and ends with code 1."""
+    code, text = _launch_until_it_ends("shadow_hand.launch.py", env=_ros_env(tmp_path / "ros_home"),
+                                       log=tmp_path / "launch.log", timeout_s=FIRST_PREDICTION_S)
+    assert code == 1, text[-3000:]
+    assert re.search(r"node biotac_driver exited with code 2: stopping the launch", text), text[-3000:]
+    assert re.search(r"\[FATAL\] \[[\d.]+\] \[biotac_driver\]: ", text), text[-3000:]
+    finished = sorted(re.findall(r"\[INFO\] \[(\w+)-\d+\]: process has finished cleanly", text))
+    assert finished == ["classifier_node", "window_node"], text[-3000:]
+
+
+def _frames_bag(path: Path, explorations: int = 3) -> Path:
+    """A bag of one finger's BioTac frames: ``explorations`` touches of 2.5 s and their releases."""
+    from node_helpers import BiotacStream
+    from rclpy.serialization import serialize_message
+
+    from tactile_descriptors_ros.bags.io import BagWriter
+
+    stream = BiotacStream()
+    topic = "/tactile/index/frames"
+    with BagWriter(path) as bag:
+        bag.add_topic(topic, "tactile_descriptors_msgs/msg/BioTacFrameBatch")
+        for k in range(explorations):
+            for msg in stream.exploration(40.0 + 80.0 * k):
+                stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                bag.write(topic, stamp, serialize_message(msg))
+    return path
+
+
+def test_without_drivers_a_replayed_bag_is_windowed_and_predicted(tmp_path):
+    """drivers:=false starts only the window and classifier nodes; tactile replay plays frames into them; the
+    params_file and log_level arguments reach the nodes."""
+    import yaml
+
+    bag = _frames_bag(tmp_path / "frames")
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump({
+        "classifier_node": {"ros__parameters": {"eta": 0.25}},
+        "window_node": {"ros__parameters": {"body_parts": ["index"], "qos": {"frames": {"reliability": "reliable"}}}},
+    }))
+    env = _ros_env(tmp_path / "ros_home")
+    log = tmp_path / "launch.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, "shadow_hand.launch.py", "drivers:=false",
+                                 f"params_file:={params}", "log_level:=debug"], stdout=fh, stderr=subprocess.STDOUT,
+                                env=env, preexec_fn=_sigint_default, start_new_session=True)
+    g = Graph("shadow_hand", proc, log, env, tmp_path / "ros_home", "")
+    replay = None
+    try:
+        g.wait_for_nodes({"/window_node", "/classifier_node"})
+        commands = " ".join(" ".join(p.cmdline()) for p in node_processes(proc)[1:])
+        assert "biotac_driver" not in commands and "window_node" in commands, commands
+        replay = subprocess.Popen([str(BIN / "tactile"), "replay", str(bag), "--loop", "--wait-for-subscribers",
+                                   str(CLI_S)], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                  start_new_session=True)
+        prediction = g.ros2("topic", "echo", "--once", "--no-daemon", "/tactile/prediction",
+                            "tactile_descriptors_msgs/msg/Prediction", timeout=FIRST_PREDICTION_S)
+        assert re.search(r"^exploration_id: [1-9]\d*$", prediction, re.M), prediction
+        eta = g.ros2_node("param", "get", "--no-daemon", "--spin-time", "3", "/classifier_node", "eta")
+        assert eta.strip() == "Double value is: 0.25", eta
+        assert re.search(r"^\[window_node-\d+\] \[DEBUG\] ", g.output(), re.M), g.output()[-3000:]
+        alive, text = ctrl_c(proc, log)
+    finally:
+        if replay is not None and replay.poll() is None:
+            os.killpg(replay.pid, signal.SIGINT)
+            replay.wait(timeout=CLI_S)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert_clean_shutdown(alive, text, ["window_node", "classifier_node"])

@@ -176,7 +176,7 @@ _VALUES = [0, -1, 2**62, 1e-300, 1e300, float("nan"), float("inf"), float("-inf"
 _ACCEPTED = {  # what each writable parameter takes of _VALUES (an integer for a double is widened); the rest
     # is refused with a reason
     "eta": [], "label_horizon": [], "label_wait_s": [0, 1e-300], "label_hold_s": [],
-    "save_after_update": [], "frame_id": ["", "a string"],
+    "save_after_update": [], "frame_id": [""],  # a frame id with a blank is refused, as by every node
 }
 
 

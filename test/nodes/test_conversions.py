@@ -83,16 +83,31 @@ def test_descriptor_and_prediction_messages():
     from tactile_descriptors_ros.core.aggregation import describe_window
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.core.windowing import Window
-    from tactile_descriptors_ros.nodes.conversions import descriptor_from_msg, descriptor_to_msg, prediction_to_msg
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.nodes.conversions import (
+        descriptor_from_msg,
+        descriptor_layout_to_msg,
+        descriptor_to_msg,
+        layout_id,
+        prediction_to_msg,
+    )
 
     robot = load_robot("shadow_hand")
     d = describe_window(robot, {})
-    msg = descriptor_to_msg(d, Window(1_000, 2_000_000_001, 4, "exploration"))
-    s = descriptor_from_msg(msg)
+    msg = descriptor_to_msg(d, Window(1_000, 2_000_000_001, 4, "exploration"), frame_id="hand")
+    layout = descriptor_layout_to_msg(d, frame_id="hand")
+    assert list(msg.labels) == [] and msg.layout_id == layout.layout_id == layout_id(d.labels)
+    assert tuple(layout.labels) == d.labels and layout.header.frame_id == "hand"
+    with pytest.raises(SignalError, match="1305 values but its layout"):
+        descriptor_from_msg(msg)  # the values without their layout's labels
+    s = descriptor_from_msg(msg, layout.labels)
     assert s.exploration_id == 4 and s.window_end_ns == 2_000_000_001 and len(s.values) == 5 * 261  # shipped groups
     assert s.labels == d.labels and not s.contact and s.body_parts[0] == "thumb"
     p = prediction_to_msg(s, class_name=None, class_names=[], scores=np.zeros(0), model_version=0, updates=0)
     assert not p.has_model and p.class_name == "" and p.exploration_id == 4
+    assert p.header.frame_id == "hand"  # the descriptor's frame, unless the classifier sets its own
+    assert prediction_to_msg(s, class_name=None, class_names=[], scores=np.zeros(0), model_version=0, updates=0,
+                             frame_id="base").header.frame_id == "base"
 
 
 def test_stamp_conversion():

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 
@@ -39,7 +38,7 @@ def test_ranges_and_choices_are_in_the_descriptors(ros_context):
         d = _describe(w, "contact.force_threshold_n")
         assert d.type == ParameterType.PARAMETER_DOUBLE and not d.read_only
         assert len(d.floating_point_range) == 1 and d.floating_point_range[0].from_value == 0.0
-        assert math.isinf(d.floating_point_range[0].to_value)
+        assert d.floating_point_range[0].to_value == 1000.0  # the schema's bound: finite, as every range
         d = _describe(w, "window.mode")
         assert d.read_only and d.additional_constraints == "one of: fixed, exploration"
         d = _describe(w, "qos.frames.depth")
@@ -251,9 +250,9 @@ def test_classifier_settings_are_set_at_run_time(ros_context, tmp_path):
         assert c.labels.add_label(3, "cork").action == "held"  # its descriptor is forgotten: beyond the horizon
         assert c.labels.add_label(5, "cork").action == "learn"
         r = c.set_parameters([Parameter("label_horizon", value=0)])[0]
-        assert not r.successful and c.horizon == 2
+        assert not r.successful and c.params["label_horizon"] == 2
         r = c.set_parameters([Parameter("eta", value=0.5)])[0]
-        assert r.successful and c.eta == 0.5
+        assert r.successful and c.params["eta"] == 0.5
         r = c.set_parameters([Parameter("pa_update", value="prediction")])[0]
         assert not r.successful and "read-only" in r.reason
         d = _describe(c, "pa_update")
@@ -333,43 +332,57 @@ def test_scene_end_is_announced_and_diagnostics_say_so(ros_context, tmp_path):
         drv.destroy_node()
 
 
-#: Parameters every rclpy node declares itself (not this package's): left out of the docs' table.
-_ROS_OWN = {"use_sim_time", "start_type_description_service"}
-
-
-def _documented_writable(repo_dir) -> dict[str, set[str]]:
-    """docs/nodes.md's table "writable at run time": node -> the parameter names it lists."""
-    import re
-
-    text = (repo_dir / "docs" / "nodes.md").read_text()
-    section = text.split("## Parameters: described, and which can change at run time", 1)[1].split("\n## ", 1)[0]
-    rows = re.findall(r"^\| (\w+) \| ([^|]+) \|", section, re.M)
-    return {node: set(re.findall(r"`([^`]+)`", cells)) for node, cells in rows if node != "node"}
-
-
-def test_docs_list_exactly_the_parameters_each_node_lets_change_at_run_time(ros_context, repo_dir, tmp_path,
-                                                                             monkeypatch):
+def test_silent_after_is_set_at_run_time(ros_context):
+    """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch
+
+    w = _window(ros_context, qos__frames__reliability="reliable")
+    io = rclpy.create_node("io", context=ros_context)
+    pub = io.create_publisher(BioTacFrameBatch, "tactile/index/frames", 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(w)
+    ex.add_node(io)
+
+    def status():
+        return w.diagnostics.statuses()[0].message
+
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 30)
+        assert w.set_parameters([Parameter("diagnostics.silent_after_s", value=3600.0)])[0].successful
+        pub.publish(BiotacStream().batch(0.0, 40.0))
+        assert spin_until(ex, lambda: w.frames_taken >= 1, 30)
+        assert "no frames from" not in status()
+        r = w.set_parameters([Parameter("diagnostics.silent_after_s", value=0.1)])[0]
+        assert r.successful, r.reason
+        assert spin_until(ex, lambda: "no frames from index" in status(), 30)
+    finally:
+        ex.shutdown()
+        w.destroy_node()
+        io.destroy_node()
+
+
+def test_a_tare_window_longer_than_the_kept_samples_is_refused(ros_context):
+    """A tare averages the samples the stream keeps (a BioTac's last 2000 frames: 20 s at 100 frames/s; a skin
+    cell's last 500 force samples: 2 s at 250 Hz): a longer window is refused, not silently shortened."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.errors import ConfigError
     from tactile_descriptors_ros.nodes.biotac_driver import BiotacDriver
-    from tactile_descriptors_ros.nodes.contact_node import ContactNode
     from tactile_descriptors_ros.nodes.skin_driver import SkinDriver
 
-    monkeypatch.setenv("ROS_HOME", str(tmp_path))
-    nodes = {"window_node": _window(ros_context),
-             "classifier_node": _classifier(ros_context, robot="shadow_hand"),
-             "biotac_driver": BiotacDriver(context=ros_context, parameter_overrides=[
-                 Parameter("robot", value="shadow_hand"), Parameter("body_parts", value=["index"]),
-                 Parameter("transport", value="loopback")]),
-             "skin_driver": SkinDriver(context=ros_context, parameter_overrides=[
-                 Parameter("robot", value="nao"), Parameter("transport", value="loopback")]),
-             "contact_node": ContactNode(context=ros_context, parameter_overrides=[Parameter("robot", value="nao")])}
+    common = [Parameter("transport", value="loopback"), Parameter("autostart", value=False)]
+    drv = BiotacDriver(context=ros_context, parameter_overrides=[Parameter("robot", value="shadow_hand"), *common])
     try:
-        running = {}
-        for name, node in nodes.items():
-            names = sorted(set(node._parameters) - _ROS_OWN)
-            running[name] = {n for n, d in zip(names, node.describe_parameters(names)) if not d.read_only}
-        assert _documented_writable(repo_dir) == running
+        assert drv.set_parameters([Parameter("tare.window_s", value=20.0)])[0].successful
+        r = drv.set_parameters([Parameter("tare.window_s", value=20.5)])[0]
+        assert not r.successful and "longer than the 20 s of samples" in r.reason and "word_rate_hz" in r.reason
+        assert drv.params["tare.window_s"] == 20.0
     finally:
-        for node in nodes.values():
-            node.destroy_node()
+        drv.destroy_node()
+    with pytest.raises(ConfigError, match=r"'tare_on_start_s': 3 s is longer than the 2 s .* 250 Hz"):
+        SkinDriver(context=ros_context, parameter_overrides=[Parameter("robot", value="nao"),
+                                                             Parameter("tare_on_start_s", value=3.0), *common])

@@ -274,7 +274,7 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
         for key, value in params.items():
             assert node.has_parameter(key), key
             assert node.get_parameter(key).value == value, key
-        assert node.drain_max == 1000 and node.windower.lateness_ns == 0
+        assert node.params["frames.drain_max"] == 1000 and node.windower.lateness_ns == 0
         assert [p.name for p in node.robot.body_parts] == params["body_parts"]
     finally:
         node.destroy_node()

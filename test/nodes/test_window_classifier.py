@@ -19,8 +19,9 @@ def graph(ros_context, tmp_path):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, Label, Prediction
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout, Label, Prediction
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
@@ -31,9 +32,11 @@ def graph(ros_context, tmp_path):
     c = ClassifierNode(context=ros_context, parameter_overrides=[Parameter("model_path", value=str(model)),
                                                                  Parameter("enable_reset", value=True)])
     io = rclpy.create_node("io", context=ros_context)
-    out = {"pred": [], "desc": []}
+    out = {"pred": [], "desc": [], "layout": []}
     io.create_subscription(Prediction, "tactile/prediction", out["pred"].append, 50)
     io.create_subscription(Descriptor, "tactile/descriptor", out["desc"].append, 50)
+    io.create_subscription(DescriptorLayout, "tactile/descriptor_layout", out["layout"].append,
+                           QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     frames = io.create_publisher(BioTacFrameBatch, "tactile/index/frames", 50)
     labels = io.create_publisher(Label, "tactile/label", 50)
     ex = SingleThreadedExecutor(context=ros_context)
@@ -62,7 +65,11 @@ def test_predict_then_learn_online(graph):
     assert first.exploration_id == 1 and not first.has_model and first.class_name == ""
     d = g["out"]["desc"][-1]
     assert d.body_parts == ["index"] and d.contact == [True] and len(d.values) == 261  # the shipped groups
-    assert d.window_mode == "exploration" and d.labels[0] == "index/per_channel/A_pac"
+    assert spin_until(g["ex"], lambda: g["out"]["layout"], 10)
+    layout = g["out"]["layout"][0]
+    assert d.window_mode == "exploration" and d.layout_id == layout.layout_id
+    assert list(d.labels) == [] and layout.labels[0] == "index/per_channel/A_pac"
+    assert first.header.frame_id == d.header.frame_id == "shadow_hand"  # every message names its frame
     g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
     assert spin_until(g["ex"], lambda: g["classifier"].model is not None and g["classifier"].model.pa.updates == 1)
     second = _explore(g, stream, 300.0)

@@ -69,7 +69,9 @@ class _Teacher:
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
-        from tactile_descriptors_msgs.msg import Descriptor, Label, Prediction
+        from tactile_descriptors_msgs.msg import Descriptor, DescriptorLayout, Label, Prediction
+        from tactile_descriptors_ros.layouts import DescriptorLayouts
+        from tactile_descriptors_ros.topics import DESCRIPTOR_LAYOUT_TOPIC
 
         self.node = rclpy.create_node("tactile_teacher", context=context)
         self.Label = Label
@@ -86,12 +88,19 @@ class _Teacher:
         self.diag_seq: dict[str, int] = {}
         self._names = {f"{window_name}: ": "window", f"{classifier_name}: ": "classifier"}
         self.node.create_subscription(Descriptor, "tactile/descriptor", self._on_descriptor, latched)
+        self.layouts = DescriptorLayouts()
+        self.node.create_subscription(DescriptorLayout, DESCRIPTOR_LAYOUT_TOPIC, self._on_layout, latched)
         self.node.create_subscription(Prediction, "tactile/prediction", self._on_prediction, latched)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
 
     def _on_descriptor(self, msg: Any) -> None:
         with self.cond:
             self.descriptors.append(msg)
+            self.cond.notify_all()
+
+    def _on_layout(self, msg: Any) -> None:
+        with self.cond:
+            self.layouts.add(msg)
             self.cond.notify_all()
 
     def _on_prediction(self, msg: Any) -> None:
@@ -261,7 +270,8 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
                 raise BagError(f"exploration {d.exploration_id} ran {start}..{end} ns, but trial window "
                                f"{k + 1} is {trial_start_ns[k]}..{trial_end_ns[k]} ns")
             run.values.append([float(v) for v in d.values])
-            run.labels = tuple(d.labels)
+            wait(f"layout {d.layout_id} of trial window {k + 1}", lambda: teacher.layouts.of(d) is not None)
+            run.labels = teacher.layouts.of(d)
             contact = bool(any(d.contact))
             run.contact.append(contact)
             if not contact:  # the classifier ignores a window out of contact: nothing to predict or teach

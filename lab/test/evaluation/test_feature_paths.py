@@ -48,9 +48,11 @@ def _node_descriptor(ros_context, rec, groups, block_s=0.0):
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
 
-    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout
     from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.layouts import DescriptorLayouts
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
     ct = load_robot("shadow_hand").cell_types["biotac"]
@@ -62,8 +64,10 @@ def _node_descriptor(ros_context, rec, groups, block_s=0.0):
         Parameter("descriptor.groups", value=list(groups)), Parameter("descriptor.block_s", value=block_s),
         Parameter("qos.frames.reliability", value="reliable")])
     io = rclpy.create_node("io", context=ros_context)
-    got = []
+    got, layouts = [], DescriptorLayouts()
     io.create_subscription(Descriptor, "tactile/descriptor", got.append, 10)
+    io.create_subscription(DescriptorLayout, "tactile/descriptor_layout", layouts.add,
+                           QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     pub = io.create_publisher(BioTacFrameBatch, "tactile/index/frames", 100)
     ex = SingleThreadedExecutor(context=ros_context)
     for n in (w, io):
@@ -73,8 +77,11 @@ def _node_descriptor(ros_context, rec, groups, block_s=0.0):
         for m in _messages(rec, ct, START, N_FRAMES + 30):
             pub.publish(m)
             ex.spin_once(timeout_sec=0.002)
-        assert spin_until(ex, lambda: len(got) >= 1, 20), "no descriptor from the window node"
+        assert spin_until(ex, lambda: len(got) >= 1 and layouts.of(got[0]) is not None, 20), \
+            "no descriptor and layout from the window node"
         assert not any(w.faults.values()), dict(w.faults)
+        assert list(got[0].labels) == []
+        got[0].labels = list(layouts.of(got[0]))  # the layout's labels, for the comparisons below
         return got[0]
     finally:
         w.destroy_node()
