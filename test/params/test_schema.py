@@ -92,7 +92,8 @@ def test_f_t_has_one_name_and_one_default_everywhere():
     for exe, params in holders.items():
         for p in params:
             assert p.name == "contact.force_threshold_n" and p.robot == "contact.force_threshold_n", (exe, p)
-    assert {exe for exe, params in holders.items() if params} == {"window_node", "biotac_driver", "skin_driver"}
+    assert {exe for exe, params in holders.items() if params} == {"window_node", "biotac_driver", "skin_driver",
+                                                                  "contact_node"}
     bare = parse_robot(_robot_without_contact())
     assert bare.contact.force_threshold_n == ContactSpec.force_threshold_n
     assert bare.window.length_s == WindowSpec.length_s
