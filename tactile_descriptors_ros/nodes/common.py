@@ -27,9 +27,40 @@ __all__ = [
     "RateMeter",
     "steady_clock",
     "run_node",
+    "take_waiting",
 ]
 
 _LEVELS = {"ok": 0, "warn": 1, "error": 2, "stale": 3}
+
+
+def take_waiting(subs: Sequence[Any], handlers: dict[Any, Callable], budget: int) -> list[tuple[object, Callable]]:
+    """Messages already waiting on ``subs``, at most ``budget``, each with its subscription's handler.
+
+    Takes one message per subscription in turn until none has any left, so a
+    busy body part does not starve the others.  rclpy has no call for this:
+    it is ``Subscription.handle.take_message``, as its executor does it.  A
+    subscription destroyed while shutting down counts as empty.
+    """
+    from rclpy.exceptions import InvalidHandle
+
+    out: list[tuple[object, Callable]] = []
+    while budget > 0:
+        took = 0
+        for sub in subs:
+            if budget <= 0:
+                break
+            try:
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+            except InvalidHandle:
+                got = None
+            if got is not None:
+                out.append((got[0], handlers[sub]))
+                took += 1
+                budget -= 1
+        if not took:
+            break
+    return out
 
 
 @dataclass

@@ -38,7 +38,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 from ..core.colormap import force_colours
@@ -58,7 +57,7 @@ from ..topics import (
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import Diagnostics, Status, run_node, steady_clock
+from .common import Diagnostics, Status, run_node, steady_clock, take_waiting
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .parameters import NodeParameters
@@ -233,23 +232,7 @@ class ContactNode(Node):
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
         out = [(first, self._by_type[type(first)])]
-        budget = self.drain_max
-        while budget > 0:
-            took = 0
-            for sub in self.subs:
-                if budget <= 0:
-                    break
-                try:
-                    with sub.handle:
-                        got = sub.handle.take_message(sub.msg_type, sub.raw)
-                except InvalidHandle:  # destroyed while shutting down
-                    got = None
-                if got is not None:
-                    out.append((got[0], self._handlers[sub]))
-                    took += 1
-                    budget -= 1
-            if not took:
-                break
+        out += take_waiting(self.subs, self._handlers, self.drain_max)
         self.frames_taken += len(out)
         return out
 

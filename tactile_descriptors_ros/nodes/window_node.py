@@ -48,7 +48,6 @@ from collections import Counter, deque
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from rclpy.exceptions import InvalidHandle
 from rclpy.node import Node
 
 from ..codecs.sequence import SequenceEvent, SequenceTracker
@@ -60,7 +59,7 @@ from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
-from .common import Diagnostics, RateMeter, Status, run_node, steady_clock
+from .common import Diagnostics, RateMeter, Status, run_node, steady_clock, take_waiting
 from .conversions import (
     biotac_msg_to_chunk,
     descriptor_layout_to_msg,
@@ -280,23 +279,7 @@ class WindowNode(Node):
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
         out = [(first, self._by_type[type(first)])]
-        budget = self.params["frames.drain_max"]
-        while budget > 0:
-            took = 0
-            for sub in self.subs:
-                if budget <= 0:
-                    break
-                try:
-                    with sub.handle:
-                        got = sub.handle.take_message(sub.msg_type, sub.raw)
-                except InvalidHandle:  # destroyed while shutting down
-                    got = None
-                if got is not None:
-                    out.append((got[0], self._handlers[sub]))
-                    took += 1
-                    budget -= 1
-            if not took:
-                break
+        out += take_waiting(self.subs, self._handlers, self.params["frames.drain_max"])
         self.frames_taken += len(out)
         self.batches += 1
         self.largest_batch = max(self.largest_batch, len(out))
