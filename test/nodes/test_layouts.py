@@ -80,7 +80,7 @@ def test_the_window_node_latches_the_layout_and_sends_descriptors_without_labels
         d, lay = got[0], late[0]
         assert list(d.labels) == [] and d.layout_id == lay.layout_id == layout_id(lay.labels)
         assert len(lay.labels) == len(d.values) == 5 * 261 and lay.labels[261] == "index/per_channel/A_pac"
-        assert d.header.frame_id == lay.header.frame_id == "shadow_hand"
+        assert d.header.frame_id == lay.header.frame_id == "forearm"  # the Shadow Hand's root frame
         assert (lay.robot, lay.layout_mode, list(lay.body_parts)) == ("shadow_hand", "concat", list(d.body_parts))
         inline = Descriptor()
         for field in Descriptor.get_fields_and_field_types():

@@ -69,7 +69,10 @@ def test_predict_then_learn_online(graph):
     layout = g["out"]["layout"][0]
     assert d.window_mode == "exploration" and d.layout_id == layout.layout_id
     assert list(d.labels) == [] and layout.labels[0] == "index/per_channel/A_pac"
-    assert first.header.frame_id == d.header.frame_id == "shadow_hand"  # every message names its frame
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    root = load_robot("shadow_hand").geometry.root_frame  # every message names a frame of the TF tree
+    assert first.header.frame_id == d.header.frame_id == root == "forearm"
     g["labels"].publish(g["Label"](exploration_id=1, class_name="cork"))
     assert spin_until(g["ex"], lambda: g["classifier"].model is not None and g["classifier"].model.pa.updates == 1)
     second = _explore(g, stream, 300.0)
