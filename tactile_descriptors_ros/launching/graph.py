@@ -208,8 +208,9 @@ def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: 
     namespace : str
         Namespace of nodes that do not set their own.
     drivers : bool
-        Start the device drivers; without them only the window and
-        classifier nodes run, for a bag replayed into them (``tactile replay``).
+        Start the device drivers; without them every other node runs
+        (window, classifier, contact, tf_publisher), for a bag replayed into
+        them (``tactile replay``).
     params_file : str or path, optional
         A ROS 2 parameters file (``{node: {ros__parameters: {...}}}``; a node
         by name, fully qualified name or ``/**`` for every node declaring the

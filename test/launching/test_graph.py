@@ -167,7 +167,7 @@ def test_params_file_is_merged_and_checked(tmp_path):
 
 def test_without_drivers_and_with_a_log_level():
     specs = build_graph("nao", drivers=False, log_level="warn")
-    assert [s.executable for s in specs] == ["window_node", "classifier_node"]
+    assert [s.executable for s in specs] == ["window_node", "classifier_node", "tf_publisher", "contact_node"]
     assert node_command(specs[0], "p.yaml")[-2:] == ["--log-level", "warn"]
     with pytest.raises(ConfigError, match="'sim': a simulated scene plays through the drivers"):
         build_graph("nao", drivers=False, sim_scene="demo_nao")

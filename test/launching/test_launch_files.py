@@ -121,8 +121,9 @@ def test_an_unknown_launch_argument_is_an_error_naming_the_valid_ones():
     check_argument_names(["robot", "drivers", "launch-prefix"])  # ros2 launch's own are fine
 
 
-def test_drivers_false_starts_the_window_and_classifier_nodes_only(repo_dir, monkeypatch):
+def test_drivers_false_starts_every_node_but_the_drivers(repo_dir, monkeypatch):
     actions = _launch_actions(repo_dir, monkeypatch, robot="nao", drivers="false", log_level="debug")
     nodes = [a for a in actions if a.kind == "node"]
-    assert [n.kwargs["executable"] for n in nodes] == ["window_node", "classifier_node"]
+    assert [n.kwargs["executable"] for n in nodes] == ["window_node", "classifier_node", "tf_publisher",
+                                                         "contact_node"]
     assert all(n.kwargs["ros_arguments"] == ["--log-level", "debug"] for n in nodes)
