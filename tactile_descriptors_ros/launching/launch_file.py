@@ -36,7 +36,7 @@ LAUNCH_ARGUMENTS: tuple[tuple[str, str, str], ...] = (
     ("sim_speed", "", "simulated seconds per wall second with sim ('' = the robot's sim_parameters, else 1.0); "
                       "a machine too busy for real time needs less"),
     ("split_window_nodes", "false", "one window node per body part (pooled descriptors): true or false"),
-    ("drivers", "true", "start the device drivers: true or false (false: only the window and classifier nodes, "
+    ("drivers", "true", "start the device drivers: true or false (false: every other node, "
                         "to replay a bag into them with tactile replay)"),
     ("model_path", "", "classifier model file ('' = the nodes: section's)"),
     ("params_file", "", "a ROS 2 parameters file merged over the graph's parameters (checked like them)"),

@@ -9,7 +9,7 @@ node ends on its own the others are stopped too and the exit code is 1.
 ``--set NODE.PARAM=VALUE``, ``--params-file`` and the robot's ``nodes:``
 section are checked against the parameters each node declares (name, type
 and accepted values) before anything starts, also with ``--print``.
-``--no-drivers`` starts only the window and classifier nodes, for a bag
+``--no-drivers`` starts every node but the drivers, for a bag
 replayed into them (``tactile replay``).
 """
 
@@ -88,7 +88,7 @@ def register(subparsers) -> None:
     p.add_argument("--split-window-nodes", action="store_true",
                    help="one window node per body part (scale-out; pooled descriptors)")
     p.add_argument("--no-drivers", dest="drivers", action="store_false",
-                   help="start only the window and classifier nodes (replay a bag into them: tactile replay)")
+                   help="start every node but the drivers (replay a bag into them: tactile replay)")
     p.add_argument("--model-path", default=None, help="classifier model file")
     p.add_argument("--params-file", default=None, metavar="YAML",
                    help="a ROS 2 parameters file merged over the graph's parameters (checked like them)")

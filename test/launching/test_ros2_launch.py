@@ -434,7 +434,7 @@ def _frames_bag(path: Path, explorations: int = 3) -> Path:
 
 
 def test_without_drivers_a_replayed_bag_is_windowed_and_predicted(tmp_path):
-    """drivers:=false starts only the window and classifier nodes; tactile replay plays frames into them; the
+    """drivers:=false starts every node but the drivers; tactile replay plays frames into them; the
     params_file and log_level arguments reach the nodes."""
     import yaml
 
