@@ -222,18 +222,19 @@ def test_the_values_that_stopped_the_classifier_are_refused_through_the_ros2_cli
                              "-r", f"__ns:=/{ns}", "-p", f"model_path:={tmp_path / 'model.json'}"],
                             stdout=log, stderr=subprocess.STDOUT, env=env)
 
-    def ros2(*args: str) -> str:
+    def ros2(*args: str, stdout_only: bool = False) -> str:
         deadline = time.monotonic() + 180
         while True:  # asked again while the CLI's own discovery has not yet seen the node
             out = subprocess.run([str(bin_dir / "ros2"), *args], env=env, capture_output=True, text=True,
                                  timeout=120)
             text = out.stdout + out.stderr
             if not any(m in text for m in ("Node not found", "Wait for service timed out")):
-                return text
+                # stderr may carry Fast DDS's stamped transport warnings on a loaded machine
+                return out.stdout if stdout_only else text
             assert node.poll() is None and time.monotonic() < deadline, text
 
     try:
-        before = ros2("param", "dump", "--no-daemon", f"/{ns}/classifier_node")
+        before = ros2("param", "dump", "--no-daemon", f"/{ns}/classifier_node", stdout_only=True)
         assert "label_wait_s: 2.0" in before, before
         for name, value in (("label_wait_s", ".inf"), ("label_wait_s", "1e300"), ("eta", ".inf"),
                             ("eta", "1e300"), ("label_horizon", str(2**62)), ("label_hold_s", ".nan"),
@@ -241,7 +242,8 @@ def test_the_values_that_stopped_the_classifier_are_refused_through_the_ros2_cli
             text = ros2("param", "set", "--no-daemon", f"/{ns}/classifier_node", name, value)
             assert "Setting parameter failed" in text and len(text.strip()) > len("Setting parameter failed"), text
             assert node.poll() is None, (tmp_path / "node.log").read_text()
-        assert ros2("param", "dump", "--no-daemon", f"/{ns}/classifier_node") == before  # nothing changed
+        after = ros2("param", "dump", "--no-daemon", f"/{ns}/classifier_node", stdout_only=True)
+        assert after == before  # nothing changed
     finally:
         if node.poll() is None:
             os.kill(node.pid, 2)
