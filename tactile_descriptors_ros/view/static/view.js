@@ -84,7 +84,7 @@ function update(frame) {
     p.force.forEach((f, i) => {
       const c = v.circles[i];
       c.setAttribute("fill", colour(f));
-      c.dataset.forceN = f === null ? "" : f.toFixed(3);
+      c.dataset.forceN = f === null ? "" : String(f);  // the value the colour was made from, unrounded
       c.dataset.stale = f === null ? "true" : "false";
     });
     if (p.cop && view.config.geometry) {
