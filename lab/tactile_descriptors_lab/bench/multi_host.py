@@ -300,10 +300,12 @@ class PredictionLog:
                                  qos_profile("reliable", "volatile", 50, "prediction"))
         return self
 
-    def ends(self, until: float | None = None) -> Counter[int]:
-        """Window end stamps of the predictions received (up to monotonic time ``until``), with multiplicity."""
+    def ends(self, until: float | None = None, since: float | None = None) -> Counter[int]:
+        """Window end stamps of the predictions received (from monotonic time ``since`` up to ``until``), with
+        multiplicity."""
         with self.lock:
-            return Counter(e for t, e in self.rows if until is None or t <= until)
+            return Counter(e for t, e in self.rows
+                           if (until is None or t <= until) and (since is None or t >= since))
 
 
 class PredictionListener:

@@ -630,8 +630,9 @@ def run_scale_graph(n_cells: int, *, parts: int | None = None, seconds: float = 
             extra.payload = {"descriptors": payload1["descriptor"] - payload0["descriptor"],
                              "diagnostics": payload1["diagnostics"] - payload0["diagnostics"],
                              "predictions_per_host": predictions1 - predictions0}
-            # predictions the classifier's host got up to a second before the end must have reached every host
-            sent = listeners[mh.CLASSIFIER_HOST].ends(until=t1 - 1.0)
+            # predictions the classifier's host got during the measurement, up to a second before its end, must
+            # have reached every host (those of the start-up may precede a host's subscription being matched)
+            sent = listeners[mh.CLASSIFIER_HOST].ends(until=t1 - 1.0, since=t0)
             extra.predictions = {h: {"sent": int(sum(sent.values())),
                                      "received": int(sum(log.ends().values())),
                                      "missing": mh.missing_predictions(sent, log.ends())}
