@@ -33,12 +33,12 @@ setup(
     entry_points={
         "console_scripts": [
             "tactile = tactile_descriptors_ros.tools.cli:main",
-            "biotac_driver = tactile_descriptors_ros.nodes.biotac_driver:main",
-            "skin_driver = tactile_descriptors_ros.nodes.skin_driver:main",
-            "window_node = tactile_descriptors_ros.nodes.window_node:main",
-            "classifier_node = tactile_descriptors_ros.nodes.classifier_node:main",
-            "contact_node = tactile_descriptors_ros.nodes.contact_node:main",
-            "tf_publisher = tactile_descriptors_ros.nodes.tf_publisher:main",
+            "biotac_driver = tactile_descriptors_ros.nodes.entry:biotac_driver",
+            "skin_driver = tactile_descriptors_ros.nodes.entry:skin_driver",
+            "window_node = tactile_descriptors_ros.nodes.entry:window_node",
+            "classifier_node = tactile_descriptors_ros.nodes.entry:classifier_node",
+            "contact_node = tactile_descriptors_ros.nodes.entry:contact_node",
+            "tf_publisher = tactile_descriptors_ros.nodes.entry:tf_publisher",
         ],
     },
 )

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import TactileError
+from .entry import note_interrupts
 
 __all__ = [
     "Status",
@@ -188,41 +189,12 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _note_interrupts() -> Callable[[], bool]:
-    """Make SIGINT only *noted* by Python; return "did it come?".
-
-    ``rclpy.init`` installs rclpy's own handler for SIGINT and SIGTERM, which
-    shuts the contexts down (the executor then returns from ``spin``) and
-    then calls the Python handler found at ``init``.  Python's default one
-    raises ``KeyboardInterrupt`` at whatever bytecode the main thread runs
-    next -- inside a callback, a thread join, or a ``__del__`` (where Python
-    can only print "Exception ignored in ..."); a second Ctrl-C (the terminal
-    sends one to the process group and ``ros2 launch`` forwards another) would
-    cut the clean-up short the same way.  So the handler installed here raises
-    nothing: shutdown goes through rclpy's path alone, and every callback,
-    ``close()`` and destructor runs to its end.  The returned function tells
-    whether SIGINT came (a call that failed because the context was shut down
-    under it is then a clean stop, not a fault).
-    """
-    import signal
-
-    interrupted = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
-        return interrupted.is_set  # signal handlers can be set only from the main thread
-
-    def handler(signum, frame):
-        interrupted.set()
-
-    signal.signal(signal.SIGINT, handler)
-    return interrupted.is_set
-
-
 def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> int:
     """Create a node, spin it until Ctrl-C or shutdown, then clean up.
 
     Ctrl-C (SIGINT) and SIGTERM go through rclpy's own shutdown path: its
     handler shuts the context down and ``spin`` returns; nothing is raised
-    into the running code (:func:`_note_interrupts`).  A
+    into the running code (:func:`~tactile_descriptors_ros.nodes.entry.note_interrupts`).  A
     :class:`~tactile_descriptors_ros.errors.TactileError` raised while
     building or spinning the node (misconfiguration, a device that cannot be
     opened) is logged as a fatal error under the node's own logger (its name
@@ -234,8 +206,12 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    interrupted = _note_interrupts()
+    interrupted = note_interrupts()
     rclpy.init(args=list(args) if args is not None else sys.argv)
+    if interrupted():  # Ctrl-C came before rclpy's handler was installed: stop before building the node
+        rclpy.try_shutdown()
+        _ignore_interrupts()
+        return 0
     node = None  # also a node whose constructor failed half-way: its logger has the node's name
     built = False
     code = 0

@@ -35,3 +35,46 @@ def test_a_fatal_error_is_logged_under_the_remapped_node_name():
     fatal = [line for line in out.stderr.splitlines() if "FATAL" in line]
     assert len(fatal) == 1 and "[left.left_fingers]" in fatal[0] and "parameter 'robot' is required" in fatal[0], \
         out.stderr
+
+
+SLOW_IMPORT = """
+import importlib, sys, time
+from tactile_descriptors_ros.nodes import entry
+
+real_import = importlib.import_module
+
+
+def slow_import(name):
+    # a busy machine: the node's module is still importing when Ctrl-C comes
+    importlib.import_module = real_import
+    print("importing", flush=True)
+    deadline = time.monotonic() + 60.0
+    while not entry._interrupted.is_set() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    module = real_import(name)
+    module.main = lambda: sys.exit("main ran after Ctrl-C")
+    return module
+
+
+importlib.import_module = slow_import
+sys.exit(entry.window_node())
+"""
+
+
+def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_starting_the_node():
+    """``ros2 launch`` stops every node when one dies at start; a node whose module is still importing then
+    ends with code 0 and without a ``KeyboardInterrupt`` traceback, and its ``main`` never runs."""
+    import signal
+
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_IMPORT], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "importing", proc.stderr.read()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert "KeyboardInterrupt" not in err and "Traceback" not in err and "main ran" not in err, err
