@@ -242,7 +242,7 @@ class WindowNode(Node):
             if isinstance(got, PartChunk):
                 took |= self._buffer(items)
                 items = []
-                took |= self._buffer_part(got)
+                took |= self._buffer(got)
             else:
                 items += got
             newest = _newest_sample_ns(sub_msg)
@@ -256,22 +256,16 @@ class WindowNode(Node):
         if took:
             self._emit(self.windower.poll())
 
-    def _buffer(self, items: list[tuple[int, CellChunk]]) -> bool:
-        if not items:
+    def _buffer(self, data: list[tuple[int, CellChunk]] | PartChunk) -> bool:
+        """Hand a message's chunks (one per cell, or a body part's runs) to the windower; False if there are none."""
+        if not len(data):
             return False
         try:
-            self.windower.add_many(items)
+            if isinstance(data, PartChunk):
+                self.windower.add_part(data)
+            else:
+                self.windower.add_many(data)
         except SignalError as exc:  # the chunks before the offending one stay buffered
-            self.faults["malformed"] += 1
-            self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
-        return True
-
-    def _buffer_part(self, chunk: PartChunk) -> bool:
-        if not len(chunk):
-            return False
-        try:
-            self.windower.add_part(chunk)
-        except SignalError as exc:  # the runs before the offending one stay buffered
             self.faults["malformed"] += 1
             self.get_logger().warning(f"frames not buffered: {exc}", throttle_duration_sec=5.0)
         return True
