@@ -29,6 +29,7 @@ from tactile_descriptors_lab.evaluation.experiments import (
     trial_cv,
 )
 from tactile_descriptors_lab.evaluation.sampling import format_trials, is_length_range
+from tactile_descriptors_ros.core.learning import RECOMMENDED_PA_AVERAGE, RECOMMENDED_PA_UPDATE
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "SECTIONS", "LENGTH_SECTIONS", "FEATURE_DEFINITION",
@@ -157,6 +158,29 @@ def _split(recs: Sequence[BiotacRecording]) -> tuple[list, list, list[int], list
     return [r for r in recs if r.trial in tr], [r for r in recs if r.trial in te], tr, te
 
 
+#: What each online update is called in the report's text.
+ONLINE_UPDATE_NAMES = {"arow": "AROW (second-order, one shared covariance)",
+                       "max_loss": "PA-I, Crammer et al.'s max-loss update",
+                       "prediction": "PA-I, the paper's prediction-based update (eq. 30-32)"}
+
+
+def online_learner_name(update: str = RECOMMENDED_PA_UPDATE, average: bool = RECOMMENDED_PA_AVERAGE,
+                        short: bool = False) -> str:
+    """The online learner a result's ``pa_update`` / ``pa_average`` configure, as the report names it
+    (``short``: its name without the explanation in brackets)."""
+    name = ONLINE_UPDATE_NAMES[update].split(" (")[0] if short else ONLINE_UPDATE_NAMES[update]
+    return name + (", averaged weights" if average else "")
+
+
+def _online_of(serial: dict, short: bool = False) -> str:
+    """The online learner of the headline results (the shipped one unless a plan said otherwise)."""
+    for r in serial.get("headline", {}).values():
+        cfg = r.get("config", {})
+        if "pa_update" in cfg:
+            return online_learner_name(cfg["pa_update"], bool(cfg.get("pa_average")), short)
+    return online_learner_name(short=short)
+
+
 def _keyed(d: dict) -> dict:
     """results.json's ``"a | b"`` keys of one section as tuples."""
     return {tuple(k.split(" | ")): v for k, v in d.items()}
@@ -232,9 +256,8 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
         ("with the contact gate (F_t on tared PDC)", {"gate": True}), ("scaling: none", {"scaling": "none"}),
         ("scaling: standardise only", {"scaling": "standardize"}),
         ("one training window per trial", {"train_per_trial": 1}),
-        ("PA: the paper's update (prediction-based, not averaged)", {"pa_update": "prediction", "pa_average": False}),
-        ("PA: max-loss update, not averaged", {"pa_average": False}),
-        ("PA: prediction-based update, averaged", {"pa_update": "prediction"})]
+        *[(f"online: {online_learner_name(u, av)}", {"pa_update": u, "pa_average": av})
+          for u, av in (("prediction", False), ("max_loss", False), ("max_loss", True))]]
     # combined = per_channel + bands + levels + baseline: leave groups out
     ablations_groups = [("without the baseline statistics (multiband_levels)", {"mode": "multiband_levels"}),
                         ("without baseline and levels (multiband)", {"mode": "multiband"}),
@@ -243,7 +266,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                          "per window)", {"mode": "combined_subwindows", "block_s": None})]
     for m in plan.ablation_modes:
         for name, kw in ablations:
-            only_pa = {"classifiers": ("pa",)} if name.startswith("PA:") else {}  # the SVM is unchanged
+            only_pa = {"classifiers": ("pa",)} if name.startswith("online:") else {}  # the SVM is unchanged
             todo.append(("ablation", (m, name), replace(abl, mode=m, **kw, **only_pa), "split"))
     if "combined" in plan.ablation_modes:
         for name, kw in ablations_groups:
@@ -285,7 +308,8 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     serial["split"] = {"train_trials": tr_trials, "test_trials": te_trials,
                        "trials": sorted({r.trial for r in recs}), "materials": len({r.material for r in recs})}
 
-    figs = _figures(serial, plan, fig_dir, tr_trials, te_trials, wanted)
+    # every figure from the merged results: a section kept from results.json is drawn with today's labels
+    figs = _figures(serial, plan, fig_dir, tr_trials, te_trials, SECTIONS)
     md = render_markdown(serial, figs={k: v.relative_to(out_dir).as_posix() for k, v in figs.items()})
     (out_dir / "results.md").write_text(md)
     (out_dir / "results.json").write_text(json.dumps(serial, indent=1))
@@ -316,7 +340,7 @@ def _frames_s(res: dict) -> float:
 
 def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: list[int],
              wanted: Sequence[str]) -> dict[str, Path]:
-    """Draw the figures of the recomputed sections; return every figure the report links to."""
+    """Draw the figures of the ``wanted`` sections from ``serial``; return every figure the report links to."""
     import matplotlib.pyplot as plt
 
     sweep, length, headline = _keyed(serial["sweep"]), _keyed(serial["length"]), _keyed(serial["headline"])
@@ -327,7 +351,7 @@ def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: l
             rows = [r for (mm, _), r in sweep.items() if mm == m]
             xs = [_frames_s(r) for r in rows]
             ax.plot(xs, [100 * r["classifiers"]["svm"]["accuracy"] for r in rows], "o-", label=f"SVM, {m}")
-            ax.plot(xs, [100 * r["classifiers"]["pa"]["accuracy"] for r in rows], "s--", label=f"PA-I, {m}",
+            ax.plot(xs, [100 * r["classifiers"]["pa"]["accuracy"] for r in rows], "s--", label=f"online, {m}",
                     alpha=0.7)
         ax.set_xlabel("window length (s)")
         ax.set_ylabel("test accuracy (%)")
@@ -367,7 +391,7 @@ def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: l
             ax.fill_between(c["n_per_class"], acc - sd, acc + sd, alpha=0.15)
         ax.set_xlabel("training trials per class seen (online)")
         ax.set_ylabel("test accuracy (%)")
-        ax.set_title("Online PA-I learning curves", fontsize=9)
+        ax.set_title(f"Online learning curves: {_online_of(serial)}", fontsize=9)
         _save_figure(fig, fig_dir / FIGURES["pa_curves"], ax=ax, legend_size=6)
 
         best_key = list(headline)[-len(plan.headline_windows)]  # the recommended mode comes last
@@ -472,9 +496,9 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
       f"SVM: linear, C chosen over {C_GRID_TEXT} by 5-fold CV (folds keep a trial's windows together) repeated "
       f"{plan['headline_repeats']} times for the headline table and {plan['sweep_repeats']} times for sweeps and "
       "ablations, refit on all training windows; scaling log1p(Activity) + standardisation fitted on the "
-      "training set. PA-I: the core's OnlineClassifier (running scaling), one pass over the training windows "
-      "in trial order, max-loss update with averaged weights unless the ablation says otherwise (the paper's "
-      "prediction-based update is an ablation row), curve averaged over "
+      f"training set. Online: the core's OnlineClassifier (running scaling) with the classifier node's "
+      f"default update, {_online_of(serial)}, one pass over the training windows in trial order (the paper's "
+      "PA-I and Crammer et al.'s max-loss PA-I are ablation rows), curve averaged over "
       f"{plan['pa_orders']} presentation orders. GMM: spherical, k = {n_mat}, k-means init with 20 restarts, "
       "100 EM iterations, NMI (arithmetic) on the test windows. The contact gate is off unless an ablation "
       "row says otherwise: every recorded trial is a slide in contact, and the gate, fed by PDC that the "
@@ -493,7 +517,7 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
         a("")
         for line in _provenance_lines(serial, "headline"):
             a(line)
-        a("| mode | window | values | SVM acc % | SVM C | SVM CV acc % | PA-I acc % (all train trials) | "
+        a("| mode | window | values | SVM acc % | SVM C | SVM CV acc % | online acc % (all train trials) | "
           "GMM NMI | GMM acc % |")
         a("|---|---|---|---|---|---|---|---|---|")
         for (m, w), r in _keyed(serial["headline"]).items():
@@ -502,7 +526,7 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
               f"{c['svm']['best_c']:g} | {_pct(c['svm']['cv_accuracy'])} | {_pct(c['pa']['accuracy'])} | "
               f"{c['gmm']['nmi']:.3f} | {_pct(c['gmm']['accuracy'])} |")
         a("")
-        a(f"![PA-I learning curves]({figs.get('pa_curves')})  ![SVM confusion]({figs.get('confusion')})")
+        a(f"![online learning curves]({figs.get('pa_curves')})  ![SVM confusion]({figs.get('confusion')})")
         a("")
     if serial.get("sweep"):
         a("## Accuracy against window length")
@@ -512,10 +536,10 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
         a("Train and test on windows of the same length (development split). Times: descriptor = median "
           "compute time of the mode's features per window (core `cell_features` + reductions, plus band "
           "filtering for multiband); SVM update = one refit on all training windows with the chosen C; "
-          "predictions are single windows; PA update = one scaling + PA-I step.")
+          "predictions are single windows; online update = one scaling + one update step.")
         a("")
-        a("| mode | window | SVM acc % | PA-I acc % | descriptor ms/window | SVM refit s | SVM predict ms | "
-          "PA update us | PA predict us |")
+        a("| mode | window | SVM acc % | online acc % | descriptor ms/window | SVM refit s | SVM predict ms | "
+          "online update us | online predict us |")
         a("|---|---|---|---|---|---|---|---|---|")
         for (m, w), r in _keyed(serial["sweep"]).items():
             s_, p = r["classifiers"]["svm"], r["classifiers"]["pa"]
@@ -533,9 +557,9 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
         for line in _provenance_lines(serial, "ablation"):
             a(line)
         a("Concatenated vs pooled body parts is moot here: the data has one finger, so both layouts give the "
-          "same vector. PA rows change only the online learner.")
+          "same vector. The `online:` rows change only the online learner (its SVM is the full descriptor's).")
         a("")
-        a("| mode | variant | values | SVM acc % | PA-I acc % |")
+        a("| mode | variant | values | SVM acc % | online acc % |")
         a("|---|---|---|---|---|")
         for (m, name), r in _keyed(serial["ablation"]).items():
             svm = _pct(r["classifiers"]["svm"]["accuracy"]) if "svm" in r["classifiers"] else "(unchanged)"
@@ -551,7 +575,7 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
           "channel) is the floor: the shipped groups (`combined`) must score at least as much with the same "
           "classifier.")
         a("")
-        a("| mode | folds | SVM acc % (mean +- sd) | PA-I acc % (mean +- sd) |")
+        a("| mode | folds | SVM acc % (mean +- sd) | online acc % (mean +- sd) |")
         a("|---|---|---|---|")
         for (m, _w), r in _keyed(serial["trial_cv"]).items():
             folds = ", ".join(f"{a_}-{b}" for a_, b in r["folds"])
@@ -621,7 +645,7 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
       + (f" ({minutes / 60:.1f} min in this run)." if minutes else ".")
       + " Why accuracy used to fall with the length and what changed: [evaluation.md](evaluation.md).")
     a("")
-    a("| mode | train window | test window | SVM acc % | PA-I acc % | SVM points vs same length |")
+    a("| mode | train window | test window | SVM acc % | online acc % | SVM points vs same length |")
     a("|---|---|---|---|---|---|")
     for (m, w), r in length.items():
         ref = length.get((m, train_w))
@@ -653,7 +677,7 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
         a(f"By trial cross-validation (blocks {folds}; each fold's model trained once on "
           f"{_wlabel(train_w, common_s)} windows and scored on every test window):")
         a("")
-        a("| mode | train window | test window | SVM acc % (mean +- sd) | PA-I acc % (mean +- sd) |")
+        a("| mode | train window | test window | SVM acc % (mean +- sd) | online acc % (mean +- sd) |")
         a("|---|---|---|---|---|")
         for (m, w), r in cv.items():
             a(f"| {m} | {_wlabel(train_w, common_s)} | {_wlabel(w, common_s)} | {_cv_cell(r, 'svm')} | "
@@ -680,7 +704,7 @@ def _length_markdown(serial: dict, figs: dict[str, str], common_s: float, a) -> 
             f"{_wlabel(train_w, common_s)} model).") + " `tactile evaluate` draws at least 8 training windows per "
           "trial, and 16 s of windows per trial at shorter lengths (`--train-windows`).")
         a("")
-        a("| mode | window | values | training windows per trial | SVM acc % | SVM C | PA-I acc % |")
+        a("| mode | window | values | training windows per trial | SVM acc % | SVM C | online acc % |")
         a("|---|---|---|---|---|---|---|")
         for (m, w), r in short.items():
             c = r["classifiers"]
@@ -739,7 +763,8 @@ def what_to_expect(serial: dict) -> str:
         f"{format_trials(split['train_trials'])}, test {format_trials(split['test_trials'])}; "
         f"`lab/docs/results.md`): the default `{DEFAULT_MODE}` descriptor ({head['n_features']} values, averaged "
         f"over 1 s blocks) gets {svm(head)} (linear SVM) and {_pct(head['classifiers']['pa']['accuracy'])} % "
-        f"(online PA-I, one pass) with 2 s windows, {cv_svm(cv)} by cross-validation over trials; the "
+        f"(online, {_online_of(serial, short=True)}, one pass) with 2 s windows, {cv_svm(cv)} by cross-validation "
+        "over trials; the "
         f"paper's 8-value descriptor, averaged over the same blocks, gets {svm(paper2)} at 2 s and "
         f"{svm(paper_whole)} on whole {paper_whole['common_length_s']:.0f} s trials (`--block 0` describes a "
         "window as one eq. 17 descriptor)" + when("length", "length_cv") + ".",

@@ -32,8 +32,12 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
     assert set(head["classifiers"]) == {"svm", "pa", "gmm"}
     # three well-separated materials: far above chance (1/3) even on 1 s windows and 8 trials
     assert head["classifiers"]["svm"]["accuracy"] >= 0.75
-    pa_rows = {k: v for k, v in res["ablation"].items() if "PA:" in k}
+    pa_rows = {k: v for k, v in res["ablation"].items() if "online:" in k}
     assert len(pa_rows) == 3 and all(set(v["classifiers"]) == {"pa"} for v in pa_rows.values())
+    # each online row runs the update it names
+    assert {(v["config"]["pa_update"], v["config"]["pa_average"]) for v in pa_rows.values()} == {
+        ("prediction", False), ("max_loss", False), ("max_loss", True)}
+    assert "with the classifier node's default update, AROW (second-order" in md
     assert res["ablation"]["paper | with the contact gate (F_t on tared PDC)"]["config"]["gate"] is True
     # the touch-length sections: one model per variant scored on every test length, the block-averaged
     # default first, trial CV of the default
