@@ -24,7 +24,15 @@ if sys.prefix not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
     os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(
         p for p in (sys.prefix, os.environ.get("AMENT_PREFIX_PATH", "")) if p)
 
+import signal  # noqa: E402
+
 import pytest  # noqa: E402
+
+# A suite started in the background (``make test &``, ``nohup``) inherits SIGINT ignored, and every process a
+# test starts would inherit that too: the tests that stop a node, a launch or ``tactile view`` with Ctrl-C
+# (SIGINT) would wait for nothing.  Handle SIGINT as a foreground run does; children then start with the default.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 SHARED_DIR = Path(os.environ.get("TACTILE_SHARED_DIR", _REPO.parent / "shared"))
 BIOTAC_DATA_DIR = SHARED_DIR / "data" / "biotac_slide_20_50"
