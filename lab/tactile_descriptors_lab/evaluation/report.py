@@ -158,18 +158,18 @@ def _split(recs: Sequence[BiotacRecording]) -> tuple[list, list, list[int], list
     return [r for r in recs if r.trial in tr], [r for r in recs if r.trial in te], tr, te
 
 
-#: What each online update is called in the report's text.
-ONLINE_UPDATE_NAMES = {"arow": "AROW (second-order, one shared covariance)",
-                       "max_loss": "PA-I, Crammer et al.'s max-loss update",
-                       "prediction": "PA-I, the paper's prediction-based update (eq. 30-32)"}
+#: What each online update is called in the report's text: its name, and what it is.
+ONLINE_UPDATE_NAMES = {"arow": ("AROW", " (second-order, one shared covariance)"),
+                       "max_loss": ("PA-I, Crammer et al.'s max-loss update", ""),
+                       "prediction": ("PA-I, the paper's prediction-based update", " (eq. 30-32)")}
 
 
 def online_learner_name(update: str = RECOMMENDED_PA_UPDATE, average: bool = RECOMMENDED_PA_AVERAGE,
                         short: bool = False) -> str:
     """The online learner a result's ``pa_update`` / ``pa_average`` configure, as the report names it
     (``short``: its name without the explanation in brackets)."""
-    name = ONLINE_UPDATE_NAMES[update].split(" (")[0] if short else ONLINE_UPDATE_NAMES[update]
-    return name + (", averaged weights" if average else "")
+    name, what = ONLINE_UPDATE_NAMES[update]
+    return name + ("" if short else what) + (", averaged weights" if average else "")
 
 
 def _online_of(serial: dict, short: bool = False) -> str:
@@ -309,7 +309,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                        "trials": sorted({r.trial for r in recs}), "materials": len({r.material for r in recs})}
 
     # every figure from the merged results: a section kept from results.json is drawn with today's labels
-    figs = _figures(serial, plan, fig_dir, tr_trials, te_trials, SECTIONS)
+    figs = _figures(serial, plan, fig_dir, tr_trials, te_trials)
     md = render_markdown(serial, figs={k: v.relative_to(out_dir).as_posix() for k, v in figs.items()})
     (out_dir / "results.md").write_text(md)
     (out_dir / "results.json").write_text(json.dumps(serial, indent=1))
@@ -338,13 +338,12 @@ def _frames_s(res: dict) -> float:
     return res["test_window_frames"] / 100.0
 
 
-def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: list[int],
-             wanted: Sequence[str]) -> dict[str, Path]:
-    """Draw the figures of the ``wanted`` sections from ``serial``; return every figure the report links to."""
+def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: list[int]) -> dict[str, Path]:
+    """Draw the figures of every section ``serial`` holds; return every figure the report links to."""
     import matplotlib.pyplot as plt
 
     sweep, length, headline = _keyed(serial["sweep"]), _keyed(serial["length"]), _keyed(serial["headline"])
-    if "sweep" in wanted and sweep:
+    if sweep:
         modes = list(dict.fromkeys(m for m, _ in sweep))
         fig, ax = plt.subplots(figsize=(6.4, 4.0))
         for m in modes:
@@ -367,7 +366,7 @@ def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: l
         ax.set_ylabel("descriptor time per window (ms)")
         _save_figure(fig, fig_dir / FIGURES["time_vs_window"], ax=ax, legend_size=7)
 
-    if "length" in wanted and length:
+    if length:
         fig, ax = plt.subplots(figsize=(6.4, 4.0))
         for m in dict.fromkeys(m for m, _ in length):
             rows = [(w, r) for (mm, w), r in length.items() if mm == m and not is_length_range(w)]
@@ -381,7 +380,7 @@ def _figures(serial: dict, plan: ReportPlan, fig_dir: Path, tr: list[int], te: l
         ax.set_ylabel("test accuracy (%)")
         _save_figure(fig, fig_dir / FIGURES["length_robustness"], ax=ax, legend_size=7)
 
-    if "headline" in wanted and headline:
+    if headline:
         common_s = next(iter(headline.values()))["common_length_s"]
         fig, ax = plt.subplots(figsize=(6.4, 4.0))
         for (m, w), res in headline.items():
