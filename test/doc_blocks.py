@@ -102,9 +102,6 @@ def _env(tmp: Path) -> dict[str, str]:
     return env
 
 
-def _sigint_default() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
 
 def _untracked() -> set[str]:
     out = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all", "--ignored=no"], cwd=REPO,
@@ -121,8 +118,7 @@ class Terminal:
         self.block, self.log = block, log
         with open(log, "w") as fh:
             self.proc = subprocess.Popen(["bash", "-e", "-c", block.text], cwd=REPO, env=env, stdout=fh,
-                                         stderr=subprocess.STDOUT, preexec_fn=_sigint_default,
-                                         start_new_session=True)
+                                         stderr=subprocess.STDOUT, start_new_session=True)
         self.env = env
         try:
             self._wait_ready()

@@ -208,14 +208,12 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
 
     interrupted = note_interrupts()
     rclpy.init(args=list(args) if args is not None else sys.argv)
-    if interrupted():  # Ctrl-C came before rclpy's handler was installed: stop before building the node
-        rclpy.try_shutdown()
-        _ignore_interrupts()
-        return 0
     node = None  # also a node whose constructor failed half-way: its logger has the node's name
     built = False
     code = 0
     try:
+        if interrupted():  # Ctrl-C came before rclpy's handler was installed: stop before building the node
+            return code
         if isinstance(factory, type):
             node = factory.__new__(factory)
             node.__init__()

@@ -31,7 +31,6 @@ from test_ros2_launch import (
     FIRST_PREDICTION_S,
     PKG,
     Graph,
-    _sigint_default,
     long_scene,
     start_launch,
 )
@@ -71,7 +70,7 @@ def graph(tmp_path_factory) -> Iterator[tuple[Graph, subprocess.Popen]]:
     skin_log = open(tmp / "skin.log", "w")
     skin = subprocess.Popen([str(BIN / "ros2"), "run", PKG, "skin_driver", "--ros-args", "-r", f"__ns:=/{NAMESPACE}",
                              "-p", "robot:=nao", "-p", "transport:=loopback"], stdout=skin_log,
-                            stderr=subprocess.STDOUT, env=env, preexec_fn=_sigint_default, start_new_session=True)
+                            stderr=subprocess.STDOUT, env=env, start_new_session=True)
     try:
         g.first_prediction = g.ros2("topic", "echo", "--once", "--no-daemon", f"/{NAMESPACE}/tactile/prediction",
                                     "tactile_descriptors_msgs/msg/Prediction", timeout=FIRST_PREDICTION_S)

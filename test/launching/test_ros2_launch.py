@@ -57,9 +57,6 @@ def _ros_env(ros_home: Path) -> dict[str, str]:
     return env
 
 
-def _sigint_default() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
 
 @dataclass
 class Graph:
@@ -155,7 +152,7 @@ def start_launch(robot: str, tmp: Path, *extra: str) -> tuple[subprocess.Popen, 
     with open(log, "w") as fh:
         proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, f"{robot}.launch.py", f"sim:={scene}",
                                  *extra], stdout=fh, stderr=subprocess.STDOUT, env=env,
-                                preexec_fn=_sigint_default, start_new_session=True)
+                                start_new_session=True)
     return proc, log, env
 
 
@@ -377,7 +374,7 @@ def _launch_until_it_ends(*args: str, env: dict[str, str], log: Path, timeout_s:
     bound is killed and fails the test); return its exit code and output."""
     with open(log, "w") as fh:
         proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, *args], stdout=fh, stderr=subprocess.STDOUT,
-                                env=env, preexec_fn=_sigint_default, start_new_session=True)
+                                env=env, start_new_session=True)
     try:
         code = proc.wait(timeout=timeout_s)
     except subprocess.TimeoutExpired:
@@ -451,7 +448,7 @@ def test_without_drivers_a_replayed_bag_is_windowed_and_predicted(tmp_path):
     with open(log, "w") as fh:
         proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, "shadow_hand.launch.py", "drivers:=false",
                                  f"params_file:={params}", "log_level:=debug"], stdout=fh, stderr=subprocess.STDOUT,
-                                env=env, preexec_fn=_sigint_default, start_new_session=True)
+                                env=env, start_new_session=True)
     g = Graph("shadow_hand", proc, log, env, tmp_path / "ros_home", "")
     replay = None
     try:

@@ -44,9 +44,6 @@ def _copy_checkout(repo_dir: Path, dest: Path) -> None:
             shutil.copy2(src, dest / name)
 
 
-def _sigint_default() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
 
 def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir, tmp_path):
     if shutil.which("colcon", path=str(BIN)) is None:
@@ -78,7 +75,7 @@ def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir
     with open(log, "w") as fh:
         launch = subprocess.Popen(["bash", "-c", sourced + "exec ros2 launch tactile_descriptors_ros nao.launch.py "
                                    f"sim:=demo_nao namespace:={NAMESPACE}"], cwd=ws, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                  preexec_fn=_sigint_default, start_new_session=True)
+                                  start_new_session=True)
     lib = ws / "install" / "tactile_descriptors_ros" / "lib" / "tactile_descriptors_ros"
     try:
         echo = subprocess.run(["bash", "-c", sourced + "ros2 topic echo --once --no-daemon --no-arr "
