@@ -16,6 +16,9 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
 _REPO = Path(__file__).resolve().parent
 os.environ.setdefault("ROS_LOG_DIR", str(_REPO / "build" / "ros_log"))
 os.environ.setdefault("MPLBACKEND", "Agg")
+# A process a test starts that dies of a fatal signal (a segmentation fault in a DDS library) prints the
+# Python stack of each of its threads on stderr, which the failing test shows.
+os.environ.setdefault("PYTHONFAULTHANDLER", "1")
 # The wheels set no ament prefix: the venv is the prefix this package is indexed in
 # (make setup), as a sourced .venv/setup.bash would say.
 import sys  # noqa: E402
@@ -25,6 +28,7 @@ if sys.prefix not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         p for p in (sys.prefix, os.environ.get("AMENT_PREFIX_PATH", "")) if p)
 
 import signal  # noqa: E402
+import subprocess  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -79,10 +83,32 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.skip(reason=f"real recordings not found at {BIOTAC_DATA_DIR}"))
 
 
+#: Fast DDS's own tool (shipped with its wheel): ``fastdds shm clean``.
+FASTDDS_TOOL = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
+_SHM_CLEANED: set[str] = set()
+
+
+def clean_zombie_shm() -> None:
+    """Remove the shared-memory ports and segments of Fast DDS participants that died without closing them.
+
+    ``fastdds shm clean`` removes only files that no live process holds a lock on, so concurrent runs keep
+    theirs.  Tests kill nodes on purpose (SIGKILL) and leave such files behind (about 900 after a few runs
+    of the suite); Fast DDS reopens a dead participant's port when a new participant gets its number, and a
+    port left half-written can crash that participant (a ``ros2`` CLI call, a node) as it starts.
+    """
+    if FASTDDS_TOOL.is_file():
+        subprocess.run([sys.executable, str(FASTDDS_TOOL), "shm", "clean"], capture_output=True, timeout=60)
+
+
 def pytest_runtest_setup(item):
     if "ros2cli" in item.keywords and not HAVE_ROS2CLI and ROS2_CLI_DIR.is_dir():
         # make setup installs it from there: its absence is a set-up failure, not a skip.
         pytest.fail(f"ros2 CLI not installed in {sys.prefix} though {ROS2_CLI_DIR} exists (run make setup)")
+    module = item.nodeid.split("::")[0]
+    # before each module that starts DDS participants
+    if ("ros" in item.keywords or "ros2cli" in item.keywords) and module not in _SHM_CLEANED:
+        _SHM_CLEANED.add(module)
+        clean_zombie_shm()
 
 
 @pytest.fixture

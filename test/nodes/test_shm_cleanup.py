@@ -1,0 +1,65 @@
+"""The suite removes the shared-memory files of Fast DDS participants that were killed (root ``conftest.py``,
+``clean_zombie_shm``), and only theirs: a live participant's files stay."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import FASTDDS_TOOL, clean_zombie_shm
+
+pytestmark = [pytest.mark.ros, pytest.mark.skipif(not FASTDDS_TOOL.is_file(), reason=f"no {FASTDDS_TOOL}")]
+
+SHM = Path("/dev/shm")
+#: A participant that publishes and subscribes on one topic (so Fast DDS opens its shared-memory port and
+#: segment), says so, and waits to be killed.
+PARTICIPANT = """
+import sys, rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("shm_probe")
+got = []
+node.create_subscription(String, "shm_probe", got.append, 10)
+pub = node.create_publisher(String, "shm_probe", 10)
+while not got:
+    pub.publish(String(data="x"))
+    rclpy.spin_once(node, timeout_sec=0.1)
+print("ready", flush=True)
+sys.stdin.read()
+"""
+
+
+def _files() -> set[str]:
+    return {p.name for p in SHM.glob("fastdds_*")}
+
+
+def _participant() -> subprocess.Popen:
+    proc = subprocess.Popen([sys.executable, "-c", PARTICIPANT], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True, env=dict(os.environ))
+    assert proc.stdout.readline().strip() == "ready", "the participant did not start"
+    return proc
+
+
+@pytest.mark.skipif(not SHM.is_dir(), reason="no /dev/shm")
+def test_a_killed_participants_files_are_removed_and_a_live_ones_stay():
+    before = _files()
+    live = _participant()
+    try:
+        live_files = _files() - before
+        dead = _participant()
+        dead_files = _files() - before - live_files
+        assert live_files and dead_files, "the participants opened no shared memory"
+        os.kill(dead.pid, signal.SIGKILL)
+        dead.wait(timeout=10)
+        assert dead_files <= _files(), "a killed participant's files went away by themselves"
+        clean_zombie_shm()
+        assert not dead_files & _files(), f"left behind: {sorted(dead_files & _files())}"
+        assert live_files <= _files(), f"removed while in use: {sorted(live_files - _files())}"
+    finally:
+        live.stdin.close()
+        live.wait(timeout=10)
