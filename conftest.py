@@ -28,7 +28,6 @@ if sys.prefix not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         p for p in (sys.prefix, os.environ.get("AMENT_PREFIX_PATH", "")) if p)
 
 import signal  # noqa: E402
-import subprocess  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -83,21 +82,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.skip(reason=f"real recordings not found at {BIOTAC_DATA_DIR}"))
 
 
-#: Fast DDS's own tool (shipped with its wheel): ``fastdds shm clean``.
-FASTDDS_TOOL = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
 _SHM_CLEANED: set[str] = set()
-
-
-def clean_zombie_shm() -> None:
-    """Remove the shared-memory ports and segments of Fast DDS participants that died without closing them.
-
-    ``fastdds shm clean`` removes only files that no live process holds a lock on, so concurrent runs keep
-    theirs.  Tests kill nodes on purpose (SIGKILL) and leave such files behind (about 900 after a few runs
-    of the suite); Fast DDS reopens a dead participant's port when a new participant gets its number, and a
-    port left half-written can crash that participant (a ``ros2`` CLI call, a node) as it starts.
-    """
-    if FASTDDS_TOOL.is_file():
-        subprocess.run([sys.executable, str(FASTDDS_TOOL), "shm", "clean"], capture_output=True, timeout=60)
 
 
 def pytest_runtest_setup(item):
@@ -107,6 +92,8 @@ def pytest_runtest_setup(item):
     module = item.nodeid.split("::")[0]
     # before each module that starts DDS participants
     if ("ros" in item.keywords or "ros2cli" in item.keywords) and module not in _SHM_CLEANED:
+        from dds_shm import clean_zombie_shm  # test/ (pytest.ini pythonpath)
+
         _SHM_CLEANED.add(module)
         clean_zombie_shm()
 

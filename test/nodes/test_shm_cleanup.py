@@ -1,5 +1,5 @@
-"""The suite removes the shared-memory files of Fast DDS participants that were killed (root ``conftest.py``,
-``clean_zombie_shm``), and only theirs: a live participant's files stay."""
+"""The suite removes the shared-memory files of Fast DDS participants that were killed (``dds_shm``, run by the
+root ``conftest.py`` per module), and only theirs: a live participant's files stay."""
 
 from __future__ import annotations
 
@@ -10,8 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-from conftest import FASTDDS_TOOL, clean_zombie_shm
+from dds_shm import FASTDDS_TOOL, clean_zombie_shm
 
 pytestmark = [pytest.mark.ros, pytest.mark.skipif(not FASTDDS_TOOL.is_file(), reason=f"no {FASTDDS_TOOL}")]
 
