@@ -27,7 +27,7 @@ window node's fault counters and frames per callback (from its last
 ``/diagnostics``), the load average, whether the ``TARGET_MS`` median is
 met, and (:func:`message_cost`) a micro benchmark of the window node's
 per-message work outside the executor: deserialisation, message -> chunk
-conversion, ``Windower.add`` / ``add_many``.  ``split_window_nodes=True``
+conversion, ``Windower.add_part`` (the node's path) beside ``add`` / ``add_many``.  ``split_window_nodes=True``
 starts one window node per body part (``tactile launch --split-window-nodes``,
 :func:`~tactile_descriptors_ros.launching.graph.build_graph`).
 Write-up: ``lab/docs/performance.md, section Latency``.
@@ -158,19 +158,32 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
 
     ``rounds`` batches of one ``SkinPartFrames`` per body part (fixed 2 s
     windows, 0.5 s hop) go through CDR deserialisation (what rclpy does
-    before the callback),
-    :func:`~tactile_descriptors_ros.nodes.conversions.skin_part_msg_to_chunks`,
-    and ``Windower.add`` one cell chunk at a time or ``Windower.add_many`` once
-    per batch (what the window node does with the frames it takes in one
-    callback), each followed by ``poll`` (window cutting included).  Minimum
-    over ``repeat`` runs of the thread's CPU time (this machine is shared).
+    before the callback), then two paths, each followed by one ``poll`` per
+    batch (window cutting included):
+
+    * the window node's: each message in one piece,
+      :func:`~tactile_descriptors_ros.nodes.conversions.skin_part_msg_to_part_chunk`
+      (``convert_part``) and ``Windower.add_part`` (``add_part_poll``);
+    * per cell, for comparison:
+      :func:`~tactile_descriptors_ros.nodes.conversions.skin_part_msg_to_chunks`
+      (``convert``) and ``Windower.add`` one cell chunk at a time
+      (``add_poll``) or ``Windower.add_many`` once per batch (``add_many_poll``).
+
+    ``us_per_message_batched`` is the node's path (deserialise +
+    ``convert_part`` + ``add_part_poll``), ``us_per_message_per_cell`` the
+    best per-cell one.  Minimum over ``repeat`` runs of the thread's CPU time
+    (this machine is shared).
     """
     from rclpy.serialization import deserialize_message, serialize_message
 
     from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.core.windowing import Windower
-    from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, skin_part_msg_to_chunks
+    from tactile_descriptors_ros.nodes.conversions import (
+        ns_to_stamp,
+        skin_part_msg_to_chunks,
+        skin_part_msg_to_part_chunk,
+    )
 
     desc = load_robot(robot)
     probe = probe_frames(desc, batch_s, seed)
@@ -184,30 +197,43 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
             round_raw.append(serialize_message(msg))
         raws.append(round_raw)
     n = rounds * len(desc.body_parts)
-    best = {"deserialize": np.inf, "convert": np.inf, "add_poll": np.inf, "add_many_poll": np.inf}
+    keys = ("deserialize", "convert_part", "add_part_poll", "convert", "add_poll", "add_many_poll")
+    best = dict.fromkeys(keys, np.inf)
+    windows: dict[str, int] = {}
     for _ in range(repeat):
         c = time.thread_time()
         msgs = [[deserialize_message(r, SkinPartFrames) for r in rr] for rr in raws]
         best["deserialize"] = min(best["deserialize"], time.thread_time() - c)
         c = time.thread_time()
+        parts = [[skin_part_msg_to_part_chunk(m) for m in mm] for mm in msgs]
+        best["convert_part"] = min(best["convert_part"], time.thread_time() - c)
+        c = time.thread_time()
         chunks = [[item for m in mm for item in skin_part_msg_to_chunks(m)] for mm in msgs]
         best["convert"] = min(best["convert"], time.thread_time() - c)
-        for key in ("add_poll", "add_many_poll"):
+        for key in ("add_part_poll", "add_poll", "add_many_poll"):
             w = Windower(desc, mode="fixed", length_s=2.0, hop_s=0.5, lateness_s=0.0)
+            cut = 0
             c = time.thread_time()
-            for batch in chunks:
-                if key == "add_poll":
+            for batch, part_batch in zip(chunks, parts):
+                if key == "add_part_poll":
+                    for part in part_batch:
+                        w.add_part(part)
+                    cut += len(w.poll())
+                elif key == "add_poll":
                     for cid, chunk in batch:
                         w.add(cid, chunk)
-                        w.poll()
+                        cut += len(w.poll())
                 else:
                     w.add_many(batch)
-                    w.poll()
+                    cut += len(w.poll())
             best[key] = min(best[key], time.thread_time() - c)
+            windows[key] = cut
     per = {k: 1e6 * v / n for k, v in best.items()}
     return {"robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "messages": n,
-            "us_per_message": per,
-            "us_per_message_batched": per["deserialize"] + per["convert"] + per["add_many_poll"],
+            "us_per_message": per, "windows_cut": windows,
+            "us_per_message_batched": per["deserialize"] + per["convert_part"] + per["add_part_poll"],
+            "us_per_message_per_cell": per["deserialize"] + per["convert"] + min(per["add_poll"],
+                                                                                per["add_many_poll"]),
             "note": "CPU time, minimum of the repeats; rclpy's executor adds its own cost per callback "
                     "(see window_cpu_us_per_message of the live run)"}
 

@@ -83,9 +83,15 @@ def test_split_window_nodes_need_processes():
 def test_message_cost_reports_each_step_per_message():
     from tactile_descriptors_lab.bench.latency import message_cost
 
-    res = message_cost(batch_s=0.02, rounds=3, repeat=1)
-    assert res["messages"] == 3 * 7
+    res = message_cost(batch_s=0.05, rounds=50, repeat=1)  # 2.5 s of data: a 2 s window is cut
+    assert res["messages"] == 50 * 7
     per = res["us_per_message"]
-    assert set(per) == {"deserialize", "convert", "add_poll", "add_many_poll"}
+    assert set(per) == {"deserialize", "convert_part", "add_part_poll", "convert", "add_poll", "add_many_poll"}
     assert all(v > 0 for v in per.values())
-    assert res["us_per_message_batched"] == pytest.approx(per["deserialize"] + per["convert"] + per["add_many_poll"])
+    # the node's path: a body part's message in one piece
+    assert res["us_per_message_batched"] == pytest.approx(per["deserialize"] + per["convert_part"]
+                                                         + per["add_part_poll"])
+    assert res["us_per_message_per_cell"] == pytest.approx(per["deserialize"] + per["convert"]
+                                                          + min(per["add_poll"], per["add_many_poll"]))
+    # every path is timed on the same data: each cuts the same window
+    assert set(res["windows_cut"].values()) == {1}, res["windows_cut"]
