@@ -32,6 +32,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 STALL_S = 8.0
 WINDOW_NODE_STOP_S = 5.0
+#: The window node's frames queue in the stop test (messages per body-part topic; 256 as shipped).
+QUEUE_DEPTH = 32
 #: The fixed windows of these tests (short, so that the recovery is timed in windows).
 LENGTH_S, HOP_S = 1.0, 0.25
 
@@ -49,7 +51,8 @@ class Probe:
     spin_until: Callable[[Callable[[], object], float], bool]
     descs: list[tuple[float, float, float]] = field(default_factory=list)  # (arrival, window start, window end)
     diags: list[tuple[float, dict]] = field(default_factory=list)  # (arrival, the window node's values)
-    frames: list[tuple[float, float]] = field(default_factory=list)  # (arrival, stamp) of one body part
+    # (arrival, stamp, cell runs) of one body part's messages
+    frames: list[tuple[float, float, int]] = field(default_factory=list)
 
     def parameter(self, executable: str, name: str):
         return next(s for s in self.specs if s.executable == executable).parameters[name]
@@ -77,8 +80,9 @@ class Probe:
 
 
 @contextmanager
-def nao_graph(tmp_path) -> Iterator[Probe]:
-    """The NAO graph with fixed windows and a probe on its descriptors, diagnostics and left-hand frames."""
+def nao_graph(tmp_path, **window_node: object) -> Iterator[Probe]:
+    """The NAO graph with fixed windows (and ``window_node`` parameters) and a probe on its descriptors,
+    diagnostics and left-hand frames."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
@@ -90,7 +94,7 @@ def nao_graph(tmp_path) -> Iterator[Probe]:
 
     specs = build_graph("nao", sim_scene="demo_nao", model_path=str(tmp_path / "model.json"),
                         overrides={"window_node": {"window.mode": "fixed", "window.length_s": LENGTH_S,
-                                                   "window.hop_s": HOP_S}})
+                                                   "window.hop_s": HOP_S, **window_node}})
     domain = random.randint(1, 100)
     env = localhost_environment()
     env["ROS_DOMAIN_ID"] = str(domain)
@@ -119,7 +123,8 @@ def nao_graph(tmp_path) -> Iterator[Probe]:
                              QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 100)
     node.create_subscription(SkinPartFrames, "tactile/left_hand/frames",
-                             lambda m: probe.frames.append((time.time(), _stamp_s(m.header.stamp))), 1000)
+                             lambda m: probe.frames.append((time.time(), _stamp_s(m.header.stamp),
+                                                            len(m.sequence))), 1000)
     ex.add_node(node)
     procs.start()
     try:
@@ -137,7 +142,7 @@ def test_an_8_s_driver_stall_is_a_gap_and_descriptors_resume_within_2_s(tmp_path
         stopped, resumed = g.stop("skin_driver", STALL_S)  # the window node must keep reporting meanwhile
         during = [values for t, values in g.diags[n_diag:] if stopped + 1.0 < t < resumed]
         assert len(during) >= 3, "the window node's diagnostics went silent during the stall"
-        fresh_frames = lambda: [t for t, stamp in g.frames if stamp > resumed - 1.0]  # noqa: E731
+        fresh_frames = lambda: [t for t, stamp, _ in g.frames if stamp > resumed - 1.0]  # noqa: E731
         # both: the executor may run the descriptor's callback before that of the frames it was made from
         assert g.spin_until(lambda: g.fresh(resumed) and fresh_frames(), 30.0), (
             f"after the stall: {len(g.fresh(resumed))} descriptors and {len(fresh_frames())} frames messages of "
@@ -160,28 +165,34 @@ def test_a_5_s_window_node_stop_is_counted_and_fresh_windows_resume_within_a_win
     from tactile_descriptors_ros.core.robot import load_robot
 
     n_cells = sum(len(p.cells) for p in load_robot("nao").body_parts)
-    with nao_graph(tmp_path) as g:
+    # a short queue: even a driver slowed by a loaded machine (fewer, fuller messages) overflows it in the stop
+    with nao_graph(tmp_path, **{"qos.frames.depth": QUEUE_DEPTH}) as g:
         assert g.spin_until(lambda: g.diags, 30.0), "no diagnostics from the window node"
         before = g.faults()
         stopped, resumed = g.stop("window_node", WINDOW_NODE_STOP_S)
         # a whole window of data sampled after SIGCONT: ends one window and at most one hop later, is then
-        # cut, described and published; the node has first the queued messages to take (2.5 s per topic)
+        # cut, described and published; the node has first the queued messages to take
         whole = lambda: [d for d in g.descs if d[1] >= resumed]  # noqa: E731
         assert g.spin_until(whole, 30.0), f"no window of fresh data after the stop: {g.descs[-3:]}"
         late_s = whole()[0][0] - whole()[0][2]
         assert whole()[0][2] <= resumed + LENGTH_S + HOP_S + 1e-3, whole()[0]
         assert late_s <= LENGTH_S, f"the first fresh window came {late_s:.2f} s after its end"
-        # what the topics could not queue is counted, at least the stop less the queue per cell; the windows
-        # of that part of the stop are counted empty, not described
+        # what the topics could not queue is counted: on the left hand's topic alone, every cell run the probe
+        # saw published during the stop but the last queue depth of messages (the driver's own rate, which a
+        # loaded machine lowers); the windows of that part of the stop are counted empty, not described
         assert g.spin_until(lambda: g.diags[-1][0] > whole()[0][0], 10.0)
         after = g.faults()
         lost = after.get("fault_lost_cell_batches", 0) - before.get("fault_lost_cell_batches", 0)
+        depth = g.parameter("window_node", "qos.frames.depth")
+        during = [runs for t, _, runs in g.frames if stopped + 0.2 < t < resumed]
+        left_hand_lost = sum(during[:-depth]) if len(during) > depth else 0
         batch_s = g.parameter("skin_driver", "batch_s")
-        queued_s = g.parameter("window_node", "qos.frames.depth") * batch_s  # per body-part topic
+        assert left_hand_lost > 0, f"the driver published {len(during)} left-hand messages in the stop"
+        assert left_hand_lost <= lost <= n_cells * (WINDOW_NODE_STOP_S + 1.0) / batch_s, (
+            lost, left_hand_lost, g.faults())
+        queued_s = depth * batch_s  # per body-part topic at the driver's full rate
         unqueued = (stopped + 0.5, resumed - queued_s - 0.5)
         assert not [d for d in g.descs if d[1] > unqueued[0] and d[2] < unqueued[1]], unqueued
         empty = (after.get("fault_windower_windows_without_samples", 0)
                  - before.get("fault_windower_windows_without_samples", 0))
         assert empty >= 1, after
-        assert lost >= 0.8 * n_cells * (WINDOW_NODE_STOP_S - queued_s) / batch_s, (lost, g.faults())
-        assert lost <= n_cells * (WINDOW_NODE_STOP_S + 1.0) / batch_s, (lost, g.faults())
