@@ -34,7 +34,8 @@ sys.stdin.read()
 
 
 def _files() -> set[str]:
-    return {p.name for p in SHM.glob("fastdds_*")}
+    """Fast DDS's shared-memory files (``fastrtps_*`` before Fast DDS 3, Jazzy's; ``fastdds_*`` since, Kilted's)."""
+    return {p.name for prefix in ("fastdds_", "fastrtps_") for p in SHM.glob(prefix + "*")}
 
 
 def _participant() -> subprocess.Popen:
