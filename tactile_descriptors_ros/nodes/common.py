@@ -11,7 +11,9 @@ Status names follow the ROS convention ``"<node name>: <task>"``.
 from __future__ import annotations
 
 import collections
+import faulthandler
 import gc
+import signal
 import sys
 import threading
 import time
@@ -202,12 +204,20 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
     exit code 2 -- a clear message instead of a traceback.  The node's
     ``close()`` (if any) runs on every exit path once the node was built, so
     devices are closed and models saved.
+
+    With Python's fault handler on (``PYTHONFAULTHANDLER=1``, as the tests
+    run nodes), SIGTERM first prints every thread's Python stack to stderr,
+    then goes on to rclpy's handler as always: ``ros2 launch`` sends SIGTERM
+    to a node still running 5 s after Ctrl-C, so a node hung in a call that
+    never returns shows where.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
     interrupted = note_interrupts()
     rclpy.init(args=list(args) if args is not None else sys.argv)
+    if faulthandler.is_enabled():  # after rclpy's handler is installed, so that the dump chains to it
+        faulthandler.register(signal.SIGTERM, all_threads=True, chain=True)
     node = None  # also a node whose constructor failed half-way: its logger has the node's name
     built = False
     code = 0
@@ -275,8 +285,5 @@ def _logger_of(node: Any, factory: Callable[..., Any]):
 def _ignore_interrupts() -> None:
     """Ignore SIGINT from here on: the node has stopped, and at exit Python would reset SIGINT to its
     default (death by signal, which ``ros2 launch`` reports as a crash) unless it is ignored."""
-    import signal
-    import threading
-
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -78,3 +78,106 @@ def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_s
             proc.communicate()
     assert proc.returncode == 0, err
     assert "KeyboardInterrupt" not in err and "Traceback" not in err and "main ran" not in err, err
+
+
+HUNG_NODE = """
+import sys, threading
+from rclpy.node import Node
+from tactile_descriptors_ros.nodes.common import run_node
+
+
+def wait_forever():
+    print("hanging", flush=True)
+    threading.Event().wait()  # a call that never returns: Ctrl-C only shuts the context down under it
+
+
+class Hung(Node):
+    def __init__(self):
+        super().__init__("hung")
+        wait_forever()
+
+
+sys.exit(run_node(Hung))
+"""
+
+SPINNING_NODE = """
+import sys
+from rclpy.node import Node
+from tactile_descriptors_ros.nodes.common import run_node
+
+
+class Spinning(Node):
+    def __init__(self):
+        super().__init__("spinning")
+        self.timer = self.create_timer(0.01, self.once)
+
+    def once(self):
+        self.timer.cancel()
+        print("spinning", flush=True)
+
+
+sys.exit(run_node(Spinning))
+"""
+
+STACK_HEADER = "(most recent call first)"
+
+
+def _start(script: str, fault_handler: bool) -> subprocess.Popen:
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONFAULTHANDLER"}
+    if fault_handler:
+        env["PYTHONFAULTHANDLER"] = "1"
+    return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def test_sigterm_prints_where_a_hung_node_hangs_when_the_fault_handler_is_on():
+    """A node stuck in a call that never returns ignores Ctrl-C; the SIGTERM ``ros2 launch`` escalates to then
+    prints every thread's stack, naming the call, so a hang in a loaded test run shows where it was."""
+    import signal
+    import threading
+
+    proc = _start(HUNG_NODE, fault_handler=True)
+    lines: list[str] = []
+    dumped = threading.Event()
+
+    def read_stderr() -> None:
+        for line in proc.stderr:  # the dump ends with the module-level frame that started the node
+            lines.append(line)
+            if 'File "<string>"' in line and "in <module>" in line:
+                dumped.set()
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    try:
+        assert proc.stdout.readline().strip() == "hanging", "".join(lines)
+        proc.send_signal(signal.SIGTERM)
+        assert dumped.wait(60.0), "no stack printed on SIGTERM: " + "".join(lines)
+        assert proc.poll() is None, "".join(lines)  # the handler chained to rclpy's: no death by signal
+    finally:
+        proc.kill()
+        proc.wait()
+        reader.join(10.0)
+    text = "".join(lines)
+    assert STACK_HEADER in text and "in wait_forever" in text and "in __init__" in text, text
+
+
+@pytest.mark.parametrize("fault_handler", [True, False])
+def test_sigterm_still_stops_a_spinning_node_cleanly(fault_handler):
+    """SIGTERM goes on to rclpy's shutdown whether or not the fault handler prints the stacks first: exit code 0;
+    without the fault handler nothing is printed."""
+    import signal
+
+    proc = _start(SPINNING_NODE, fault_handler)
+    try:
+        assert proc.stdout.readline().strip() == "spinning", proc.stderr.read() if proc.poll() is not None else ""
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err
+    assert (STACK_HEADER in err) == fault_handler, err
+    assert "Traceback" not in err, err
