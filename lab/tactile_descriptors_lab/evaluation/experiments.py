@@ -91,9 +91,10 @@ class EvalConfig:
     pa_max, pa_orders : int
         PA curve length (training trials per class) and presentation orders.
     pa_update, pa_average
-        PA variant (:class:`~..core.learning.PassiveAggressive`): default the
-        max-loss update with averaged weights; ``"prediction"`` and ``False``
-        are the paper's eq. 30-32.
+        Online learner (:class:`~..core.learning.PassiveAggressive`): default
+        the classifier node's, AROW without averaging
+        (:data:`~..core.learning.RECOMMENDED_PA_UPDATE`); ``"prediction"``
+        and ``False`` are the paper's eq. 30-32.
     windows : {"random", "contact"}
         Window placement: seeded random positions in the common-length crop,
         or random positions wholly in contact (:func:`~.windows.draw_contact_windows`).
