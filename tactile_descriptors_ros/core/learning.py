@@ -52,9 +52,10 @@ keeps the trade-off independent of the descriptor's length (the scaled
 features have unit variance, so ``x' x`` grows with it).  Cost per update:
 O(n^2) for n features (a 1,306-value Shadow Hand descriptor: one
 1,306 x 1,306 matrix, a few ms per label); prediction is unchanged.
-On the BioTac recordings (2 s windows) it scores 96.0 % on the development
-split and 95.8 +- 1.6 % by trial cross-validation against PA-I's 93.4 % and
-91.8 +- 3.1 % (the SVM: 97.0 % and 96.8 +- 1.0 %; ``docs/evaluation.md``).
+On the BioTac recordings (2 s windows) it scores 94.1 % on the development
+split and 95.0 +- 1.6 % by trial cross-validation against averaged max-loss
+PA-I's 93.55 % and 92.5 +- 2.8 % (the SVM: 97.0 % and 96.8 +- 0.8 %;
+``lab/docs/evaluation.md``).
 
 Scikit-learn's PassiveAggressiveClassifier is being deprecated and costs
 about 25 ms per single-sample update for 120 classes; this numpy version
@@ -90,7 +91,7 @@ AROW_R_PER_FEATURE: float = 0.4
 #: The variant the classifier node and ``tactile evaluate`` use by default
 #: (the classes themselves default to the paper's): AROW, not averaged (an
 #: average dilutes a class that appears late with the zeros it had before,
-#: and scored lower: 95.5 % against 96.0 % on the development split at 2 s).
+#: and scored lower: 92.9 % against 94.1 % on the development split at 2 s).
 #: Max-loss averaged PA-I (``max_loss``, averaged) is the first-order choice
 #: for a descriptor of many thousand values, where AROW's n x n covariance
 #: is too large to keep.
