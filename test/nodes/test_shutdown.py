@@ -61,6 +61,20 @@ sys.exit(entry.window_node())
 """
 
 
+def _signal_when_ready(proc: subprocess.Popen, ready: str, signum: int) -> str:
+    """Send ``signum`` once the process printed ``ready`` on stdout; wait for its end; return its stderr."""
+    try:
+        line = proc.stdout.readline().strip()
+        assert line == ready, proc.stderr.read() if proc.poll() is not None else line
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return err
+
+
 def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_starting_the_node():
     """``ros2 launch`` stops every node when one dies at start; a node whose module is still importing then
     ends with code 0 and without a ``KeyboardInterrupt`` traceback, and its ``main`` never runs."""
@@ -68,14 +82,7 @@ def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_s
 
     proc = subprocess.Popen([sys.executable, "-c", SLOW_IMPORT], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
-    try:
-        assert proc.stdout.readline().strip() == "importing", proc.stderr.read()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+    err = _signal_when_ready(proc, "importing", signal.SIGINT)
     assert proc.returncode == 0, err
     assert "KeyboardInterrupt" not in err and "Traceback" not in err and "main ran" not in err, err
 
@@ -170,14 +177,7 @@ def test_sigterm_still_stops_a_spinning_node_cleanly(fault_handler):
     import signal
 
     proc = _start(SPINNING_NODE, fault_handler)
-    try:
-        assert proc.stdout.readline().strip() == "spinning", proc.stderr.read() if proc.poll() is not None else ""
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+    err = _signal_when_ready(proc, "spinning", signal.SIGTERM)
     assert proc.returncode == 0, err
     assert (STACK_HEADER in err) == fault_handler, err
     assert "Traceback" not in err, err
