@@ -33,9 +33,13 @@ sys.stdin.read()
 """
 
 
+#: Fast DDS's shared-memory files: ``fastrtps_*`` before Fast DDS 3 (Jazzy's), ``fastdds_*`` since (Kilted's).
+PREFIXES = ("fastdds_", "fastrtps_")
+
+
 def _files() -> set[str]:
-    """Fast DDS's shared-memory files (``fastrtps_*`` before Fast DDS 3, Jazzy's; ``fastdds_*`` since, Kilted's)."""
-    return {p.name for prefix in ("fastdds_", "fastrtps_") for p in SHM.glob(prefix + "*")}
+    """Fast DDS's shared-memory files in ``/dev/shm``."""
+    return {p.name for prefix in PREFIXES for p in SHM.glob(prefix + "*")}
 
 
 def _held_by(pid: int) -> set[str]:
@@ -52,7 +56,7 @@ def _held_by(pid: int) -> set[str]:
         if len(fields) == 6:
             paths.add(fields[5])
     names = {Path(p).name for p in paths if p.startswith(str(SHM) + "/") and not p.endswith(" (deleted)")}
-    return {n for n in names if n.startswith(("fastdds_", "fastrtps_"))}
+    return {n for n in names if n.startswith(PREFIXES)}
 
 
 def _participant() -> subprocess.Popen:

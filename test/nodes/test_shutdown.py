@@ -3,8 +3,11 @@ every line under the node's own name."""
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -78,8 +81,6 @@ def _signal_when_ready(proc: subprocess.Popen, ready: str, signum: int) -> str:
 def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_starting_the_node():
     """``ros2 launch`` stops every node when one dies at start; a node whose module is still importing then
     ends with code 0 and without a ``KeyboardInterrupt`` traceback, and its ``main`` never runs."""
-    import signal
-
     proc = subprocess.Popen([sys.executable, "-c", SLOW_IMPORT], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     err = _signal_when_ready(proc, "importing", signal.SIGINT)
@@ -130,8 +131,6 @@ STACK_HEADER = "(most recent call first)"
 
 
 def _start(script: str, fault_handler: bool) -> subprocess.Popen:
-    import os
-
     env = {k: v for k, v in os.environ.items() if k != "PYTHONFAULTHANDLER"}
     if fault_handler:
         env["PYTHONFAULTHANDLER"] = "1"
@@ -142,9 +141,6 @@ def _start(script: str, fault_handler: bool) -> subprocess.Popen:
 def test_sigterm_prints_where_a_hung_node_hangs_when_the_fault_handler_is_on():
     """A node stuck in a call that never returns ignores Ctrl-C; the SIGTERM ``ros2 launch`` escalates to then
     prints every thread's stack, naming the call, so a hang in a loaded test run shows where it was."""
-    import signal
-    import threading
-
     proc = _start(HUNG_NODE, fault_handler=True)
     lines: list[str] = []
     dumped = threading.Event()
@@ -174,8 +170,6 @@ def test_sigterm_prints_where_a_hung_node_hangs_when_the_fault_handler_is_on():
 def test_sigterm_still_stops_a_spinning_node_cleanly(fault_handler):
     """SIGTERM goes on to rclpy's shutdown whether or not the fault handler prints the stacks first: exit code 0;
     without the fault handler nothing is printed."""
-    import signal
-
     proc = _start(SPINNING_NODE, fault_handler)
     err = _signal_when_ready(proc, "spinning", signal.SIGTERM)
     assert proc.returncode == 0, err
