@@ -136,6 +136,18 @@ class SequenceTracker:
     period_ns : float, optional
         Default frame period of every key (``track_many`` also takes one per
         number); without it times are ignored.
+
+    Notes
+    -----
+    Each key has a slot in flat arrays: the oldest and newest unwrapped
+    numbers and the time of the newest.  What was received is remembered as
+    its complement, the *holes*: numbers between the oldest and the newest
+    that a gap skipped and no late frame has filled, kept only within
+    ``window`` of the newest (a number further back is a restart, so nothing
+    older is ever asked).  A number in that span is a duplicate exactly when
+    it is not a hole.  Streams in order have no holes, so :meth:`track_many`
+    updates all their keys with array operations, with no Python work per key
+    (a skin driver tracks hundreds of keys on every read).
     """
 
     def __init__(self, modulus: int, window: int = 64, period_ns: float | None = None) -> None:
@@ -144,8 +156,14 @@ class SequenceTracker:
         self.modulus = int(modulus)
         self.window = int(window)
         self.period_ns = None if period_ns is None else float(period_ns)
-        self._state: dict[Hashable, tuple[int, int, set[int]]] = {}  # key -> (low, high, seen)
-        self._t_high: dict[Hashable, int] = {}  # key -> time of the newest number [ns]
+        self._slot: dict[Hashable, int] = {}  # key -> slot
+        self._code_sorted = np.empty(0, dtype=np.int64)  # integer codes track_many has seen, sorted
+        self._code_slot = np.empty(0, dtype=np.int64)  # the slot of each
+        self._live = np.zeros(0, dtype=bool)  # the slot's key has a number (not new, not reset)
+        self._low = np.zeros(0, dtype=np.int64)  # oldest unwrapped number received
+        self._high = np.zeros(0, dtype=np.int64)  # newest unwrapped number received
+        self._t_high = np.zeros(0, dtype=np.int64)  # time of the newest [ns]; -1 = unknown
+        self._holes: dict[int, set[int]] = {}  # slot -> numbers skipped within window of the newest
         self.gaps = 0
         self.lost = 0
         self.duplicates = 0
@@ -153,19 +171,85 @@ class SequenceTracker:
         self.resets = 0
         self._last_unwrapped = 0
 
+    # ------------------------------------------------------------------ slots
+    def _new_slot(self, key: Hashable) -> int:
+        s = len(self._slot)
+        if s == len(self._live):
+            grow = max(16, 2 * s)
+            self._live = np.concatenate([self._live, np.zeros(grow, dtype=bool)])
+            self._low = np.concatenate([self._low, np.zeros(grow, dtype=np.int64)])
+            self._high = np.concatenate([self._high, np.zeros(grow, dtype=np.int64)])
+            self._t_high = np.concatenate([self._t_high, np.full(grow, -1, dtype=np.int64)])
+        self._slot[key] = s
+        return s
+
+    def _slot_of(self, key: Hashable) -> int:
+        s = self._slot.get(key)
+        return self._new_slot(key) if s is None else s
+
+    def _slots_of_codes(self, codes: np.ndarray, key_of: Callable[[int], Hashable]) -> np.ndarray:
+        """The slots of sorted unique ``codes``; a code seen for the first time gets its key's slot."""
+        known = self._code_sorted
+        i = np.searchsorted(known, codes)
+        found = i < len(known)
+        found[found] = known[i[found]] == codes[found]
+        if found.all():
+            return self._code_slot[i]
+        fresh = codes[~found]
+        fresh_slots = np.array([self._slot_of(key_of(c)) for c in fresh.tolist()], dtype=np.int64)
+        merged = np.concatenate([known, fresh])
+        order = np.argsort(merged, kind="stable")
+        self._code_sorted = merged[order]
+        self._code_slot = np.concatenate([self._code_slot, fresh_slots])[order]
+        return self._slots_of_codes(codes, key_of)
+
+    def _start(self, s: int, seq: int, t_ns: int) -> None:
+        self._live[s] = True
+        self._low[s] = self._high[s] = seq
+        self._t_high[s] = t_ns
+        self._holes.pop(s, None)
+
+    def _add_holes(self, s: int, first: int, stop: int) -> None:
+        """Numbers ``first..stop-1`` were skipped; only those within ``window`` of the newest are kept."""
+        first = max(first, int(self._high[s]) - self.window)
+        if first < stop:
+            self._holes.setdefault(s, set()).update(range(first, stop))
+
+    def _prune_holes(self, s: int) -> None:
+        holes = self._holes.get(s)
+        if holes:
+            cut = int(self._high[s]) - self.window
+            holes.difference_update([x for x in holes if x < cut])
+        if not holes:
+            self._holes.pop(s, None)
+
+    # ------------------------------------------------------------- one by one
     def reset(self, key: Hashable | None = None) -> None:
         """Forget one key (e.g. a sensor that was replugged) or all keys."""
         if key is None:
-            self._state.clear()
-            self._t_high.clear()
+            self._live[:] = False
+            self._holes.clear()
         else:
-            self._state.pop(key, None)
-            self._t_high.pop(key, None)
+            s = self._slot.get(key)
+            if s is not None:
+                self._live[s] = False
+                self._holes.pop(s, None)
 
     def newest(self, key: Hashable) -> int | None:
         """The unwrapped newest number of ``key`` (``None`` before its first)."""
-        st = self._state.get(key)
-        return None if st is None else st[1]
+        s = self._slot.get(key)
+        return None if s is None or not self._live[s] else int(self._high[s])
+
+    def snapshot(self) -> dict[Hashable, tuple[int, int, int | None, frozenset[int]]]:
+        """What decides the events to come, per key with a number: the oldest and newest unwrapped numbers,
+        the time of the newest [ns] (``None`` unknown) and the holes within ``window`` of the newest."""
+        out = {}
+        for key, s in self._slot.items():
+            if self._live[s]:
+                high, t = int(self._high[s]), int(self._t_high[s])
+                holes = frozenset(x for x in self._holes.get(s, ()) if x >= high - self.window)
+                out[key] = (int(self._low[s]), high, None if t < 0 else t, holes)
+        return out
 
     def update(self, key: Hashable, seq: int, t_ns: int | None = None,
                period_ns: float | None = None) -> SequenceEvent:
@@ -176,49 +260,50 @@ class SequenceTracker:
     def track(self, key: Hashable, seq: int, t_ns: int | None = None,
               period_ns: float | None = None) -> tuple[SequenceEvent, int]:
         """:meth:`update`, also returning the unwrapped number (meaningless for a duplicate)."""
+        return self._track_slot(self._slot_of(key), seq, -1 if t_ns is None else int(t_ns),
+                                self.period_ns if period_ns is None else period_ns)
+
+    def _track_slot(self, s: int, seq: int, t_ns: int, period: float | None) -> tuple[SequenceEvent, int]:
+        """One number of slot ``s`` (``t_ns`` -1 = unknown); the rules of :meth:`track`."""
         m = self.modulus
         seq = int(seq) % m
-        st = self._state.get(key)
-        if st is None:
-            self._state[key] = (seq, seq, {seq} if self.window else set())
-            self._set_time(key, t_ns)
+        if not self._live[s]:
+            self._start(s, seq, t_ns)
             return SequenceEvent.FIRST, seq
-        low, high, seen = st
-        period = self.period_ns if period_ns is None else period_ns
-        t_high = self._t_high.get(key)
-        advance = (t_ns - t_high) / period if (t_ns is not None and t_high is not None and period) else 0.0
+        low, high, t_high = int(self._low[s]), int(self._high[s]), int(self._t_high[s])
+        advance = (t_ns - t_high) / period if (t_ns >= 0 and t_high >= 0 and period) else 0.0
         u = unwrap(seq, high, m, advance)
-        if u < high - (self.window or m // 8):
+        w = self.window
+        if u < high - (w or m // 8):
             self.resets += 1
-            self._state[key] = (seq, seq, {seq} if self.window else set())
-            self._set_time(key, t_ns)
+            self._start(s, seq, t_ns)
             return SequenceEvent.RESET, seq
-        if self.window and u in seen:
+        if w and low <= u <= high and u not in self._holes.get(s, ()):
             self.duplicates += 1
             return SequenceEvent.DUPLICATE, u
-        if self.window:
-            seen.add(u)
         if u > high:
             event = SequenceEvent.IN_ORDER if u == high + 1 else SequenceEvent.GAP
             if u > high + 1:
                 self.gaps += 1
                 self.lost += u - high - 1
-            high = u
-            self._set_time(key, t_ns)
-            if len(seen) > 2 * self.window + 2:
-                cut = high - self.window
-                seen = {x for x in seen if x >= cut}
-        elif u < low:
-            self.late += 1
+            self._high[s] = u
+            self._t_high[s] = t_ns
+            if w:
+                self._add_holes(s, high + 1, u)
+                self._prune_holes(s)
+            return event, u
+        self.late += 1
+        if u < low:
             self.lost += low - u - 1
-            low = u
-            event = SequenceEvent.LATE
+            if w:
+                self._add_holes(s, u + 1, low)
+            self._low[s] = u
         else:
-            self.late += 1
             self.lost -= 1
-            event = SequenceEvent.LATE
-        self._state[key] = (low, high, seen)
-        return event, u
+            if w:
+                self._holes[s].discard(u)
+                self._prune_holes(s)
+        return SequenceEvent.LATE, u
 
     def track_run(self, key: Hashable, first: int, count: int) -> tuple[SequenceEvent, int]:
         """Register a run of ``count`` consecutive numbers from ``first`` (one message of a batch).
@@ -241,29 +326,26 @@ class SequenceTracker:
             raise ConfigError(f"a run holds at least one number, not {count}")
         m = self.modulus
         first = int(first) % m
-        st = self._state.get(key)
-        if st is None:
-            self._state[key] = (first, first + count - 1, set())
+        s = self._slot_of(key)
+        if not self._live[s]:
+            self._start(s, first, -1)
+            self._high[s] = first + count - 1
             return SequenceEvent.FIRST, 0
-        low, high, seen = st
+        high = int(self._high[s])
         u = unwrap(first, high + 1, m)
         if u <= high:
             self.resets += 1
-            self._state[key] = (first, first + count - 1, set())
+            self._start(s, first, -1)
+            self._high[s] = first + count - 1
             return SequenceEvent.RESET, 0
         lost = u - high - 1
         if lost:
             self.gaps += 1
             self.lost += lost
-        self._state[key] = (low, u + count - 1, seen)
+        self._high[s] = u + count - 1
         return (SequenceEvent.GAP if lost else SequenceEvent.IN_ORDER), lost
 
-    def _set_time(self, key: Hashable, t_ns: int | None) -> None:
-        if t_ns is None:
-            self._t_high.pop(key, None)
-        else:
-            self._t_high[key] = int(t_ns)
-
+    # ------------------------------------------------------------- many at once
     def update_many(self, codes: np.ndarray, seqs: np.ndarray, key_of: Callable[[int], Hashable],
                     t_ns: np.ndarray | None = None, period_ns: np.ndarray | float | None = None) -> np.ndarray:
         """Register many numbers at once; the events of :meth:`track_many`."""
@@ -276,10 +358,10 @@ class SequenceTracker:
         :meth:`track` one by one.
 
         Keys are independent, so the numbers are taken key by key (in their
-        order within each key).  A key whose numbers all move forward (the
-        usual case: in order or with gaps) is handled with array operations;
-        any other key (duplicates, late frames, restarts) goes through
-        :meth:`track` number by number.
+        order within each key).  Keys whose numbers all move forward (the
+        usual case: in order or with gaps) are handled together with array
+        operations; any other key (duplicates, late frames, restarts) goes
+        through the rules of :meth:`track` number by number.
 
         Parameters
         ----------
@@ -289,7 +371,8 @@ class SequenceTracker:
             The sequence numbers, in arrival order.
         key_of : callable(int) -> hashable
             The key of a code, as :meth:`track` would be given it (so the
-            two methods can be mixed on one tracker).
+            two methods can be mixed on one tracker); called once per code,
+            the first time it comes.
         t_ns : array of int, shape (n,), optional
             Arrival (or bus) time of each number [ns]; a negative value
             means unknown.
@@ -317,10 +400,9 @@ class SequenceTracker:
         starts = np.flatnonzero(np.r_[True, sc[1:] != sc[:-1]])
         ends = np.r_[starts[1:], n]
         lens = ends - starts
-        keys = [key_of(c) for c in sc[starts].tolist()]
-        states = [self._state.get(k) for k in keys]
-        is_new = np.array([st is None for st in states], dtype=bool)
-        high = np.array([0 if st is None else st[1] for st in states], dtype=np.int64)
+        slots = self._slots_of_codes(sc[starts], key_of)
+        is_new = ~self._live[slots]
+        high = np.where(is_new, 0, self._high[slots])
         # expected advance between neighbours of a key, from their times
         period = self.period_ns if period_ns is None else period_ns
         if t_ns is not None and period is not None:
@@ -329,7 +411,7 @@ class SequenceTracker:
             pp = pp[order] if np.ndim(period) else pp
             t_prev = np.empty(n, dtype=np.int64)
             t_prev[1:] = tt[:-1]
-            t_prev[starts] = [self._t_high.get(k, -1) for k in keys]
+            t_prev[starts] = np.where(is_new, -1, self._t_high[slots])
             known = (tt >= 0) & (t_prev >= 0) & (pp > 0)
             advance = np.where(known, (tt - t_prev) / np.where(pp > 0, pp, 1.0), 0.0)
         else:
@@ -351,32 +433,33 @@ class SequenceTracker:
         gap = in_fast & (diff > 1)
         self.gaps += int(gap.sum())
         self.lost += int((diff[gap] - 1).sum())
-        u_list = unwrapped.tolist()
-        s_list = ss.tolist()
-        t_list = None if tt is None else tt.tolist()
-        p_list = None if tt is None else pp.tolist()
-        w = self.window
-        for g, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            key = keys[g]
-            if fast[g]:
-                st = states[g]
-                if st is None:
-                    low, seen = s_list[a], set()
-                else:
-                    low, _, seen = st
-                if w:
-                    seen.update(u_list[a:b])
-                new_high = u_list[b - 1]
-                if len(seen) > 2 * w + 2:
-                    cut = new_high - w
-                    seen = {x for x in seen if x >= cut}
-                self._state[key] = (low, new_high, seen)
-                self._set_time(key, None if t_list is None or t_list[b - 1] < 0 else t_list[b - 1])
-            else:
-                for i in range(a, b):
-                    t_i = None if t_list is None or t_list[i] < 0 else t_list[i]
-                    ev[i] = self.update(key, s_list[i], t_i, None if p_list is None else p_list[i])
-                    unwrapped[i] = self._last_unwrapped
+        # keys moving forward: their new state at once
+        fs = slots[fast]
+        last = ends[fast] - 1
+        self._low[fs] = np.where(is_new[fast], ss[starts[fast]], self._low[fs])
+        self._live[fs] = True
+        self._high[fs] = unwrapped[last]
+        self._t_high[fs] = -1 if tt is None else np.where(tt[last] >= 0, tt[last], -1)
+        if self.window:
+            # the numbers a gap skipped become holes; holes fall behind the window as the newest moves on
+            for i in np.flatnonzero(gap).tolist():
+                self._add_holes(int(slots[np.searchsorted(starts, i, side="right") - 1]),
+                                int(unwrapped[i] - diff[i] + 1), int(unwrapped[i]))
+            if self._holes:
+                for s in set(fs.tolist()).intersection(self._holes):
+                    self._prune_holes(s)
+        # any other key: number by number
+        if not fast.all():
+            s_list = ss.tolist()
+            t_list = None if tt is None else tt.tolist()
+            p_list = None if tt is None else pp.tolist()
+            for g in np.flatnonzero(~fast).tolist():
+                s = int(slots[g])
+                for i in range(int(starts[g]), int(ends[g])):
+                    e, u = self._track_slot(s, s_list[i], -1 if t_list is None else t_list[i],
+                                            None if p_list is None else p_list[i])
+                    ev[i] = e
+                    unwrapped[i] = u
         events[order] = ev
         unwrapped_out[order] = unwrapped
         return events, unwrapped_out

@@ -89,6 +89,87 @@ def test_track_many_equals_track_one_by_one_with_times(steps, window):
         assert u - first[c][0] == tr - first[c][1]
 
 
+class ReferenceTracker:
+    """The tracker's rules written plainly, as a reference: per key the set of every number received (the
+    tracker keeps only the holes between them), one number at a time."""
+
+    def __init__(self, modulus: int, window: int) -> None:
+        self.m, self.w = modulus, window
+        self.state: dict = {}  # key -> [low, high, time of high (None = unknown), received numbers]
+        self.gaps = self.lost = self.duplicates = self.late = self.resets = 0
+
+    def track(self, key, seq, t_ns, period):
+        seq %= self.m
+        st_ = self.state.get(key)
+        if st_ is None:
+            self.state[key] = [seq, seq, t_ns, {seq}]
+            return SequenceEvent.FIRST, seq
+        low, high, t_high, seen = st_
+        advance = (t_ns - t_high) / period if (t_ns is not None and t_high is not None and period) else 0.0
+        u = unwrap(seq, high, self.m, advance)
+        if u < high - (self.w or self.m // 8):
+            self.resets += 1
+            self.state[key] = [seq, seq, t_ns, {seq}]
+            return SequenceEvent.RESET, seq
+        if self.w and u in seen:
+            self.duplicates += 1
+            return SequenceEvent.DUPLICATE, u
+        seen.add(u)
+        if u > high:
+            if u > high + 1:
+                self.gaps += 1
+                self.lost += u - high - 1
+            st_[1], st_[2] = u, t_ns
+            return (SequenceEvent.IN_ORDER if u == high + 1 else SequenceEvent.GAP), u
+        self.late += 1
+        if u < low:
+            self.lost += low - u - 1
+            st_[0] = u
+        else:
+            self.lost -= 1
+        return SequenceEvent.LATE, u
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 2), st.one_of(st.integers(-6, 9), st.integers(-70, 300)), st.integers(0, 3),
+                          st.booleans()),
+                min_size=1, max_size=150),
+       st.sampled_from([0, 1, 8, 40]), st.booleans(), st.integers(1, 5))
+def test_tracker_equals_the_plain_reference_with_duplicates_late_frames_and_restarts(steps, window, timed, calls):
+    """Numbers that step back (duplicates, late frames, restarts), repeat, skip and wrap, some with a time
+    and some without, fed partly one by one and partly in batches: the same events, unwrapped numbers and
+    counters as the plain set-based reference."""
+    period = [MS, 4 * MS, 100 * MS]
+    now = [0, 0, 0]
+    codes, seqs, times = [], [], []
+    for k, step, jitter, no_time in steps:
+        now[k] = max(now[k] + step, 0)
+        codes.append(k)
+        seqs.append(now[k] % 256)
+        times.append(-1 if (no_time or not timed) else (now[k] + jitter) * period[k])
+    ref = ReferenceTracker(256, window)
+    want = [ref.track(c, s, None if t < 0 else t, float(period[c])) for c, s, t in zip(codes, seqs, times)]
+    got = SequenceTracker(256, window)
+    events, unwrapped = [], []
+    cuts = sorted({0, len(codes), *np.linspace(0, len(codes), calls + 1).astype(int).tolist()})
+    for j, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        if j % 2:  # one by one, on the same keys: the two ways share one state
+            for c, s, t in zip(codes[a:b], seqs[a:b], times[a:b]):
+                e, u = got.track(c, s, None if t < 0 else t, float(period[c]))
+                events.append(int(e))
+                unwrapped.append(u)
+        else:
+            e, u = got.track_many(np.array(codes[a:b]), np.array(seqs[a:b]), int, np.array(times[a:b]),
+                                  np.array(period, dtype=float)[codes[a:b]])
+            events += e.tolist()
+            unwrapped += u.tolist()
+    assert events == [int(e) for e, _ in want]
+    keep = [i for i, (e, _) in enumerate(want) if e != SequenceEvent.DUPLICATE]  # a duplicate's is meaningless
+    assert [unwrapped[i] for i in keep] == [want[i][1] for i in keep]
+    assert (got.gaps, got.lost, got.duplicates, got.late, got.resets) == \
+        (ref.gaps, ref.lost, ref.duplicates, ref.late, ref.resets)
+
+
 def test_unwrapper_follows_a_device_clock_across_wraps():
     u = Unwrapper(1 << 32)
     assert u(0xFFFF_FF00) == 0xFFFF_FF00
