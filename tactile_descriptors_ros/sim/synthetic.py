@@ -215,7 +215,8 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
     batch_s : float, optional
         The drivers' ``batch_s`` (default: the NAO graph's).
     read_period_s : float, optional
-        The drivers' ``read_period_s`` (default: the driver's, 0: read as soon as frames are due).
+        The drivers' ``read_period_s`` (default: the NAO graph's, else the driver's: 0, read as soon as frames
+        are due).
     one_driver : bool
         One skin driver for all body parts (one bus) instead of one per body part.
     window_parameters : dict, optional
@@ -248,8 +249,11 @@ def scale_robot_files(n_cells: int, parts: int, out_dir: str | os.PathLike[str],
     # No tare at start: every lap is mostly touch, so the first samples are no baseline; the simulated
     # force baseline (20 counts, 0.05 N) is below the contact threshold untared.
     shipped = nao.get("nodes", {})
+    shipped_driver = shipped.get("skin_driver", {}).get("parameters", {})
     if batch_s is None:
-        batch_s = float(shipped.get("skin_driver", {}).get("parameters", {}).get("batch_s", 0.05))
+        batch_s = float(shipped_driver.get("batch_s", 0.05))
+    if read_period_s is None:
+        read_period_s = shipped_driver.get("read_period_s")
     driver_params = {"transport": "simulated", "batch_s": float(batch_s), "stamp_source": "device",
                      "tare_on_start_s": 0.0,
                      "sim": {"loop": True, "speed": 1.0}}

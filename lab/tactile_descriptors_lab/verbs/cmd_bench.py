@@ -122,8 +122,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-s", type=float, default=None,
                    help="the skin drivers' batch_s for --scale-graph (default: the NAO graph's)")
     p.add_argument("--read-period-s", type=float, default=None,
-                   help="the skin drivers' read_period_s for --scale-graph (default 0: read as soon as frames are "
-                        "due)")
+                   help="the skin drivers' read_period_s for --scale-graph (default: the NAO graph's; 0 reads as soon "
+                        "as frames are due)")
     p.add_argument("--one-driver", action="store_true",
                    help="--scale-graph with one skin driver for all body parts instead of one per body part")
     p.add_argument("--hosts", type=int, default=0,
