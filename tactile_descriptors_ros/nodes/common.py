@@ -25,6 +25,7 @@ from ..errors import TactileError
 from .entry import note_interrupts
 
 __all__ = [
+    "HOST_TIME_LIMIT_MS",
     "Status",
     "Diagnostics",
     "RateMeter",
@@ -33,6 +34,9 @@ __all__ = [
     "take_waiting",
 ]
 
+#: A stamp further than this from the host clock [ms] is not on it (``stamp_source: device``: a simulator's
+#: scene time, a bridge's own clock): the age of such data is counted as not on host time, never timed.
+HOST_TIME_LIMIT_MS = 3_600_000.0
 _LEVELS = {"ok": 0, "warn": 1, "error": 2, "stale": 3}
 
 

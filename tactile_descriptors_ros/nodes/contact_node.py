@@ -57,7 +57,7 @@ from ..topics import (
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import Diagnostics, Status, run_node, steady_clock, take_waiting
+from .common import HOST_TIME_LIMIT_MS, Diagnostics, Status, run_node, steady_clock, take_waiting
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .parameters import NodeParameters
@@ -195,6 +195,7 @@ class ContactNode(Node):
         self.refresh_ticks = max(1, round(refresh_s * self.rate_hz)) if self.display_on else 1
         self.frames_taken = 0
         self._age_ms: deque[float] = deque(maxlen=5000)
+        self.contacts_not_host_time = 0
         self._tick_ms: deque[float] = deque(maxlen=500)
         self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("contact", self._status)
@@ -305,7 +306,11 @@ class ContactNode(Node):
         p.messages += 1
         self.contacts_published += 1
         self.newest_ns = max(self.newest_ns, window.end_ns)
-        self._age_ms.append((time.time_ns() - window.end_ns) / 1e6)
+        age_ms = (time.time_ns() - window.end_ns) / 1e6
+        if abs(age_ms) < HOST_TIME_LIMIT_MS:
+            self._age_ms.append(age_ms)
+        else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
+            self.contacts_not_host_time += 1
 
     def _on_prediction(self, msg) -> None:
         self.history.prediction(int(msg.exploration_id), stamp_to_ns(msg.window_end), str(msg.class_name),
@@ -378,7 +383,8 @@ class ContactNode(Node):
                         "display_tick_cpu_ms": round(1e3 * self.display_tick_cpu_s, 3),
                         "display_merges": self.display_merges,
                         "display_merge_cpu_ms": round(1e3 * self.display_merge_cpu_s, 3),
-                        "frames_messages_taken": self.frames_taken}
+                        "frames_messages_taken": self.frames_taken,
+                        "contacts_not_host_time": self.contacts_not_host_time}
         for name, samples in (("contact_age", self._age_ms), ("display_tick", self._tick_ms)):
             if samples:
                 a = np.fromiter(samples, np.float64, len(samples))

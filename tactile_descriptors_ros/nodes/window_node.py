@@ -59,7 +59,7 @@ from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
-from .common import Diagnostics, RateMeter, Status, run_node, steady_clock, take_waiting
+from .common import HOST_TIME_LIMIT_MS, Diagnostics, RateMeter, Status, run_node, steady_clock, take_waiting
 from .conversions import (
     biotac_msg_to_chunk,
     descriptor_layout_to_msg,
@@ -71,11 +71,7 @@ from .conversions import (
 from .parameters import NodeParameters
 from .qos import qos_of
 
-__all__ = ["WindowNode", "main", "FRAMES_AGE_LIMIT_MS"]
-
-#: A frames message whose newest sample is further than this from the host clock [ms] is not stamped on
-#: it (``stamp_source: device``): it is counted (``frames_not_host_time``), not timed.
-FRAMES_AGE_LIMIT_MS = 3_600_000.0
+__all__ = ["WindowNode", "main"]
 
 
 
@@ -248,7 +244,7 @@ class WindowNode(Node):
             newest = _newest_sample_ns(sub_msg)
             if newest is not None:
                 age_ms = (now_ns - newest) / 1e6
-                if abs(age_ms) < FRAMES_AGE_LIMIT_MS:
+                if abs(age_ms) < HOST_TIME_LIMIT_MS:
                     self._frames_age_ms.append(age_ms)
                 else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
                     self.frames_not_host_time += 1

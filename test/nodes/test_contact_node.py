@@ -140,6 +140,22 @@ def test_contact_and_wrench_at_the_frame_rate(graph):
     assert np.allclose(f, [-1.5, 0, 0], atol=0.01) and np.allclose(tau, np.cross(cop, f), atol=1e-5)
 
 
+@pytest.mark.parametrize("host_clock", [True, False])
+def test_contact_age_is_timed_on_host_stamps_and_counted_on_device_stamps(graph, host_clock):
+    """Frames stamped on the host clock give ``contact_age_ms``; frames on another clock (the simulator's scene
+    time, 5 s after 1970 here) are counted in ``contacts_not_host_time`` and never timed as a 56-year age."""
+    node, io, ex, pub, got = graph
+    start_ns = time.time_ns() - 200_000_000 if host_clock else 5_000_000_000
+    assert _feed_until(ex, pub, lambda: len(got["contact"]) >= 3, start_ns=start_ns)
+    values = node._status().values
+    if host_clock:
+        assert values["contacts_not_host_time"] == 0, values
+        assert 0.0 < values["contact_age_ms_p50"] < 60_000.0, values
+    else:
+        assert values["contacts_not_host_time"] >= 3, values
+        assert "contact_age_ms_p50" not in values and "contact_age_ms_max" not in values, values
+
+
 def test_markers_and_image_show_known_forces_in_viridis(graph):
     node, io, ex, pub, got = graph
     from visualization_msgs.msg import Marker
