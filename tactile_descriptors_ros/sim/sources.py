@@ -33,6 +33,7 @@ import heapq
 import time
 from collections import deque
 from collections.abc import Collection, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -297,27 +298,50 @@ class _PacedSource:
         self._t0_wall: float | None = None
         self.exhausted = False
         self.results: list[dict[str, Any]] = []  # ground truth of the chunks simulated so far
+        self._pool: ThreadPoolExecutor | None = None  # paced: simulates the next chunk ahead
+        self._ahead: Future | None = None
 
     def open(self) -> None:
         self._t0_wall = self.clock()
 
     def close(self) -> None:
-        pass
+        pass  # a chunk being simulated ahead stays: a transport opened again goes on with it
 
     def _convert(self, result: SimResult) -> _Chunk:
         raise NotImplementedError
 
-    def _fill(self) -> bool:
-        if self.exhausted:
-            return False
+    def _simulate_next(self) -> tuple[SimResult, _Chunk] | None:
+        """The scene's next chunk, simulated and put on the wire (``None`` at its end)."""
         try:
             result = next(self._chunks)
         except StopIteration:
+            return None
+        return result, self._convert(result)
+
+    def _fill(self) -> bool:
+        """Queue the next chunk; False at the scene's end.
+
+        Paced, the chunk after it is simulated at once on a worker thread,
+        while this one is handed out: simulating a chunk of a large skin takes
+        0.1-0.2 s, which a reader waiting for it would see as a stalled bus
+        (a backlog its driver sheds beyond its read cap).  The chunks and
+        their order are the same either way.
+        """
+        if self.exhausted:
+            return False
+        got = self._ahead.result() if self._ahead is not None else self._simulate_next()
+        self._ahead = None
+        if got is None:
             self.exhausted = True
             return False
+        result, chunk = got
         self.results.append({"explorations": [e.to_dict() for e in result.explorations],
                              "faults": result.faults, "end_ns": result.end_ns})
-        self._items.append(self._convert(result))
+        self._items.append(chunk)
+        if self.speed is not None:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scene_ahead")
+            self._ahead = self._pool.submit(self._simulate_next)
         return True
 
     @property

@@ -283,3 +283,42 @@ def test_wire_throughput_reports_every_frame_and_agrees_with_the_per_frame_path(
     else:  # delivered samples: corrupt frames fail their CRC
         assert out["frames"] == sent - int(rows.corrupt.sum())
     assert out["reference_frames"] == 500 and out["batch_frames_per_s"] > 0 and out["simulated_s"] > 0
+
+
+def test_a_paced_source_simulates_the_next_chunk_while_the_reader_takes_this_one():
+    """Live (paced), the chunk after the one being read is simulated on a worker thread at once, so a reader
+    never waits for a whole chunk's simulation between two reads; the frames are those of the unpaced
+    source, in the same order."""
+    import threading
+
+    data = copy.deepcopy(NAO)
+    data["explorations"] = [dict(data["explorations"][0], material=m) for m in ("steel", "cork", "felt")]
+    scene = parse_scene(data)
+    src = SkinCanSource(scene, speed=1e6, chunk_s=0.5)
+    converting, release = threading.Event(), threading.Event()
+    convert = src._convert
+    calls = []
+
+    def gated(result):
+        calls.append(threading.current_thread().name)
+        if len(calls) == 2:  # the second chunk: hold its simulation until the reader has read on
+            converting.set()
+            assert release.wait(60.0)
+        return convert(result)
+
+    src._convert = gated
+    src.open()
+    first = src.recv_batch(100, 0.0)  # the first chunk is queued and the second starts on the worker
+    assert len(first) == 100
+    assert converting.wait(60.0), "the next chunk was not simulated while this one was read"
+    rest_of_first = src.recv_batch(len(src._items[0]), 0.0)  # the first chunk to its end, the second still held
+    release.set()
+    rest = src.recv_batch(10**7, 0.0)
+    while len(more := src.recv_batch(10**7, 0.0)):
+        rest = np.concatenate([rest, more])
+    assert calls[0] == threading.main_thread().name and calls[1].startswith("scene_ahead")
+    plain = SkinCanSource(scene, chunk_s=0.5)
+    plain.open()
+    want = plain.recv_batch(10**8, 0.0)
+    got = np.concatenate([first, rest_of_first, rest])
+    assert len(got) == len(want) > 0 and (got == want).all()
