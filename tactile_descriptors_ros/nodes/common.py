@@ -25,7 +25,7 @@ from ..errors import TactileError
 from .entry import note_interrupts
 
 __all__ = [
-    "HOST_TIME_LIMIT_MS",
+    "host_age_ms",
     "Status",
     "Diagnostics",
     "RateMeter",
@@ -37,6 +37,14 @@ __all__ = [
 #: A stamp further than this from the host clock [ms] is not on it (``stamp_source: device``: a simulator's
 #: scene time, a bridge's own clock): the age of such data is counted as not on host time, never timed.
 HOST_TIME_LIMIT_MS = 3_600_000.0
+
+
+def host_age_ms(now_ns: int, stamp_ns: int) -> float | None:
+    """``now_ns - stamp_ns`` in ms, or ``None`` when the stamp is not on the host clock (further than
+    :data:`HOST_TIME_LIMIT_MS`): a diagnostic counts such data, it never times it."""
+    age_ms = (now_ns - stamp_ns) / 1e6
+    return age_ms if abs(age_ms) < HOST_TIME_LIMIT_MS else None
+
 _LEVELS = {"ok": 0, "warn": 1, "error": 2, "stale": 3}
 
 

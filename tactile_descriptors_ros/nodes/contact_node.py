@@ -57,7 +57,7 @@ from ..topics import (
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import HOST_TIME_LIMIT_MS, Diagnostics, Status, run_node, steady_clock, take_waiting
+from .common import Diagnostics, Status, host_age_ms, run_node, steady_clock, take_waiting
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .parameters import NodeParameters
@@ -306,8 +306,8 @@ class ContactNode(Node):
         p.messages += 1
         self.contacts_published += 1
         self.newest_ns = max(self.newest_ns, window.end_ns)
-        age_ms = (time.time_ns() - window.end_ns) / 1e6
-        if abs(age_ms) < HOST_TIME_LIMIT_MS:
+        age_ms = host_age_ms(time.time_ns(), window.end_ns)
+        if age_ms is not None:
             self._age_ms.append(age_ms)
         else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
             self.contacts_not_host_time += 1

@@ -59,7 +59,7 @@ from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
-from .common import HOST_TIME_LIMIT_MS, Diagnostics, RateMeter, Status, run_node, steady_clock, take_waiting
+from .common import Diagnostics, RateMeter, Status, host_age_ms, run_node, steady_clock, take_waiting
 from .conversions import (
     biotac_msg_to_chunk,
     descriptor_layout_to_msg,
@@ -243,8 +243,8 @@ class WindowNode(Node):
                 items += got
             newest = _newest_sample_ns(sub_msg)
             if newest is not None:
-                age_ms = (now_ns - newest) / 1e6
-                if abs(age_ms) < HOST_TIME_LIMIT_MS:
+                age_ms = host_age_ms(now_ns, newest)
+                if age_ms is not None:
                     self._frames_age_ms.append(age_ms)
                 else:  # device stamps (a simulator's scene time, a bridge's own clock): no age on the host clock
                     self.frames_not_host_time += 1
