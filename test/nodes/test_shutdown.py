@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from stacks import native_stacks
 
 pytestmark = pytest.mark.ros
 
@@ -70,7 +71,11 @@ def _signal_when_ready(proc: subprocess.Popen, ready: str, signum: int) -> str:
         line = proc.stdout.readline().strip()
         assert line == ready, proc.stderr.read() if proc.poll() is not None else line
         proc.send_signal(signum)
-        _, err = proc.communicate(timeout=120)
+        try:
+            _, err = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"still running 120 s after signal {signum}; its threads:\n"
+                                 f"{native_stacks(proc.pid)}") from None
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -175,3 +180,17 @@ def test_sigterm_still_stops_a_spinning_node_cleanly(fault_handler):
     assert proc.returncode == 0, err
     assert (STACK_HEADER in err) == fault_handler, err
     assert "Traceback" not in err, err
+
+
+def test_a_process_that_does_not_end_is_reported_with_its_native_and_python_stacks():
+    """What a shutdown test shows when a node hangs: the native call it is stuck in and the Python line
+    that made it."""
+    code = "import time\ndef stuck_here():\n    print('stuck', flush=True)\n    time.sleep(600)\nstuck_here()\n"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "stuck"
+        stacks = native_stacks(proc.pid)
+    finally:
+        proc.kill()
+        proc.communicate()
+    assert "clock_nanosleep" in stacks and "stuck_here (<string>:4)" in stacks, stacks
