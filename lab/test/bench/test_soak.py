@@ -34,10 +34,31 @@ def test_lost_and_late_frames_come_from_every_window_node_and_nothing_else():
 def test_soak_scene_lasts_the_soak_without_simulated_frame_faults(tmp_path):
     import yaml
 
-    path, seconds = soak_scene(600, "nao", tmp_path)
+    from tactile_descriptors_ros.sim.scene import scene_path
+
+    path, seconds, cycle_s = soak_scene(600, "nao", tmp_path)
     assert seconds >= 600
     data = yaml.safe_load(path.read_text())
     assert "dropped_frames" not in data["effects"] and "corrupt_frames" not in data["effects"]
+    # the demo whole, over and over: each cycle ends with the large objects that press every cell
+    demo = yaml.safe_load(scene_path("demo_nao").read_text())["explorations"]
+    cycles = len(data["explorations"]) // len(demo)
+    assert cycles >= 2 and data["explorations"] == demo * cycles
+    assert cycle_s > 60 and (cycles - 1) * cycle_s < seconds <= cycles * cycle_s
+
+
+def test_rss_growth_is_measured_after_one_cycle_of_the_scene_when_that_is_longer_than_a_minute():
+    # 76 s cycles: the second cycle's work is at the level of the first, the RSS step inside the first is not growth
+    s = NodeSamples("window_node", "window_node", 1, t_s=[0, 60, 80, 300, 600], rss_mb=[10, 340, 450, 450, 450],
+                    cpu_s=[0, 1, 2, 3, 4])
+    r = SoakReport("nao", 700.0, 600.0, 10.0, [s], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {}, cycle_s=76.0)
+    d = r.to_dict()
+    assert d["warmup_s"] == 76.0 and d["nodes"]["window_node"]["rss_at_warmup_mb"] == 450
+    assert d["nodes"]["window_node"]["rss_growth_after_warmup_percent"] == pytest.approx(0.0)
+    assert d["goal"]["rss_met"] is True
+    # a scene shorter than a minute: the first minute is the warm-up
+    short = SoakReport("nao", 700.0, 600.0, 10.0, [s], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {}, cycle_s=20.0)
+    assert short.to_dict()["warmup_s"] == 60.0 and short.to_dict()["goal"]["rss_met"] is False
 
 
 @pytest.mark.ros
