@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import TactileError
+from .deadline import END_WITHIN_S, end_process_after
 from .entry import note_interrupts
 
 __all__ = [
@@ -222,6 +223,11 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
     then goes on to rclpy's handler as always: ``ros2 launch`` sends SIGTERM
     to a node still running 5 s after Ctrl-C, so a node hung in a call that
     never returns shows where.
+
+    Once ``close()`` has run, the process ends within
+    :data:`~tactile_descriptors_ros.nodes.deadline.END_WITHIN_S` with the
+    same status, even if tearing down the middleware blocks
+    (:mod:`~tactile_descriptors_ros.nodes.deadline`).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -253,6 +259,7 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
         code = 2
     except Exception:
         if rclpy.ok() and not interrupted():
+            code = 1  # the status Python gives the traceback that follows
             raise
         # a call failed because Ctrl-C shut the context down under it: a clean stop
     finally:
@@ -263,6 +270,8 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
                     close()
                 except Exception as exc:  # noqa: BLE001 - report, keep shutting down
                     _logger_of(node, factory).error(f"while closing: {exc!r}")
+        # Everything is saved: the middleware's teardown may not hold the process up for long.
+        end_process_after(END_WITHIN_S, code, _logger_of(node, factory).name)
         if node is not None:
             try:
                 node.destroy_node()

@@ -194,3 +194,56 @@ def test_a_process_that_does_not_end_is_reported_with_its_native_and_python_stac
         proc.kill()
         proc.communicate()
     assert "clock_nanosleep" in stacks and "stuck_here (<string>:4)" in stacks, stacks
+
+
+STUCK_TEARDOWN = """
+import ctypes, sys
+from rclpy.node import Node
+from tactile_descriptors_ros.errors import TactileError
+from tactile_descriptors_ros.nodes.common import run_node
+
+FAIL = {fail}
+
+
+class Stuck(Node):
+    def __init__(self):
+        super().__init__("stuck")
+        self.timer = self.create_timer(0.01, self.once)
+
+    def once(self):
+        self.timer.cancel()
+        print("spinning", flush=True)
+        if FAIL:
+            raise TactileError("the device went away")
+
+    def close(self):
+        print("closed", file=sys.stderr, flush=True)
+
+    def destroy_node(self):
+        # a native call that blocks holding the GIL, as a DDS teardown stuck on a locked shared-memory port does
+        ctypes.PyDLL(None).sleep(600)
+
+
+sys.exit(run_node(Stuck))
+"""
+
+
+@pytest.mark.parametrize("fail, status", [(False, 0), (True, 2)])
+def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, status):
+    """A teardown that blocks in native code holding the GIL (no Python thread can run) does not hold the
+    process: it ends ``END_WITHIN_S`` after ``close()`` with the status the node would have returned, and
+    says why on stderr."""
+    from tactile_descriptors_ros.nodes.deadline import END_WITHIN_S
+
+    proc = _start(STUCK_TEARDOWN.format(fail=fail), fault_handler=False)
+    signum = signal.SIGINT
+    if fail:  # the node stops by itself; the signal only has to find it
+        signum = 0
+    err = _signal_when_ready(proc, "spinning", signum)
+    assert proc.returncode == status, err
+    lines = err.splitlines()
+    warning = [i for i, line in enumerate(lines) if f"still not ended {END_WITHIN_S:.1f} s after the node closed"
+               in line]
+    assert len(warning) == 1 and "[stuck]" in lines[warning[0]], err
+    assert f"ending with status {status}" in lines[warning[0]], err
+    assert lines.index("closed") < warning[0], err
