@@ -112,6 +112,14 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _whole(text: str, keep: int = 4000) -> str:
+    """A failed call's output for the failure message: whole (a crash dump names the call it crashed in),
+    but the middle of a very long one (the 100,000-character value echoed) cut out."""
+    if len(text) <= 2 * keep:
+        return text
+    return f"{text[:keep]}\n...({len(text) - 2 * keep} chars)...\n{text[-keep:]}"
+
+
 def _value(text: str) -> str:
     """The value of ``ros2 param get``'s answer (``Double value is: 0.5`` -> ``0.5``)."""
     m = re.search(r"value is: (.*?)\n?\Z", text, re.S)
@@ -147,9 +155,9 @@ def test_every_writable_parameter_survives_hostile_sets_through_the_cli(graph):
                         problems.append(f"{node} {name} {shown}: accepted {got}, outside {param.range}")
                 restored = g.ros2_node("param", "set", *CLI, node, name, "--", original, check=False)
                 if "Set parameter successful" not in restored:
-                    problems.append(f"{node} {name}: could not set back {original!r}: {restored[-300:]}")
+                    problems.append(f"{node} {name}: could not set back {original!r}: {_whole(restored)}")
             elif not failed:
-                problems.append(f"{node} {name} {shown}: no answer with a reason: {out[-300:]}")
+                problems.append(f"{node} {name} {shown}: no answer with a reason: {_whole(out)}")
             dead = [n for n, pid in pids.items() if not _alive(pid)]
             if dead:
                 problems.append(f"{node} {name} {shown}: {', '.join(dead)} died")

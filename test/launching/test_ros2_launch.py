@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from stacks import native_stacks
 
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.launching.graph import build_graph
@@ -169,15 +170,25 @@ def ctrl_c(proc: subprocess.Popen, log: Path) -> tuple[list, str]:
     procs = node_processes(proc)
     assert len(procs) > 1, "ros2 launch started no nodes"
     os.killpg(proc.pid, signal.SIGINT)
-    _, alive = psutil.wait_procs(procs, timeout=4 * SIGTERM_AFTER_S)
+    # A node still running after ros2 launch escalated it to SIGTERM is stuck: its stacks say where.
+    _, late = psutil.wait_procs(procs, timeout=SIGTERM_AFTER_S + 2)
+    stacks = [f"\nstacks of {p.pid} {_cmdline(p)}:\n{native_stacks(p.pid)}" for p in late if p.pid != proc.pid]
+    _, alive = psutil.wait_procs(late, timeout=3 * SIGTERM_AFTER_S)
     proc.wait(timeout=10)
-    return alive, log.read_text(errors="replace")
+    return alive, log.read_text(errors="replace") + "".join(stacks)
+
+
+def _cmdline(p) -> str:
+    try:
+        return " ".join(p.cmdline()[:2])
+    except Exception:  # noqa: BLE001 - it ended meanwhile
+        return "(ended)"
 
 
 def assert_clean_shutdown(alive: list, text: str, executables: list[str]) -> None:
     assert not alive, f"still running after Ctrl-C: {alive}\n{text[-3000:]}"
     # A node that did not end on SIGINT within SIGTERM_AFTER_S is escalated and logged so.
-    assert "escalating to 'SIGTERM'" not in text and "escalating to 'SIGKILL'" not in text, text[-3000:]
+    assert "escalating to 'SIGTERM'" not in text and "escalating to 'SIGKILL'" not in text, text[-20000:]
     for bad in ("Traceback", "RCLError", "KeyboardInterrupt", "process has died"):
         assert bad not in text, f"{bad!r} in the launch output:\n{text[-4000:]}"
     # ros2 launch names a process <executable>-<n>
