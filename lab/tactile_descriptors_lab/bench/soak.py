@@ -78,6 +78,10 @@ class NodeSamples:
     rss_mb: list[float] = field(default_factory=list)
     cpu_s: list[float] = field(default_factory=list)
 
+    def rss_at(self, t_s: float) -> float | None:
+        """RSS of the first sample at or after ``t_s`` [MB] (``None`` if the soak ended before)."""
+        return next((r for t, r in zip(self.t_s, self.rss_mb) if t >= t_s), None)
+
     def growth_after_s(self, after_s: float) -> float | None:
         """Largest RSS after ``after_s`` relative to the RSS at ``after_s`` [%] (``None`` if too short)."""
         idx = [i for i, t in enumerate(self.t_s) if t >= after_s]
@@ -184,12 +188,8 @@ class SoakReport:
         """Per node, the RSS of the first sample at or after every whole minute, from 0 [MB]."""
         out = {}
         for n in self.nodes:
-            row = []
-            for minute in range(int(self.seconds // 60) + 1):
-                r = next((r for t, r in zip(n.t_s, n.rss_mb) if t >= 60.0 * minute), None)
-                if r is not None:
-                    row.append(round(r, 1))
-            out[n.name] = row
+            at = (n.rss_at(60.0 * minute) for minute in range(int(self.seconds // 60) + 1))
+            out[n.name] = [round(r, 1) for r in at if r is not None]
         return out
 
     def descriptors(self) -> int:
@@ -203,7 +203,7 @@ class SoakReport:
             nodes[n.name] = {
                 "executable": n.executable, "pid": n.pid, "t_s": n.t_s, "rss_mb": n.rss_mb,
                 "rss_start_mb": n.rss_mb[0] if n.rss_mb else None,
-                "rss_at_warmup_mb": next((r for t, r in zip(n.t_s, n.rss_mb) if t >= self.warmup_s), None),
+                "rss_at_warmup_mb": n.rss_at(self.warmup_s),
                 "rss_end_mb": n.rss_mb[-1] if n.rss_mb else None,
                 "rss_growth_after_warmup_percent": n.growth_after_s(self.warmup_s),
                 "rss_rate_after_warmup_mb_per_min": n.rate_mb_per_min(self.warmup_s),
