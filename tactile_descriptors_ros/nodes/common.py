@@ -263,15 +263,17 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
             raise
         # a call failed because Ctrl-C shut the context down under it: a clean stop
     finally:
+        saved = True
         if node is not None and built:
             close = getattr(node, "close", None)
             if close is not None:
                 try:
                     close()
                 except Exception as exc:  # noqa: BLE001 - report, keep shutting down
+                    saved = False
                     _logger_of(node, factory).error(f"while closing: {exc!r}")
-        # Everything is saved: the middleware's teardown may not hold the process up for long.
-        end_process_after(END_WITHIN_S, code, _logger_of(node, factory).name)
+        # Closed: the middleware's teardown may not hold the process up for long.
+        end_process_after(END_WITHIN_S, code, _logger_of(node, factory).name, saved)
         if node is not None:
             try:
                 node.destroy_node()

@@ -88,7 +88,7 @@ def _arm(libc: ctypes.CDLL, after_s: float, function: str, argument: int | None)
     _armed.append(timer)
 
 
-def end_process_after(limit_s: float, status: int, who: str) -> bool:
+def end_process_after(limit_s: float, status: int, who: str, saved: bool = True) -> bool:
     """End this process ``limit_s`` from now with exit ``status``, whatever its threads are doing.
 
     Parameters
@@ -99,6 +99,8 @@ def end_process_after(limit_s: float, status: int, who: str) -> bool:
         The exit status to end with (the one the node would have returned).
     who
         The node's logger name, for the warning.
+    saved
+        Whether the node's ``close()`` finished (the warning says so, or that it failed).
 
     Returns
     -------
@@ -106,8 +108,9 @@ def end_process_after(limit_s: float, status: int, who: str) -> bool:
         ``True`` if the timers are armed; ``False`` if only the fault handler's timer could be (the
         process then ends with its Python stack and status 1).
     """
+    closing = "everything was saved" if saved else "closing had failed (logged above)"
     text = (f"[WARN] [{who}]: still not ended {limit_s:.1f} s after the node closed (a blocked middleware "
-            f"teardown); everything was saved; ending with status {status}")
+            f"teardown); {closing}; ending with status {status}")
     message = ctypes.create_string_buffer(text.encode())
     try:
         libc = _libc_with_timers()

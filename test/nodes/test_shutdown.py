@@ -218,6 +218,8 @@ class Stuck(Node):
 
     def close(self):
         print("closed", file=sys.stderr, flush=True)
+        if FAIL:
+            raise OSError("the model's disk is gone")
 
     def destroy_node(self):
         # a native call that blocks holding the GIL, as a DDS teardown stuck on a locked shared-memory port does
@@ -228,11 +230,12 @@ sys.exit(run_node(Stuck))
 """
 
 
-@pytest.mark.parametrize("fail, status", [(False, 0), (True, 2)])
-def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, status):
+@pytest.mark.parametrize("fail, status, closing", [(False, 0, "everything was saved"),
+                                                   (True, 2, "closing had failed (logged above)")])
+def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, status, closing):
     """A teardown that blocks in native code holding the GIL (no Python thread can run) does not hold the
     process: it ends ``END_WITHIN_S`` after ``close()`` with the status the node would have returned, and
-    says why on stderr."""
+    says why on stderr, and whether closing had finished."""
     from tactile_descriptors_ros.nodes.deadline import END_WITHIN_S
 
     proc = _start(STUCK_TEARDOWN.format(fail=fail), fault_handler=False)
@@ -245,5 +248,5 @@ def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, 
     warning = [i for i, line in enumerate(lines) if f"still not ended {END_WITHIN_S:.1f} s after the node closed"
                in line]
     assert len(warning) == 1 and "[stuck]" in lines[warning[0]], err
-    assert f"ending with status {status}" in lines[warning[0]], err
+    assert f"{closing}; ending with status {status}" in lines[warning[0]], err
     assert lines.index("closed") < warning[0], err
