@@ -273,7 +273,10 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
                     saved = False
                     _logger_of(node, factory).error(f"while closing: {exc!r}")
         # Closed: the middleware's teardown may not hold the process up for long.
-        end_process_after(END_WITHIN_S, code, _logger_of(node, factory).name, saved)
+        logger = _logger_of(node, factory)
+        if not end_process_after(END_WITHIN_S, code, logger.name, saved):
+            logger.warning(f"no POSIX timers in this C library: if tearing down the middleware blocks, the "
+                           f"process ends {END_WITHIN_S:.1f} s from now with its stack and status 1")
         if node is not None:
             try:
                 node.destroy_node()

@@ -61,13 +61,13 @@ _armed: list[object] = []
 
 
 def _libc_with_timers() -> ctypes.CDLL:
-    libc = ctypes.CDLL(None)
+    libc = ctypes.CDLL(None, use_errno=True)  # so that ctypes.get_errno() reads a failed call's errno
     if hasattr(libc, "timer_create"):
         return libc
     rt = ctypes.util.find_library("rt")  # glibc before 2.34 keeps the timers in librt
     if rt is None:
         raise OSError("no timer_create in this C library")
-    librt = ctypes.CDLL(rt)
+    librt = ctypes.CDLL(rt, use_errno=True)
     libc.timer_create, libc.timer_settime = librt.timer_create, librt.timer_settime
     return libc
 
@@ -109,8 +109,8 @@ def end_process_after(limit_s: float, status: int, who: str, saved: bool = True)
         process then ends with its Python stack and status 1).
     """
     closing = "everything was saved" if saved else "closing had failed (logged above)"
-    text = (f"[WARN] [{who}]: still not ended {limit_s:.1f} s after the node closed (a blocked middleware "
-            f"teardown); {closing}; ending with status {status}")
+    text = (f"[WARN] [{who}]: still not ended {limit_s:.1f} s after the node closed (tearing down the "
+            f"middleware blocked, or slower than that); {closing}; ending with status {status}")
     message = ctypes.create_string_buffer(text.encode())
     try:
         libc = _libc_with_timers()

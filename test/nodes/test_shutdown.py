@@ -203,6 +203,13 @@ from tactile_descriptors_ros.errors import TactileError
 from tactile_descriptors_ros.nodes.common import run_node
 
 FAIL = {fail}
+if {no_timers}:  # a C library without POSIX timers: the fault handler's timer bounds the end
+    from tactile_descriptors_ros.nodes import deadline
+
+    def _no_timers():
+        raise OSError("no timer_create in this C library")
+
+    deadline._libc_with_timers = _no_timers
 
 
 class Stuck(Node):
@@ -238,7 +245,7 @@ def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, 
     says why on stderr, and whether closing had finished."""
     from tactile_descriptors_ros.nodes.deadline import END_WITHIN_S
 
-    proc = _start(STUCK_TEARDOWN.format(fail=fail), fault_handler=False)
+    proc = _start(STUCK_TEARDOWN.format(fail=fail, no_timers=False), fault_handler=False)
     signum = signal.SIGINT
     if fail:  # the node stops by itself; the signal only has to find it
         signum = 0
@@ -250,3 +257,18 @@ def test_a_node_whose_middleware_teardown_blocks_still_ends_after_closing(fail, 
     assert len(warning) == 1 and "[stuck]" in lines[warning[0]], err
     assert f"{closing}; ending with status {status}" in lines[warning[0]], err
     assert lines.index("closed") < warning[0], err
+
+
+def test_without_posix_timers_the_fault_handler_ends_a_blocked_teardown_with_its_stack():
+    """Where libc has no ``timer_create``, the node says so when it closes, and the fault handler's timer ends
+    the blocked teardown ``END_WITHIN_S`` later, with the Python stack and status 1."""
+    from datetime import timedelta
+
+    from tactile_descriptors_ros.nodes.deadline import END_WITHIN_S
+
+    proc = _start(STUCK_TEARDOWN.format(fail=False, no_timers=True), fault_handler=False)
+    err = _signal_when_ready(proc, "spinning", signal.SIGINT)
+    assert proc.returncode == 1, err
+    assert "[stuck]: no POSIX timers in this C library" in err, err
+    assert f"Timeout ({timedelta(seconds=END_WITHIN_S)})!" in err and "in destroy_node" in err, err
+    assert "still not ended" not in err, err
