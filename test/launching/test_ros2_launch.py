@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from ros_cli import finish, run_ros2
 from stacks import native_stacks
 
 from tactile_descriptors_ros.core.robot import load_robot
@@ -70,13 +71,15 @@ class Graph:
 
     def ros2(self, *args: str, timeout: float = CLI_S, check: bool = True) -> str:
         """Run ``ros2 ARGS``; return its stdout (raise with its output when it fails and ``check``;
-        without ``check``, return stdout and stderr together)."""
-        out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
-                             timeout=timeout)
-        if check and out.returncode != 0:
-            raise AssertionError(f"ros2 {' '.join(args)} exited {out.returncode}:\n{out.stdout}\n{out.stderr}"
+        without ``check``, return stdout and stderr together).  A call that overruns ``timeout`` is stopped
+        with Ctrl-C (:func:`ros_cli.finish`) and raises :class:`subprocess.TimeoutExpired`."""
+        run = run_ros2(*args, env=self.env, timeout_s=timeout)
+        if run.stopped:
+            raise subprocess.TimeoutExpired(["ros2", *args], timeout, output=run.stdout, stderr=run.stderr)
+        if check and run.returncode != 0:
+            raise AssertionError(f"ros2 {' '.join(args)} exited {run.returncode}:\n{run.stdout}\n{run.stderr}"
                                  f"\n--- launch log:\n{self.output()[-4000:]}")
-        return out.stdout if check else out.stdout + out.stderr
+        return run.stdout if check else run.text
 
     def output(self) -> str:
         return self.log.read_text(errors="replace")
@@ -98,17 +101,13 @@ class Graph:
         returned together)."""
         deadline = time.monotonic() + DISCOVERY_S
         while True:
-            try:
-                out = subprocess.run([str(BIN / "ros2"), *args], env=self.env, capture_output=True, text=True,
-                                     timeout=CLI_S)
-                code, text = out.returncode, out.stdout + out.stderr
-                undiscovered = any(m in text for m in NOT_YET_DISCOVERED)
-            except subprocess.TimeoutExpired as exc:
-                code, undiscovered = None, True
-                text = f"no answer within {CLI_S:.0f} s; output so far:\n" + "".join(
-                    o.decode(errors="replace") if isinstance(o, bytes) else o for o in (exc.stdout, exc.stderr) if o)
+            run = run_ros2(*args, env=self.env, timeout_s=CLI_S)
+            code, text = run.returncode, run.text
+            undiscovered = run.stopped or any(m in text for m in NOT_YET_DISCOVERED)
+            if run.stopped:
+                text = f"no answer within {CLI_S:.0f} s, stopped with Ctrl-C; output so far:\n{text}"
             if not undiscovered and (code == 0 or not check):
-                return out.stdout if check else text
+                return run.stdout if check else text
             if not undiscovered or time.monotonic() > deadline:
                 raise AssertionError(f"ros2 {' '.join(args)} exited {code}:\n{text}"
                                      f"\n--- launch log:\n{self.output()[-4000:]}")
@@ -251,20 +250,13 @@ def test_every_topic_echoes_once_with_default_qos(graph):
               for t, ty in topics.items()}
     failed, stopped = {}, []
     for topic, p in echoes.items():
-        try:
-            out, err = p.communicate(timeout=FIRST_PREDICTION_S)
-        except subprocess.TimeoutExpired:
-            # Stopped as a user would, with Ctrl-C.  A CLI process that printed its message and then hung on its
-            # way out (its own DDS teardown: seen once, on Jazzy, in CI) has still echoed the topic.
+        # A CLI process that printed its message and then hung on its way out (its own DDS teardown: seen once,
+        # on Jazzy, in CI) has still echoed the topic: stopped with Ctrl-C, its status is not judged.
+        run = finish(p, FIRST_PREDICTION_S)
+        if run.stopped:
             stopped.append(topic)
-            p.send_signal(signal.SIGINT)
-            try:
-                out, err = p.communicate(timeout=CLI_S)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                out, err = p.communicate()
-        if (p.returncode != 0 and topic not in stopped) or not out.rstrip().endswith("---"):
-            failed[topic] = (p.returncode, out[-300:], err[-300:])
+        if (run.returncode != 0 and not run.stopped) or not run.stdout.rstrip().endswith("---"):
+            failed[topic] = (run.returncode, run.stdout[-300:], run.stderr[-300:])
     assert not failed, failed
     if stopped:
         print(f"ros2 topic echo --once did not exit after echoing, stopped with Ctrl-C: {stopped}")

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from descriptor_msgs import descriptor_msg
 from node_helpers import spin_until
+from ros_cli import run_ros2
 
 pytestmark = pytest.mark.ros
 
@@ -220,9 +221,7 @@ def test_the_values_that_stopped_the_classifier_are_refused_through_the_ros2_cli
     that it took silently; each refused with a reason, the node alive and its value unchanged."""
     import random
     import time
-    from pathlib import Path
 
-    bin_dir = Path(sys.prefix) / "bin"
     ns = f"cli_{random.randint(0, 10**9)}"
     env = {**os.environ, "ROS_DOMAIN_ID": str(random.randint(1, 100)), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "PYTHONPATH": os.pathsep.join(p for p in (os.getcwd(), os.environ.get("PYTHONPATH", "")) if p)}
@@ -234,12 +233,11 @@ def test_the_values_that_stopped_the_classifier_are_refused_through_the_ros2_cli
     def ros2(*args: str, stdout_only: bool = False) -> str:
         deadline = time.monotonic() + 180
         while True:  # asked again while the CLI's own discovery has not yet seen the node
-            out = subprocess.run([str(bin_dir / "ros2"), *args], env=env, capture_output=True, text=True,
-                                 timeout=120)
-            text = out.stdout + out.stderr
-            if not any(m in text for m in ("Node not found", "Wait for service timed out")):
+            run = run_ros2(*args, env=env, timeout_s=120)
+            assert not run.stopped, f"ros2 {' '.join(args)}: no answer within 120 s:\n{run.text}"
+            if not any(m in run.text for m in ("Node not found", "Wait for service timed out")):
                 # stderr may carry Fast DDS's stamped transport warnings on a loaded machine
-                return out.stdout if stdout_only else text
+                return run.stdout if stdout_only else run.text
             assert node.poll() is None and time.monotonic() < deadline, text
 
     try:

@@ -1,0 +1,59 @@
+"""Running the ``ros2`` CLI from tests the way a user does: a call that overruns is stopped with Ctrl-C.
+
+A ``ros2`` process is a DDS participant.  Killed outright (``subprocess.run``'s timeout sends SIGKILL) it
+cannot release its Fast DDS shared-memory port, and a lock taken in that port stays taken for every later
+participant that opens it.  So an overrun call gets SIGINT first, as a user's Ctrl-C, and SIGKILL only if it
+is still there :data:`STOP_S` later.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["ROS2", "STOP_S", "CliRun", "finish", "run_ros2"]
+
+#: The venv's ``ros2`` (the real CLI, built from upstream sources by the Makefile).
+ROS2 = Path(sys.prefix) / "bin" / "ros2"
+#: How long a call stopped with Ctrl-C may take to end before it is killed [s].
+STOP_S = 60.0
+
+
+@dataclass(frozen=True)
+class CliRun:
+    """What one ``ros2`` call did."""
+
+    #: The exit status; after a Ctrl-C, what the CLI returned for it (-9 when it had to be killed).
+    returncode: int
+    stdout: str
+    stderr: str
+    #: Whether the call overran its time and was stopped (Ctrl-C, then SIGKILL after :data:`STOP_S`).
+    stopped: bool
+
+    @property
+    def text(self) -> str:
+        return self.stdout + self.stderr
+
+
+def finish(proc: subprocess.Popen, timeout_s: float) -> CliRun:
+    """Wait for a started call (text pipes) for ``timeout_s``; stop it with Ctrl-C if it overruns."""
+    try:
+        out, err = proc.communicate(timeout=timeout_s)
+        return CliRun(proc.returncode, out, err, stopped=False)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=STOP_S)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    return CliRun(proc.returncode, out or "", err or "", stopped=True)
+
+
+def run_ros2(*args: str, env: dict[str, str], timeout_s: float) -> CliRun:
+    """Run ``ros2 ARGS`` for at most ``timeout_s`` (then Ctrl-C, see :func:`finish`)."""
+    proc = subprocess.Popen([str(ROS2), *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return finish(proc, timeout_s)
