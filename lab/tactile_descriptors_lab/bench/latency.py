@@ -303,6 +303,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     from tactile_descriptors_ros.launching.graph import build_graph
     from tactile_descriptors_ros.launching.processes import GraphProcesses
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
+    from tactile_descriptors_ros.nodes.common import executor_kind
     from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, stamp_to_ns
     from tactile_descriptors_ros.nodes.window_node import WindowNode
     from tactile_descriptors_ros.topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC, PREDICTION_TOPIC
@@ -516,7 +517,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
                      "hop_s": hop_s, "release_s": release_ns / 1e9, "duration_s": duration_s,
                      "in_process": in_process, "split_window_nodes": split_window_nodes, "drain_max": drain_max,
                      "groups": list(groups) if groups is not None else list(desc.descriptor.groups),
-                     "messages_per_s": len(pubs) / batch_s},
+                     "messages_per_s": len(pubs) / batch_s,
+                     "executor": "the bench's own" if in_process else executor_kind()},
         "window_s": length_s, "hop_s": hop_s, "duration_s": duration_s,
         "messages": n_messages, "predictions": len(received), "expected_predictions": expected,
         "e2e": e2e_summary, "wait": _summary(wait), "processing": _summary(proc),

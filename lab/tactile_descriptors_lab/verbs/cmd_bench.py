@@ -16,7 +16,9 @@ graph; ``--scale-graph --cells N`` instead runs N skin cells through skin
 drivers and one window node per body part, each its own process
 (lab/docs/performance.md, section Scale); ``--view-overhead`` instead measures the views' CPU
 on the NAO graph at full rate against the same graph without them
-(docs/view.md).  Reading the numbers: lab/docs/performance.md.
+(docs/view.md); ``--executor-overhead`` instead measures the CPU per message
+taken in each executor a node can spin in (``TACTILE_EXECUTOR``).  Reading
+the numbers: lab/docs/performance.md.
 """
 
 from __future__ import annotations
@@ -102,8 +104,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instead of timing: feed the NAO's contact node at full rate (700 frames messages/s) "
                         "with the views (its markers and images, tactile view with one page) and without, "
                         "--rounds times each, and report the views' CPU against the 10 %% target (docs/view.md)")
-    p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead "
-                   "(default 2 each)")
+    p.add_argument("--executor-overhead", action="store_true",
+                   help="instead of timing: the CPU a node pays per message taken in each executor it can spin in "
+                        "(TACTILE_EXECUTOR single and events), one NAO body part's frames at 700 messages/s, "
+                        "--rounds alternating runs of --seconds each (lab/docs/performance.md, section Latency)")
+    p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead, "
+                   "runs of each executor of --executor-overhead (default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
     p.add_argument("--parts", type=int, default=None,
                    help="body parts of --scale-graph, one driver and one window node each (default: one per 500 "
@@ -150,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
         return _scale_graph(args)
     if args.view_overhead:
         return _view_overhead(args)
+    if args.executor_overhead:
+        return _executor_overhead(args)
 
     from tactile_descriptors_lab.bench.bench import BenchMismatch, format_report, run_bench
     from tactile_descriptors_ros.core import fast
@@ -304,4 +312,29 @@ def _view_overhead(args: argparse.Namespace) -> int:
         return 1
     bar.close()
     print(json.dumps(report, default=float) if args.json else format_view_overhead(report))
+    return 0
+
+
+def _executor_overhead(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from tactile_descriptors_lab.bench.executor_overhead import format_executor_overhead, measure
+
+    if args.rounds < 1 or not args.seconds > 0:
+        print("tactile bench: error: --rounds and --seconds must be positive", file=sys.stderr)
+        return 2
+    bar = tqdm(total=2 * args.rounds, desc="executor overhead", unit="run", file=sys.stderr, leave=False)
+
+    def progress(text: str) -> None:
+        bar.set_postfix_str(text)
+        bar.update(1)
+
+    try:
+        report = measure(args.seconds, args.rounds, progress=progress)
+    except RuntimeError as exc:
+        bar.close()
+        print(f"tactile bench: error: executor overhead failed: {exc}", file=sys.stderr)
+        return 1
+    bar.close()
+    print(json.dumps(report) if args.json else format_executor_overhead(report))
     return 0

@@ -21,6 +21,8 @@ SKIP: dict[tuple[str, str], str] = {
     ("lab/docs/performance.md",
      "tactile bench --scale-graph --cells 10000 --parts 20 --hosts 2 --seconds 30 --json > hosts_10000.json"):
         "43 processes on three hosts for minutes; lab/test/bench/test_multi_host.py runs a small two-host graph",
+    ("lab/docs/performance.md", "tactile bench --executor-overhead --rounds 3 --seconds 15 --json"):
+        "six 15 s runs of two processes each; lab/test/bench/test_executor_overhead.py runs a short one",
     ("lab/docs/performance.md", "tactile bench --model-save"):
         "a benchmark of 100 durable saves of a 1,000-class model; lab/test/bench/test_model_save_bench.py runs a "
         "small one",
