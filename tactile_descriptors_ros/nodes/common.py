@@ -213,9 +213,10 @@ EXECUTOR_ENV = "TACTILE_EXECUTOR"
 EXECUTORS = ("single", "events")
 
 
-def executor_kind() -> str:
-    """The executor nodes spin in here: ``$TACTILE_EXECUTOR``, else ``single`` (:func:`spin`)."""
-    kind = os.environ.get(EXECUTOR_ENV, "") or "single"
+def executor_kind(kind: str | None = None) -> str:
+    """The executor to spin in: ``kind`` if given, else ``$TACTILE_EXECUTOR``, else ``single`` (:func:`spin`);
+    any other name is refused, naming the valid ones."""
+    kind = kind or os.environ.get(EXECUTOR_ENV, "") or "single"
     if kind not in EXECUTORS:
         raise TactileError(f"{EXECUTOR_ENV}={kind!r}: not an executor; one of {', '.join(EXECUTORS)}")
     return kind
@@ -237,7 +238,7 @@ def spin(node: Any, kind: str | None = None) -> None:
     A callback's exception ends the spin and is raised here, with either executor; the events executor
     also logs it itself first (``Exception in 'subscriptions' callback: ...`` and where it was raised).
     """
-    kind = kind or executor_kind()
+    kind = executor_kind(kind)
     if kind == "single":
         from rclpy.executors import SingleThreadedExecutor
 

@@ -101,3 +101,12 @@ def test_an_unknown_executor_is_refused_naming_the_valid_ones():
     assert out == "", out
     fatal = [line for line in err.splitlines() if "FATAL" in line]
     assert len(fatal) == 1 and "TACTILE_EXECUTOR='multi': not an executor; one of single, events" in fatal[0], err
+
+
+def test_an_executor_named_by_the_caller_is_checked_like_the_environments():
+    from tactile_descriptors_ros.errors import TactileError
+    from tactile_descriptors_ros.nodes.common import executor_kind
+
+    assert executor_kind("events") == "events"
+    with pytest.raises(TactileError, match="not an executor; one of single, events"):
+        executor_kind("multi")
