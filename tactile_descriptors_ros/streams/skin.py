@@ -164,11 +164,20 @@ class _Pending:
             self.c = np.concatenate([self.c, c]) if self.c.size else c
             self.v = np.concatenate([self.v, v]) if self.v.size else v
 
-    def take(self, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The samples ``sel`` (a mask) selects, removed."""
-        out = self.t[sel], self.c[sel], self.v[sel]
+    def take(self, sel: np.ndarray, group: np.ndarray, n_groups: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """The samples ``sel`` (a mask) selects, removed, split by ``group`` (each sample's, ``0..n_groups-1``):
+        one ``(t, c, v)`` per group, its samples in their order here."""
+        idx = np.flatnonzero(sel)
+        g = group[idx]
+        idx = idx[np.argsort(g, kind="stable")]
+        t, c, v = self.t[idx], self.c[idx], self.v[idx]
         keep = ~sel
         self.t, self.c, self.v = self.t[keep], self.c[keep], self.v[keep]
+        bounds = np.cumsum(np.bincount(g, minlength=n_groups)).tolist()
+        out, lo = [], 0
+        for hi in bounds:
+            out.append((t[lo:hi], c[lo:hi], v[lo:hi]))
+            lo = hi
         return out
 
     def drop_cells(self, mask_of_cell: np.ndarray) -> None:
@@ -468,20 +477,22 @@ class SkinStream:
         np.minimum.at(until, self._part_of[waited], reach[waited])
         b = self._batch_ns
         edge = np.where(until < big, (until // b) * b, np.iinfo(np.int64).min)  # the end of the last whole batch
-        for k in range(n_parts):
-            mask_a = self._part_of[self._acc.c] == k
-            mask_f = self._part_of[self._force.c] == k
-            mask_p = self._part_of[self._prox.c] == k
-            if not (mask_a.any() or mask_f.any()):
-                continue
-            end = big if final else int(edge[k])
-            sel_a = mask_a & (self._acc.t < end)
-            sel_f = mask_f & (self._force.t < end)
-            if not (sel_a.any() or sel_f.any()):
-                continue
-            sel_p = mask_p & (self._prox.t < end)
-            out += self._messages(self._parts[k], self._acc.take(sel_a), self._force.take(sel_f),
-                                  self._prox.take(sel_p))
+        end = np.full(n_parts, big) if final else edge
+        # every body part at once: the samples before their part's end; a part takes its proximity samples only
+        # when it has accelerometer or force samples due
+        part_a, part_f, part_p = (self._part_of[x.c] for x in (self._acc, self._force, self._prox))
+        sel_a, sel_f = self._acc.t < end[part_a], self._force.t < end[part_f]
+        due = np.zeros(n_parts, bool)
+        due[part_a[sel_a]] = True
+        due[part_f[sel_f]] = True
+        if not due.any():
+            return out
+        sel_p = due[part_p] & (self._prox.t < end[part_p])
+        acc = self._acc.take(sel_a, part_a, n_parts)
+        force = self._force.take(sel_f, part_f, n_parts)
+        prox = self._prox.take(sel_p, part_p, n_parts)
+        for k in np.flatnonzero(due).tolist():
+            out += self._messages(self._parts[k], acc[k], force[k], prox[k])
         if len(out) > n_parts:  # a backlog in several messages per part: in time order, the parts side by side
             out.sort(key=lambda m: m.stamp_ns)
         return out
