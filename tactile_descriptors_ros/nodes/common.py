@@ -211,6 +211,8 @@ def _fmt(v: Any) -> str:
 #: ``events``.
 EXECUTOR_ENV = "TACTILE_EXECUTOR"
 EXECUTORS = ("single", "events")
+#: A spinning node looks at its context at least this often [s], whatever else is due (:func:`spin`).
+SPIN_WAKE_S = 1.0
 
 
 def executor_kind(kind: str | None = None) -> str:
@@ -220,6 +222,10 @@ def executor_kind(kind: str | None = None) -> str:
     if kind not in EXECUTORS:
         raise TactileError(f"{EXECUTOR_ENV}={kind!r}: not an executor; one of {', '.join(EXECUTORS)}")
     return kind
+
+
+def _look_at_the_context() -> None:
+    """The wake-up timer's callback: nothing to do, the executor looks at the context when it returns."""
 
 
 def spin(node: Any, kind: str | None = None) -> None:
@@ -237,6 +243,12 @@ def spin(node: Any, kind: str | None = None) -> None:
 
     A callback's exception ends the spin and is raised here, with either executor; the events executor
     also logs it itself first (``Exception in 'subscriptions' callback: ...`` and where it was raised).
+
+    Either executor looks at the context at least every :data:`SPIN_WAKE_S`: rclpy's SIGINT handler
+    shuts the context down from a thread of its own and wakes the executors with a guard condition, and
+    ``SingleThreadedExecutor.spin`` waits with no timeout, so a wait that misses that wake-up, with no
+    timer or message due, never ends (seen once under load: a node whose only timer had stopped ignored
+    Ctrl-C for 60 s).  A timer of the node wakes it; the events executor's ``spin_once`` times out.
     """
     kind = executor_kind(kind)
     if kind == "single":
@@ -244,7 +256,11 @@ def spin(node: Any, kind: str | None = None) -> None:
 
         executor = SingleThreadedExecutor(context=node.context)
         executor.add_node(node)
-        executor.spin()
+        wake = node.create_timer(SPIN_WAKE_S, _look_at_the_context, clock=steady_clock())  # also under sim time
+        try:
+            executor.spin()
+        finally:
+            node.destroy_timer(wake)
         return
     from rclpy.experimental import EventsExecutor
 
@@ -252,7 +268,7 @@ def spin(node: Any, kind: str | None = None) -> None:
     executor.add_node(node)
     try:
         while node.context.ok():
-            executor.spin_once(timeout_sec=1.0)
+            executor.spin_once(timeout_sec=SPIN_WAKE_S)
     finally:
         executor.shutdown()
 

@@ -110,3 +110,55 @@ def test_an_executor_named_by_the_caller_is_checked_like_the_environments():
     assert executor_kind("events") == "events"
     with pytest.raises(TactileError, match="not an executor; one of single, events"):
         executor_kind("multi")
+
+
+
+def test_a_context_shut_down_while_the_executor_waits_with_nothing_due_still_ends_the_spin():
+    """rclpy's SIGINT handler shuts the context down from its own thread and wakes the executor through a
+    guard condition; a wait that misses the wake-up, with nothing else due, must still end (once, under
+    load, a node whose only timer had stopped ignored Ctrl-C for 60 s).  The context is shut down the way
+    that thread does it, without the wake-up, once the executor has begun to wait with nothing due.  (The
+    events executor's wait times out by construction: ``spin_once`` with a timeout.)"""
+    import sys
+    import threading
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from tactile_descriptors_ros.nodes.common import SPIN_WAKE_S, spin
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("spin_probe", context=ctx)
+    stopped, waiting, ended = threading.Event(), threading.Event(), threading.Event()
+
+    def once() -> None:
+        timer.cancel()  # from here on nothing of the node is due
+        stopped.set()
+
+    timer = node.create_timer(0.01, once)
+
+    def see_the_wait(frame, event, arg) -> None:  # the executor's call into rcl_wait, once the timer stopped
+        if event == "c_call" and stopped.is_set() and getattr(arg, "__name__", "") == "wait" \
+                and frame.f_code.co_name == "_wait_for_ready_callbacks":
+            waiting.set()
+
+    def run() -> None:
+        sys.setprofile(see_the_wait)
+        try:
+            spin(node, "single")
+        except ExternalShutdownException:
+            pass
+        finally:
+            sys.setprofile(None)
+        ended.set()
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    try:
+        assert waiting.wait(30.0), "the executor never waited after the node's timer stopped"
+        ctx.handle.shutdown()  # what the signal handler's thread does, without the guard condition's wake-up
+        assert ended.wait(SPIN_WAKE_S + 5.0), "spin still waits after its context was shut down"
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
