@@ -453,31 +453,38 @@ class SkinStream:
                 self._log("warning", f"cell {cell.cell_id}: start tare failed: {why}")
                 self._tared[i] = True  # publish anyway, untared (the diagnostics say so)
 
-    def _cut(self, final: bool) -> list[SkinPartFrames]:
-        """The messages due: per body part, the whole batches every waited-for cell has passed.
+    def _batch_ends(self, final: bool) -> np.ndarray:
+        """Per body part, the time before which its samples are due: the end of the last whole batch every
+        waited-for cell has passed (``final``: every sample).
 
         A cell has passed a time once its newest accelerometer and force
         samples are within one period of it (the next would be later); a
         cell whose newest sample is more than ``wait_s`` behind its part's
-        newest is not waited for.  ``final``: everything pending.
+        newest is not waited for.
         """
-        out: list[SkinPartFrames] = []
-        if not (self._acc.t.size or self._force.t.size):
-            return out
-        period_a, period_f = self._period_ns[0], self._period_ns[1]
+        n_parts = len(self._parts)
         big = np.iinfo(np.int64).max
+        if final:
+            return np.full(n_parts, big)
+        period_a, period_f = self._period_ns[0], self._period_ns[1]
         reach = np.where(self._has_a, self._last_a + int(period_a), big)
         reach = np.minimum(reach, np.where(self._has_f, self._last_f + int(period_f), big))
         newest = np.where(self._has_a, self._last_a, np.where(self._has_f, self._last_f, np.iinfo(np.int64).min))
-        n_parts = len(self._parts)
         part_newest = np.full(n_parts, np.iinfo(np.int64).min)
         np.maximum.at(part_newest, self._part_of, newest)
         waited = (newest >= part_newest[self._part_of] - self._wait_ns) & (self._has_a | self._has_f)
         until = np.full(n_parts, big)
         np.minimum.at(until, self._part_of[waited], reach[waited])
         b = self._batch_ns
-        edge = np.where(until < big, (until // b) * b, np.iinfo(np.int64).min)  # the end of the last whole batch
-        end = np.full(n_parts, big) if final else edge
+        return np.where(until < big, (until // b) * b, np.iinfo(np.int64).min)  # the end of the last whole batch
+
+    def _cut(self, final: bool) -> list[SkinPartFrames]:
+        """The messages due: per body part, its samples before :meth:`_batch_ends`, in whole batches."""
+        out: list[SkinPartFrames] = []
+        if not (self._acc.t.size or self._force.t.size):
+            return out
+        n_parts = len(self._parts)
+        end = self._batch_ends(final)
         # every body part at once: the samples before their part's end; a part takes its proximity samples only
         # when it has accelerometer or force samples due
         part_a, part_f, part_p = (self._part_of[x.c] for x in (self._acc, self._force, self._prox))

@@ -41,25 +41,15 @@ class _OnePartAtATime(SkinStream):
         out = []
         if not (self._acc.t.size or self._force.t.size):
             return out
-        big = np.iinfo(np.int64).max
-        reach = np.where(self._has_a, self._last_a + int(self._period_ns[0]), big)
-        reach = np.minimum(reach, np.where(self._has_f, self._last_f + int(self._period_ns[1]), big))
-        newest = np.where(self._has_a, self._last_a, np.where(self._has_f, self._last_f, np.iinfo(np.int64).min))
         n_parts = len(self._parts)
-        part_newest = np.full(n_parts, np.iinfo(np.int64).min)
-        np.maximum.at(part_newest, self._part_of, newest)
-        waited = (newest >= part_newest[self._part_of] - self._wait_ns) & (self._has_a | self._has_f)
-        until = np.full(n_parts, big)
-        np.minimum.at(until, self._part_of[waited], reach[waited])
-        b = self._batch_ns
-        edge = np.where(until < big, (until // b) * b, np.iinfo(np.int64).min)
+        edges = self._batch_ends(final)  # the same batch edges: only the taking differs
         for k in range(n_parts):
             mask_a = self._part_of[self._acc.c] == k
             mask_f = self._part_of[self._force.c] == k
             mask_p = self._part_of[self._prox.c] == k
             if not (mask_a.any() or mask_f.any()):
                 continue
-            end = big if final else int(edge[k])
+            end = int(edges[k])
             sel_a = mask_a & (self._acc.t < end)
             sel_f = mask_f & (self._force.t < end)
             if not (sel_a.any() or sel_f.any()):
