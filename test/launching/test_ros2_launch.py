@@ -101,11 +101,15 @@ class Graph:
         fault in the CLI's own ``destroy_node``, before it had sent anything; a crash says nothing about the
         node asked, whose process the callers check themselves); bounded by :data:`DISCOVERY_S`.  Any other
         failure raises at once (without ``check``, stdout and stderr are returned together)."""
-        deadline = time.monotonic() + DISCOVERY_S
+        started = time.monotonic()
+        deadline = started + DISCOVERY_S
         crashes: list[str] = []
+        attempts: list[str] = []  # when each try ended and how: the failure message says what happened before
         while True:
             run = run_ros2(*args, env=self.env, timeout_s=CLI_S)
             code, text = run.returncode, run.text
+            attempts.append(f"{time.monotonic() - started:.0f} s: exit {code}, "
+                            + ("stopped" if run.stopped else repr(text.strip().splitlines()[-1:])))
             crashed = code < 0 and not run.stopped
             if crashed:
                 crashes.append(f"ros2 {' '.join(args)[:200]} crashed (signal {-code}):\n{text[-3000:]}")
@@ -116,7 +120,13 @@ class Graph:
             if not undiscovered and (code == 0 or not check):
                 return run.stdout if check else text
             if not undiscovered or time.monotonic() > deadline:
+                seen = ""
+                if "Node not found" in text:  # what the graph held instead, seen by a CLI of its own
+                    nodes = run_ros2("node", "list", "-a", "--no-daemon", "--spin-time", "5", env=self.env,
+                                     timeout_s=CLI_S)
+                    seen = f"\n--- ros2 node list -a:\n{nodes.text}"
                 raise AssertionError(f"ros2 {' '.join(args)} exited {code}:\n{text}"
+                                     + f"\n--- {len(attempts)} tries: " + "; ".join(attempts) + seen
                                      + "".join(f"\n--- earlier: {c}" for c in crashes)
                                      + f"\n--- launch log:\n{self.output()[-4000:]}")
 
