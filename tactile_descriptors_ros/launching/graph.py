@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import importlib.util
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -48,6 +49,8 @@ __all__ = [
     "NodeSpec",
     "read_params_file",
     "build_graph",
+    "NOT_ON_PYPI",
+    "unrunnable",
     "flatten_parameters",
     "parameters_document",
     "write_parameters_file",
@@ -58,6 +61,9 @@ PACKAGE = "tactile_descriptors_ros"
 LOG_LEVELS = ("debug", "info", "warn", "error", "fatal")
 #: Executables of the package (console scripts in setup.py).
 EXECUTABLES = ("biotac_driver", "skin_driver", "window_node", "classifier_node", "contact_node", "tf_publisher")
+#: Interface packages an executable imports that the ROS 2 wheels on PyPI do not carry: a ROS 2 install has
+#: them, and ``make setup`` builds them with the ros2 CLI from its sources; a venv of wheels alone lacks them.
+NOT_ON_PYPI = {"tf_publisher": "tf2_msgs"}
 #: Executables that talk to hardware (and switch to a simulated transport with ``--sim``).
 DRIVERS = ("biotac_driver", "skin_driver")
 _ENTRY_KEYS = {"executable", "body_parts", "namespace", "parameters", "sim_parameters", "remappings"}
@@ -172,6 +178,29 @@ def _entry(robot: RobotDescription, name: str, raw: Any) -> dict[str, Any]:
                                              source=robot.source),
         "remappings": tuple((str(a), str(b)) for a, b in (raw.get("remappings") or {}).items()),
     }
+
+
+def unrunnable(specs: Sequence[NodeSpec]) -> dict[str, str]:
+    """The nodes of ``specs`` that cannot start on this machine, and why.
+
+    A node whose executable imports an interface package that is not
+    installed (:data:`NOT_ON_PYPI`) would end at once with an ``ImportError``,
+    and a launcher that stops the graph when one node ends would stop the
+    whole graph with it; the launchers leave such a node out and say so.
+
+    Returns
+    -------
+    dict of str to str
+        Node name -> the reason, one line naming the missing package.
+    """
+    out: dict[str, str] = {}
+    for s in specs:
+        package = NOT_ON_PYPI.get(s.executable)
+        if package is not None and importlib.util.find_spec(package) is None:
+            out[s.name] = (f"{s.name} ({s.executable}) left out: it needs the {package} message package, which "
+                           f"is not installed (not on PyPI; a ROS 2 install has it, and make setup builds it "
+                           f"with the ros2 CLI)")
+    return out
 
 
 def build_graph(robot: RobotDescription | str | os.PathLike[str], *, sim_scene: str | os.PathLike[str] | None = None,

@@ -25,7 +25,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from ..errors import ConfigError, NodeExitedError
-from .graph import LOG_LEVELS, build_graph
+from .graph import LOG_LEVELS, build_graph, unrunnable
 
 __all__ = ["LAUNCH_ARGUMENTS", "ROS2_LAUNCH_ARGUMENTS", "graph_options", "check_argument_names",
            "launch_description_for"]
@@ -122,7 +122,7 @@ def _cli_arguments(context: Any) -> list[str] | None:
 
 def _nodes(context: Any, *args: Any, **kwargs: Any) -> list:
     """``OpaqueFunction`` body: the launch arguments -> one ``launch_ros`` ``Node`` per NodeSpec."""
-    from launch.actions import RegisterEventHandler
+    from launch.actions import LogInfo, RegisterEventHandler
     from launch.event_handlers import OnProcessExit
     from launch.substitutions import LaunchConfiguration
     from launch_ros.actions import Node
@@ -132,7 +132,9 @@ def _nodes(context: Any, *args: Any, **kwargs: Any) -> list:
         check_argument_names(given)
     values = {name: LaunchConfiguration(name).perform(context) for name, _, _ in LAUNCH_ARGUMENTS}
     specs = build_graph(LaunchConfiguration("robot").perform(context), **graph_options(values))
-    actions: list = []
+    left_out = unrunnable(specs)
+    actions: list = [LogInfo(msg=reason) for reason in left_out.values()]
+    specs = [s for s in specs if s.name not in left_out]
     for s in specs:
         node = Node(package=s.package, executable=s.executable, name=s.name, namespace=s.namespace,
                     parameters=[s.parameters], remappings=list(s.remappings), output="screen",

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import IO
 
 from ..errors import ConfigError
-from .graph import PACKAGE, NodeSpec, write_parameters_file
+from .graph import PACKAGE, NodeSpec, unrunnable, write_parameters_file
 
 __all__ = ["node_command", "RunningNode", "GraphProcesses", "localhost_environment", "run_until_interrupted"]
 
@@ -117,7 +117,12 @@ class GraphProcesses:
             raise ConfigError(f"no node named {unknown[0]!r} to place (nodes: {', '.join(sorted(names))})")
         self.prefix = {k: list(v) for k, v in (prefix or {}).items()}
         self.node_env = {k: dict(v) for k, v in (node_env or {}).items()}
-        self.specs = list(specs)
+        #: node name -> why it is not started (:func:`~.graph.unrunnable`); said at :meth:`start` on ``output``
+        #: (on stderr when ``output`` is None)
+        self.left_out = unrunnable(specs)
+        self.specs = [s for s in specs if s.name not in self.left_out]
+        if not self.specs:
+            raise ConfigError("no node can start here: " + "; ".join(self.left_out.values()))
         self.env = dict(os.environ if env is None else env)
         self.env.setdefault("PYTHONUNBUFFERED", "1")
         self.env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "1")
@@ -136,6 +141,8 @@ class GraphProcesses:
     def start(self) -> None:
         """Write the parameters file and start every node."""
         write_parameters_file(self.specs, self.params_file)
+        for reason in self.left_out.values():  # said even when the nodes' lines are kept quiet
+            print(f"[launch] {reason}", file=self.output if self.output is not None else sys.stderr, flush=True)
         width = max(len(s.name) for s in self.specs)
         for spec in self.specs:
             cmd = [*self.prefix.get(spec.name, []), *node_command(spec, self.params_file)]

@@ -21,7 +21,12 @@ class _Config:
         return context[self.name]
 
 
-def _stubs(monkeypatch):
+def _stubs(monkeypatch, not_on_pypi=None):
+    """Stub launch and launch_ros; every node's packages count as installed unless ``not_on_pypi`` says
+    otherwise (executable -> package), so the result does not depend on what this machine has."""
+    from tactile_descriptors_ros.launching import graph
+
+    monkeypatch.setattr(graph, "NOT_ON_PYPI", dict(not_on_pypi or {}))
     made = {}
 
     def record(kind):
@@ -37,6 +42,7 @@ def _stubs(monkeypatch):
     actions.DeclareLaunchArgument = record("arg")
     actions.OpaqueFunction = record("opaque")
     actions.RegisterEventHandler = record("handler")
+    actions.LogInfo = record("log")
     handlers = types.ModuleType("launch.event_handlers")
     handlers.OnProcessExit = record("on_exit")
     subs = types.ModuleType("launch.substitutions")
@@ -84,8 +90,8 @@ def test_launch_file_nodes_match_graph(repo_dir, monkeypatch, robot, sim, split)
         assert node.kwargs["ros_arguments"] == ["--log-level", "info"]
 
 
-def _launch_actions(repo_dir, monkeypatch, robot="shadow_hand", **values):
-    made = _stubs(monkeypatch)
+def _launch_actions(repo_dir, monkeypatch, robot="shadow_hand", not_on_pypi=None, **values):
+    made = _stubs(monkeypatch, not_on_pypi)
     spec = importlib.util.spec_from_file_location(f"launch_{robot}", repo_dir / "launch" / f"{robot}.launch.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -127,3 +133,12 @@ def test_drivers_false_starts_every_node_but_the_drivers(repo_dir, monkeypatch):
     assert [n.kwargs["executable"] for n in nodes] == ["window_node", "classifier_node", "tf_publisher",
                                                          "contact_node"]
     assert all(n.kwargs["ros_arguments"] == ["--log-level", "debug"] for n in nodes)
+
+
+def test_a_node_whose_message_package_is_missing_is_left_out_with_a_line_saying_so(repo_dir, monkeypatch):
+    actions = _launch_actions(repo_dir, monkeypatch, robot="nao", not_on_pypi={"tf_publisher": "tactile_no_such_msgs"})
+    nodes = [a for a in actions if a.kind == "node"]
+    assert [n.kwargs["executable"] for n in nodes] == ["skin_driver", "window_node", "classifier_node",
+                                                         "contact_node"]
+    said = [a.kwargs["msg"] for a in actions if a.kind == "log"]
+    assert len(said) == 1 and "tf_publisher" in said[0] and "tactile_no_such_msgs" in said[0], said

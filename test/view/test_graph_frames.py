@@ -34,6 +34,8 @@ def _frame_ids(msg) -> list[str]:
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize("robot", ["shadow_hand", "nao"])
 def test_every_frame_resolves_to_the_root_and_contacts_are_where_pressed(robot, ros_context, tmp_path):
+    pytest.importorskip("tf2_msgs", reason="no tf2_msgs (not on PyPI; make setup builds it with the ros2 CLI): "
+                                           "the launcher leaves tf_publisher out, and /tf_static has no tree")
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -67,7 +68,11 @@ def test_bench_soak_command_reports_every_node(tmp_path):
                           "--soak-sample-s", "1", "--json"], capture_output=True, text=True, timeout=240)
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
-    assert set(d["nodes"]) == {"skin_driver", "tf_publisher", "window_node", "contact_node", "classifier_node"}
+    # tf_publisher is left out where its tf2_msgs is not installed (not on PyPI), and the soak says so
+    has_tf = importlib.util.find_spec("tf2_msgs") is not None
+    assert set(d["nodes"]) == {"skin_driver", "window_node", "contact_node", "classifier_node"} | (
+        {"tf_publisher"} if has_tf else set())
+    assert ("tf_publisher (tf_publisher) left out" in out.stderr) is not has_tf, out.stderr[-2000:]
     for n in d["nodes"].values():
         assert len(n["rss_mb"]) >= 5 and n["rss_end_mb"] > 0 and n["cpu_percent"] is not None
     assert set(d["lost_frames"]) == {"lost_frames", "bad_frames", "sequence_restart"}
