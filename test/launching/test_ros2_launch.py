@@ -286,6 +286,13 @@ def test_every_topic_echoes_once_with_default_qos(graph):
         # A CLI process that printed its message and then hung on its way out (its own DDS teardown: seen once,
         # on Jazzy, in CI) has still echoed the topic: stopped with Ctrl-C, its status is not judged.
         run = finish(p, FIRST_PREDICTION_S)
+        if run.returncode < 0 and not run.stopped:
+            # the CLI ended by a signal we did not send, before printing anything (seen once at load 5: SIGKILL,
+            # no output, no OOM kill): as in Graph.ros2_node, a crashed CLI says nothing about the topic; ask again
+            print(f"ros2 topic echo {topic} ended by signal {-run.returncode} with {len(run.stdout)} characters "
+                  "out; asked again")
+            run = run_ros2("topic", "echo", "--once", "--no-daemon", "--no-arr", topic, topics[topic],
+                           env=graph.env, timeout_s=FIRST_PREDICTION_S)
         if run.stopped:
             stopped.append(topic)
         if (run.returncode != 0 and not run.stopped) or not run.stdout.rstrip().endswith("---"):
@@ -359,11 +366,34 @@ def test_readme_label_command_teaches_the_classifier(graph, repo_dir):
     assert model.is_file() and '"cork"' in model.read_text()
 
 
+def replay_scene(graph: Graph, driver: str) -> None:
+    """Play the simulated scene again: the driver's lifecycle cleanup and configure reopen the simulated transport.
+
+    The transitions go through the driver's ``change_state`` service, which ``ros2 service call`` waits for;
+    ``ros2 lifecycle set`` first looks the node's name up in the graph, and once, in CI, after hundreds of CLI
+    participants, that look-up said "Node not found" for minutes (``test_driver_lifecycle_transitions`` tests
+    ``ros2 lifecycle set`` itself).  Returns once a frames message of the new play has arrived."""
+    for transition in ("deactivate", "cleanup", "configure", "activate"):
+        out = graph.ros2_node("service", "call", f"{driver}/change_state", "lifecycle_msgs/srv/ChangeState",
+                              f"{{transition: {{label: {transition}}}}}")
+        assert "ChangeState_Response(success=True)" in out, f"{transition}: {out}"
+    topic, msg_type = next((t, ty) for t, ty in _topics(graph.robot).items() if t.endswith("/frames"))
+    namespace = driver.rsplit("/", 1)[0]
+    graph.ros2("topic", "echo", "--once", "--no-daemon", "--no-arr", f"{namespace}{topic}", msg_type,
+               timeout=FIRST_PREDICTION_S)
+
+
 def test_tare_save_reset_services(graph):
     driver = "/biotac_driver" if graph.robot == "shadow_hand" else "/skin_driver"
     ok, message = _trigger(graph, f"{driver}/tare")
-    # The scene is running (long_scene), so the frames are current: the tare either succeeds or is refused
-    # because a sensor is touched at that moment, and the driver says which.
+    if "the simulated scene has ended" in message:
+        # the module's tests outlasted the long scene on a loaded machine (seen at load 5): the driver is right
+        # to refuse, and the tare is asked again on a scene playing
+        print(f"tare: {message}; scene played again")
+        replay_scene(graph, driver)
+        ok, message = _trigger(graph, f"{driver}/tare")
+    # The scene is running, so the frames are current: the tare either succeeds or is refused because a sensor
+    # is touched at that moment, and the driver says which.
     assert "stale" not in message, message
     assert message, "tare answered with no message"
     if not ok:
