@@ -37,6 +37,11 @@ class CliRun:
     def text(self) -> str:
         return self.stdout + self.stderr
 
+    @property
+    def crashed(self) -> bool:
+        """Ended by a signal the caller did not send (not stopped, yet a negative status)."""
+        return self.returncode < 0 and not self.stopped
+
 
 def finish(proc: subprocess.Popen, timeout_s: float) -> CliRun:
     """Wait for a started call (text pipes) for ``timeout_s``; stop it with Ctrl-C if it overruns."""

@@ -110,7 +110,7 @@ class Graph:
             code, text = run.returncode, run.text
             attempts.append(f"{time.monotonic() - started:.0f} s: exit {code}, "
                             + ("stopped" if run.stopped else repr(text.strip().splitlines()[-1:])))
-            crashed = code < 0 and not run.stopped
+            crashed = run.crashed
             if crashed:
                 crashes.append(f"ros2 {' '.join(args)[:200]} crashed (signal {-code}):\n{text[-3000:]}")
                 print(crashes[-1].splitlines()[0] + "; asked again")
@@ -286,7 +286,7 @@ def test_every_topic_echoes_once_with_default_qos(graph):
         # A CLI process that printed its message and then hung on its way out (its own DDS teardown: seen once,
         # on Jazzy, in CI) has still echoed the topic: stopped with Ctrl-C, its status is not judged.
         run = finish(p, FIRST_PREDICTION_S)
-        if run.returncode < 0 and not run.stopped:
+        if run.crashed:
             # the CLI ended by a signal we did not send, before printing anything (seen once at load 5: SIGKILL,
             # no output, no OOM kill): as in Graph.ros2_node, a crashed CLI says nothing about the topic; ask again
             print(f"ros2 topic echo {topic} ended by signal {-run.returncode} with {len(run.stdout)} characters "
