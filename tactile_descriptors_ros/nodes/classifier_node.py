@@ -118,6 +118,10 @@ def layout_mismatch(sample: DescriptorSample, model_labels: Sequence[str], advic
 class ClassifierNode(Node):
     """The classifier node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
 
+    #: ``~/label`` is a coroutine that awaits the learning (:func:`~.common.spin` refuses an executor that
+    #: never resumes it)
+    coroutine_callbacks = True
+
     def __init__(self, node_name: str = "classifier_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
         from rclpy.callback_groups import ReentrantCallbackGroup

@@ -35,6 +35,8 @@ __all__ = [
     "run_node",
     "spin",
     "executor_kind",
+    "default_executor",
+    "events_resume_coroutines",
     "take_waiting",
 ]
 
@@ -207,18 +209,43 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-#: The environment variable that picks the executor a node spins in (:func:`spin`): ``single`` (default) or
-#: ``events``.
+#: The environment variable that picks the executor a node spins in (:func:`spin`): ``single`` or ``events``
+#: (default: :func:`default_executor`).
 EXECUTOR_ENV = "TACTILE_EXECUTOR"
 EXECUTORS = ("single", "events")
+#: The first rclpy major version whose ``EventsExecutor`` runs a coroutine callback as a coroutine, resuming it
+#: when the future it awaits is set by another callback (Kilted's rclpy 9 does; Jazzy's rclpy 7 calls it as a
+#: plain function and hands the coroutine object on as the service's response, which rclpy refuses).
+EVENTS_RESUME_COROUTINES_FROM_RCLPY = 9
 #: A spinning node looks at its context at least this often [s], whatever else is due (:func:`spin`).
 SPIN_WAKE_S = 1.0
 
 
+def rclpy_major() -> int:
+    """The installed rclpy's major version (7 in the Jazzy wheels, 9 in Kilted's); 0 if it says none."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return int(version("rclpy").split(".")[0])
+    except (PackageNotFoundError, ValueError):
+        return 0
+
+
+def events_resume_coroutines() -> bool:
+    """Whether this rclpy's ``EventsExecutor`` resumes coroutine callbacks (:data:`EVENTS_RESUME_COROUTINES_FROM_RCLPY`)."""
+    return rclpy_major() >= EVENTS_RESUME_COROUTINES_FROM_RCLPY
+
+
+def default_executor() -> str:
+    """``events`` where this rclpy's ``EventsExecutor`` serves every callback the nodes have (Kilted), else
+    ``single`` (Jazzy: its ``EventsExecutor`` never resumes the classifier's coroutine ``~/label`` service)."""
+    return "events" if events_resume_coroutines() else "single"
+
+
 def executor_kind(kind: str | None = None) -> str:
-    """The executor to spin in: ``kind`` if given, else ``$TACTILE_EXECUTOR``, else ``single`` (:func:`spin`);
-    any other name is refused, naming the valid ones."""
-    kind = kind or os.environ.get(EXECUTOR_ENV, "") or "single"
+    """The executor to spin in: ``kind`` if given, else ``$TACTILE_EXECUTOR``, else :func:`default_executor`
+    (:func:`spin`); any other name is refused, naming the valid ones."""
+    kind = kind or os.environ.get(EXECUTOR_ENV, "") or default_executor()
     if kind not in EXECUTORS:
         raise TactileError(f"{EXECUTOR_ENV}={kind!r}: not an executor; one of {', '.join(EXECUTORS)}")
     return kind
@@ -231,15 +258,18 @@ def _look_at_the_context() -> None:
 def spin(node: Any, kind: str | None = None) -> None:
     """Serve ``node``'s callbacks until its context shuts down (Ctrl-C, ``rclpy.shutdown``).
 
-    ``kind`` (default: ``$TACTILE_EXECUTOR``, else ``single``) picks the executor:
+    ``kind`` (default: ``$TACTILE_EXECUTOR``, else :func:`default_executor`) picks the executor:
 
-    ``single``
-        rclpy's ``SingleThreadedExecutor`` (Python): about 0.3 ms of CPU per message taken.
     ``events``
-        rclpy's ``EventsExecutor`` (C++, ``rclpy.experimental``; Jazzy and Kilted): about 0.13 ms per
-        message on the same messages (``lab/docs/performance.md``, Latency).  It is driven by
-        ``spin_once``, as rclpy's own ``Executor.spin`` drives the Python executors: its ``spin()`` in
-        these wheels turns without serving timers.  Shutting the context down wakes it.
+        rclpy's ``EventsExecutor`` (C++, ``rclpy.experimental``; Jazzy and Kilted): about 0.18 ms of CPU
+        per message taken, half of ``single``'s on the same messages (``lab/docs/performance.md``,
+        Latency).  It is driven by ``spin_once``, as rclpy's own ``Executor.spin`` drives the Python
+        executors: its ``spin()`` in these wheels turns without serving timers.  Shutting the context
+        down wakes it.  It serves timers on the ROS clock under ``use_sim_time`` as ``single`` does.  A node
+        whose ``coroutine_callbacks`` attribute is true (the classifier: its ``~/label`` service awaits
+        the learning) is refused it where it does not resume coroutines (:func:`events_resume_coroutines`).
+    ``single``
+        rclpy's ``SingleThreadedExecutor`` (Python): about 0.35 ms of CPU per message taken.
 
     A callback's exception ends the spin and is raised here, with either executor; the events executor
     also logs it itself first (``Exception in 'subscriptions' callback: ...`` and where it was raised).
@@ -251,6 +281,10 @@ def spin(node: Any, kind: str | None = None) -> None:
     Ctrl-C for 60 s).  A timer of the node wakes it; the events executor's ``spin_once`` times out.
     """
     kind = executor_kind(kind)
+    if kind == "events" and getattr(node, "coroutine_callbacks", False) and not events_resume_coroutines():
+        raise TactileError(f"{EXECUTOR_ENV}=events: rclpy {rclpy_major()}'s EventsExecutor does not await "
+                           f"coroutine callbacks, and this node has some (its services would not answer); use "
+                           f"single, or rclpy {EVENTS_RESUME_COROUTINES_FROM_RCLPY} or later")
     if kind == "single":
         from rclpy.executors import SingleThreadedExecutor
 
