@@ -52,12 +52,21 @@ from typing import Any
 import yaml
 
 __all__ = ["NodeSamples", "SoakReport", "soak_scene", "scene_frames_per_s", "run_soak", "format_soak",
-           "GROWTH_GOAL_PERCENT", "KEEPS_UP_FRACTION", "WARMUP_MIN_S"]
+           "GROWTH_GOAL_PERCENT", "KEEPS_UP_FRACTION", "WARMUP_MIN_S", "GRAPH_CPU_GOAL_PERCENT",
+           "CELL_SECOND_GOAL_MS", "SEEING_EXECUTABLES"]
 
 #: Goal: RSS growth after the warm-up, at most this many percent.
 GROWTH_GOAL_PERCENT = 5.0
 #: The warm-up lasts at least this long, and at least one cycle of the scene [s].
 WARMUP_MIN_S = 60.0
+#: Goal: the recognition path's CPU (drivers with their simulator, window node(s), classifier) under one core
+#: [% of one core].
+GRAPH_CPU_GOAL_PERCENT = 100.0
+#: Goal: CPU per cell and second of data across the recognition path [ms].
+CELL_SECOND_GOAL_MS = 1.0
+#: Nodes that serve seeing the skin (contact markers, the TF tree), not recognising: left out of the
+#: recognition path's CPU and reported beside it.
+SEEING_EXECUTABLES = ("contact_node", "tf_publisher")
 #: Window node fault counters that mean a lost frame.
 LOST_KEYS = ("fault_lost_frames", "fault_bad_frames", "fault_sequence_restart")
 #: The machine kept up when the simulated bus sent at least this share of the real rate.
@@ -127,6 +136,7 @@ class SoakReport:
     driver_run_s: float = 0.0
     frames_sent_in_run: int = 0
     cycle_s: float = 0.0  # one cycle of the scene (the demo once)
+    cells: int = 0  # the robot's skin cells (and fingertips)
 
     @property
     def warmup_s(self) -> float:
@@ -184,6 +194,30 @@ class SoakReport:
                 "messages_sent_and_lost": lost_msgs,
                 "frames_sent_and_lost": int(round(lost_msgs * sent / messages)) if messages else 0}
 
+    def cpu(self) -> dict[str, Any]:
+        """The graph's mean CPU [% of one core], whole and on the recognition path (every node but
+        :data:`SEEING_EXECUTABLES`), and per node and on the path the CPU per cell and second of data [ms]:
+        CPU time over ``cells`` times the seconds of data the simulated bus sent (its share of the real rate
+        times the wall time), so a machine that fell behind is not credited for data it never sent."""
+        per_node = {n.name: n.cpu_percent() for n in self.nodes}
+        known = [v for v in per_node.values() if v is not None]
+        path = [n.cpu_percent() for n in self.nodes if n.executable not in SEEING_EXECUTABLES]
+        graph = sum(known) if known else None
+        path_percent = sum(v for v in path if v is not None) if path and None not in path else None
+        rate = self.frames_split()["sent_percent_of_real_rate"]
+        data_share = None if rate is None else min(rate, 100.0) / 100.0
+
+        def per_cell_s(percent: float | None) -> float | None:
+            if percent is None or not self.cells or not data_share:
+                return None
+            return 10.0 * percent / (self.cells * data_share)  # (percent / 100) s/s * 1000 ms/s / (cells * share)
+
+        return {"graph_percent": graph, "recognition_path_percent": path_percent,
+                "seeing_executables": list(SEEING_EXECUTABLES), "cells": self.cells,
+                "data_share_of_real_rate": data_share,
+                "ms_per_cell_second": {name: per_cell_s(v) for name, v in per_node.items()},
+                "recognition_path_ms_per_cell_second": per_cell_s(path_percent)}
+
     def rss_per_minute(self) -> dict[str, list[float]]:
         """Per node, the RSS of the first sample at or after every whole minute, from 0 [MB]."""
         out = {}
@@ -216,6 +250,7 @@ class SoakReport:
             + lost["sequence_restart"]
         buffers = [float(v["windower_buffer_mb"]) for n, v in self.diagnostics.items()
                    if n.split(": ")[-1] == "windows" and "windower_buffer_mb" in v]
+        cpu = self.cpu()
         return {"robot": self.robot, "seconds": self.seconds, "scene_s": self.scene_s, "cycle_s": self.cycle_s,
                 "warmup_s": self.warmup_s, "sample_s": self.sample_s,
                 "cpus": self.cpus, "nice": self.nice, "load_avg_start": list(self.load_avg_start),
@@ -223,11 +258,17 @@ class SoakReport:
                 "windower_buffer_mb": sum(buffers) if buffers else None, "scene_frames_per_s": self.scene_frames_per_s,
                 "driver_run_s": self.driver_run_s, "frames": split, "lost_frames": lost,
                 "late_frames": self.late_frames(), "descriptors": self.descriptors(),
-                "exit_codes": self.exit_codes,
+                "exit_codes": self.exit_codes, "cpu": cpu,
                 "goal": {"rss_growth_max_percent": GROWTH_GOAL_PERCENT,
                          "rss_met": bool(growth) and max(growth) <= GROWTH_GOAL_PERCENT,
                          "no_lost_frames": not graph_lost,
-                         "machine_kept_up": split["machine_kept_up"]},
+                         "machine_kept_up": split["machine_kept_up"],
+                         "recognition_path_cpu_max_percent": GRAPH_CPU_GOAL_PERCENT,
+                         "cpu_met": None if cpu["recognition_path_percent"] is None
+                         else bool(cpu["recognition_path_percent"] < GRAPH_CPU_GOAL_PERCENT),
+                         "ms_per_cell_second_max": CELL_SECOND_GOAL_MS,
+                         "cell_second_met": None if cpu["recognition_path_ms_per_cell_second"] is None
+                         else bool(cpu["recognition_path_ms_per_cell_second"] <= CELL_SECOND_GOAL_MS)},
                 "diagnostics": self.diagnostics}
 
 
@@ -372,7 +413,7 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
                       load_avg_end=os.getloadavg(), cpus=os.cpu_count() or 1, nice=os.nice(0),
                       exit_codes={r.spec.name: r.returncode for r in procs.nodes},
                       scene_frames_per_s=frames_per_s, driver_run_s=run_s,
-                      frames_sent_in_run=sum(n for _, n in runs), cycle_s=cycle_s)
+                      frames_sent_in_run=sum(n for _, n in runs), cycle_s=cycle_s, cells=rob.n_cells)
 
 
 def format_soak(report: SoakReport) -> str:
@@ -405,7 +446,20 @@ def format_soak(report: SoakReport) -> str:
                  f"({fr['frames_sent_and_lost']} frames)")
     lines.append(f"descriptors {d['descriptors']}; window node counters: lost {d['lost_frames']}; "
                  f"late {d['late_frames']}")
+    c, verdict = d["cpu"], {True: "met", False: "NOT met", None: "-"}
+
+    def num(x: float | None, fmt: str) -> str:
+        return "-" if x is None else format(x, fmt)
+
+    lines.append(f"CPU per cell and second of data [ms] ({c['cells']} cells): "
+                 + ", ".join(f"{name} {num(v, '.2f')}" for name, v in c["ms_per_cell_second"].items()))
     g = d["goal"]
+    lines.append(f"goal: the recognition path's CPU (every node but {', '.join(c['seeing_executables'])}) under "
+                 f"{g['recognition_path_cpu_max_percent']:.0f} % of a core: "
+                 f"{num(c['recognition_path_percent'], '.1f')} %, {verdict[g['cpu_met']]} (the whole graph "
+                 f"{num(c['graph_percent'], '.1f')} %); at most {g['ms_per_cell_second_max']:.1f} ms per "
+                 f"cell-second: {num(c['recognition_path_ms_per_cell_second'], '.2f')}, "
+                 f"{verdict[g['cell_second_met']]}")
     lost_goal = ("met" if g["no_lost_frames"] else "NOT met") + ("" if g["machine_kept_up"] else
                                                                  " (not judged: the machine did not keep up)")
     lines.append(f"goal: RSS growth after the first minute <= {g['rss_growth_max_percent']:.0f} %: "

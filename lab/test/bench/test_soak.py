@@ -83,6 +83,12 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     # the window node reports its sample buffers with its diagnostics (none yet if it was still starting)
     assert (d["windower_buffer_mb"] is None) == ("window_node: windows" not in d["diagnostics"])
     assert all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
+    # the recognition path's CPU is every node's but the contact node's and the TF publisher's, judged against
+    # one core
+    c = d["cpu"]
+    path = sum(n["cpu_percent"] for name, n in d["nodes"].items() if name not in ("contact_node", "tf_publisher"))
+    assert c["recognition_path_percent"] == pytest.approx(path) and c["cells"] == 116
+    assert d["goal"]["cpu_met"] is (path < 100.0)
 
 
 def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
@@ -117,3 +123,39 @@ def test_rss_per_minute_takes_the_first_sample_of_every_minute():
                     cpu_s=[0] * 5)
     r = SoakReport("nao", 10.0, 150.0, 1.0, [s], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {})
     assert r.rss_per_minute() == {"window_node": [10, 30, 50]}
+
+
+def test_the_recognition_paths_cpu_is_judged_under_one_core_and_per_cell_second_of_data_sent():
+    """Known answers: over 10 s the driver used 4 s of CPU (40 %), the window node 5 s, the classifier 0.2 s,
+    the contact node 3 s and the TF publisher 0.1 s; the recognition path leaves the last two out (92 %, under
+    one core; the whole graph 123 %).  The bus sent 80 % of the real rate, so 116 cells sent 0.8 x 10 s of data
+    each: the path's 9.2 s of CPU over 928 cell-seconds is 9.91 ms per cell-second (the goal is 1 ms)."""
+    from tactile_descriptors_lab.bench.soak import CELL_SECOND_GOAL_MS, GRAPH_CPU_GOAL_PERCENT, format_soak
+
+    def used(name: str, pid: int, cpu_s: float) -> NodeSamples:
+        return NodeSamples(name, name, pid, t_s=[0.0, 10.0], rss_mb=[100.0, 100.0], cpu_s=[1.0, 1.0 + cpu_s])
+
+    nodes = [used("skin_driver", 1, 4.0), used("window_node", 2, 5.0), used("classifier_node", 3, 0.2),
+             used("contact_node", 4, 3.0), used("tf_publisher", 5, 0.1)]
+    r = SoakReport("nao", 10.0, 10.0, 1.0, nodes, {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=8000, cells=116)
+    d = r.to_dict()
+    c = d["cpu"]
+    assert c["graph_percent"] == pytest.approx(123.0) and c["recognition_path_percent"] == pytest.approx(92.0)
+    assert c["data_share_of_real_rate"] == pytest.approx(0.8)
+    assert c["ms_per_cell_second"]["skin_driver"] == pytest.approx(4000.0 / 928.0)
+    assert c["recognition_path_ms_per_cell_second"] == pytest.approx(9200.0 / 928.0)
+    assert d["goal"]["recognition_path_cpu_max_percent"] == GRAPH_CPU_GOAL_PERCENT
+    assert d["goal"]["cpu_met"] is True and d["goal"]["cell_second_met"] is False
+    assert d["goal"]["ms_per_cell_second_max"] == CELL_SECOND_GOAL_MS
+    text = format_soak(r)
+    assert "92.0 %, met (the whole graph 123.0 %)" in text and "9.91, NOT met" in text, text
+    # a window node working 1.5 cores puts the path over one core
+    nodes[1] = used("window_node", 2, 15.0)
+    over = SoakReport("nao", 10.0, 10.0, 1.0, nodes, {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {},
+                      scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=10000, cells=116)
+    assert over.to_dict()["goal"]["cpu_met"] is False
+    # without CPU samples or cells nothing is judged
+    bare = SoakReport("nao", 10.0, 10.0, 1.0, [NodeSamples("window_node", "window_node", 2)], {},
+                      (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {})
+    assert bare.to_dict()["goal"]["cpu_met"] is None and bare.to_dict()["goal"]["cell_second_met"] is None
