@@ -119,7 +119,7 @@ class ClassifierNode(Node):
     """The classifier node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
 
     #: ``~/label`` is a coroutine that awaits the learning (:func:`~.common.spin` refuses an executor that
-    #: never resumes it)
+    #: does not await it)
     coroutine_callbacks = True
 
     def __init__(self, node_name: str = "classifier_node", **kwargs) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import faulthandler
+import functools
 import gc
 import os
 import signal
@@ -221,8 +222,10 @@ EVENTS_RESUME_COROUTINES_FROM_RCLPY = 9
 SPIN_WAKE_S = 1.0
 
 
+@functools.cache
 def rclpy_major() -> int:
-    """The installed rclpy's major version (7 in the Jazzy wheels, 9 in Kilted's); 0 if it says none."""
+    """The installed rclpy's major version (7 in the Jazzy wheels, 9 in Kilted's); 0 if it says none.  Read
+    from its package metadata once per process: :func:`spin` asks for it twice."""
     from importlib.metadata import PackageNotFoundError, version
 
     try:
@@ -238,7 +241,7 @@ def events_resume_coroutines() -> bool:
 
 def default_executor() -> str:
     """``events`` where this rclpy's ``EventsExecutor`` serves every callback the nodes have (Kilted), else
-    ``single`` (Jazzy: its ``EventsExecutor`` never resumes the classifier's coroutine ``~/label`` service)."""
+    ``single`` (Jazzy: its ``EventsExecutor`` does not await the classifier's coroutine ``~/label`` service)."""
     return "events" if events_resume_coroutines() else "single"
 
 

@@ -201,7 +201,7 @@ class SoakReport:
         times the wall time), so a machine that fell behind is not credited for data it never sent."""
         per_node = {n.name: n.cpu_percent() for n in self.nodes}
         known = [v for v in per_node.values() if v is not None]
-        path = [n.cpu_percent() for n in self.nodes if n.executable not in SEEING_EXECUTABLES]
+        path = [per_node[n.name] for n in self.nodes if n.executable not in SEEING_EXECUTABLES]
         graph = sum(known) if known else None
         path_percent = sum(v for v in path if v is not None) if path and None not in path else None
         rate = self.frames_split()["sent_percent_of_real_rate"]
@@ -448,17 +448,14 @@ def format_soak(report: SoakReport) -> str:
                  f"late {d['late_frames']}")
     c, verdict = d["cpu"], {True: "met", False: "NOT met", None: "-"}
 
-    def num(x: float | None, fmt: str) -> str:
-        return "-" if x is None else format(x, fmt)
-
     lines.append(f"CPU per cell and second of data [ms] ({c['cells']} cells): "
-                 + ", ".join(f"{name} {num(v, '.2f')}" for name, v in c["ms_per_cell_second"].items()))
+                 + ", ".join(f"{name} {f(v, '.2f')}" for name, v in c["ms_per_cell_second"].items()))
     g = d["goal"]
     lines.append(f"goal: the recognition path's CPU (every node but {', '.join(c['seeing_executables'])}) under "
                  f"{g['recognition_path_cpu_max_percent']:.0f} % of a core: "
-                 f"{num(c['recognition_path_percent'], '.1f')} %, {verdict[g['cpu_met']]} (the whole graph "
-                 f"{num(c['graph_percent'], '.1f')} %); at most {g['ms_per_cell_second_max']:.1f} ms per "
-                 f"cell-second: {num(c['recognition_path_ms_per_cell_second'], '.2f')}, "
+                 f"{f(c['recognition_path_percent'], '.1f')} %, {verdict[g['cpu_met']]} (the whole graph "
+                 f"{f(c['graph_percent'], '.1f')} %); at most {g['ms_per_cell_second_max']:.1f} ms per "
+                 f"cell-second: {f(c['recognition_path_ms_per_cell_second'], '.2f')}, "
                  f"{verdict[g['cell_second_met']]}")
     lost_goal = ("met" if g["no_lost_frames"] else "NOT met") + ("" if g["machine_kept_up"] else
                                                                  " (not judged: the machine did not keep up)")
