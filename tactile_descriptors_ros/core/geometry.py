@@ -138,11 +138,15 @@ class Pose:
         """The frame at ``xyz`` whose z axis is ``normal`` (the shortest rotation from z; any length > 0)."""
         n = np.asarray(normal, dtype=float)
         n = n / np.linalg.norm(n)
-        if np.allclose(n, -_Z):
-            rot = Rotation.from_rotvec([math.pi, 0.0, 0.0])  # z -> -z about x (align_vectors' choice is arbitrary)
+        # about z x n by the angle between them; written out rather than scipy's align_vectors, which near -z
+        # picks an arbitrary axis and, snapped to it there, leaves normals within 1e-8 of -z off by that much
+        axis = np.cross(_Z, n)
+        sin = float(np.linalg.norm(axis))
+        if sin == 0.0:  # along z, or exactly opposite: then z -> -z about x
+            rotvec = [math.pi, 0.0, 0.0] if n[2] < 0 else [0.0, 0.0, 0.0]
         else:
-            rot = Rotation.align_vectors([n], [_Z])[0]
-        return cls.from_rotation(xyz, rot)
+            rotvec = axis / sin * math.atan2(sin, float(n[2]))
+        return cls.from_rotation(xyz, Rotation.from_rotvec(rotvec))
 
     @property
     def rotation(self) -> Rotation:
