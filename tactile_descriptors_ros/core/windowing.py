@@ -46,6 +46,12 @@ __all__ = ["CellChunk", "PartChunk", "Window", "Windower", "SampleStream", "GAP_
 #: behind the most recent one (unplugged, dead) no longer holds it back.
 WATERMARK_STALL_S = 0.5
 
+#: Force samples a cell may have after the time its smoothed force is asked
+#: for, beyond the ``smooth_s`` looked at (:meth:`Windower._forces_at`): the
+#: watermark trails a cell's newest sample by about one message (10 ms, 2-3
+#: samples at the skin's 250 Hz); a cell further ahead is looked at alone.
+FORCE_TAIL_EXTRA = 8
+
 #: A cell's buffers are sized when its first chunk arrives, from its cell
 #: type's rates, for the longest span the windower keeps plus
 #: :data:`BUFFER_SLACK_S` (the chunks of one drained batch), times this
@@ -631,8 +637,11 @@ class Windower:
         self._released_since: int | None = None
         self._now_ns = 0  # the time of the current exploration step
         self._swept_ns: int | None = None  # the watermark the state machine has run to
+        self._swept_key: tuple | None = None  # that watermark and the settings it was run with
+        self._swept_rows: list[tuple[_Part, np.ndarray]] = []  # and the live cells it was run on
         self._resumed_ns: int | None = None  # first force stamp after the last stall (no onset before it)
-        self._live: list[_CellState] = []  # cells not stalled behind the newest (the contact judged on)
+        # cells not stalled behind the newest (the contact judged on): (body part, its rows)
+        self._live_rows: list[tuple[_Part, np.ndarray]] = []
         self._probed_onset: int | None = None  # the exploration the release was probed for
         self._trimmed_ns: int | None = None  # the horizon of the last trim
         self._jump: tuple[int, int] | None = None  # (newest before, first after) the last stall of every cell
@@ -999,6 +1008,7 @@ class Windower:
 
     def _reset_time(self) -> None:
         self._swept_ns = None
+        self._swept_key = None
         self._resumed_ns = None
         self._next_start_ns = None
         self._onset_ns = None
@@ -1044,11 +1054,13 @@ class Windower:
         """The latest vibration stamp every live cell has reached (fixed windows close on it).
 
         A cell more than :data:`WATERMARK_STALL_S` behind the most recent one
-        (unplugged, dead) is not waited for.
+        (unplugged, dead) is not waited for.  Each body part's cells are
+        looked at together, as one array of their newest stamps.
         """
         newest = self._latest_ns
         floor = self._stall_floor(newest)
-        lasts = [t for st in self._cells.values() if (t := st.vib.last_t_ns) is not None and t >= floor]
+        lasts = [int(live.min()) for p in self._parts.values()
+                 if (live := (last := p.vib.last[p.vib.has])[last >= floor]).size]
         return min(lasts) if lasts else newest
 
     def _stall_floor(self, newest: int) -> int:
@@ -1075,17 +1087,41 @@ class Windower:
         Decisions made on data up to here do not depend on how the cells'
         messages interleaved or were batched.  A cell more than
         :data:`WATERMARK_STALL_S` behind the most recent one is not waited for.
+        The live cells are kept as each body part's rows (``_live_rows``);
+        every step looks at a part's cells together.
         """
-        cells = [(st, st.force.last_t_ns) for st in self._cells.values() if len(st.force)]
-        if not cells:
-            self._live = []
+        held = []  # (part, rows holding force samples, their newest stamps)
+        for part in self._parts.values():
+            buf = part.force
+            rows = np.flatnonzero(buf.hi > buf.lo)
+            if rows.size:
+                held.append((part, rows, buf.last[rows]))
+        if not held:
+            self._live_rows = []
             return None
-        floor = self._stall_floor(max(t for _, t in cells))
-        self._live = [st for st, t in cells if t >= floor]
-        return min(t for st, t in cells if t >= floor)
+        floor = self._stall_floor(max(int(last.max()) for _, _, last in held))
+        self._live_rows, lows = [], []
+        for part, rows, last in held:
+            keep = last >= floor
+            if keep.all():
+                self._live_rows.append((part, rows))
+                lows.append(int(last.min()))
+            elif keep.any():
+                self._live_rows.append((part, rows[keep]))
+                lows.append(int(last[keep].min()))
+        return min(lows)
+
+    @property
+    def _live(self) -> list[_CellState]:
+        """The live cells of the last :meth:`_watermark` (those not stalled behind the newest)."""
+        return [self._cells[part.cell_ids[r]] for part, rows in self._live_rows for r in rows.tolist()]
 
     def _force_at(self, st: _CellState, t_ns: int) -> float:
-        """The cell's mean finite force over the ``smooth_s`` up to ``t_ns`` (its latest when it ends there)."""
+        """The cell's mean finite force over the ``smooth_s`` up to ``t_ns`` (its latest when it ends there).
+
+        The sum runs in sample order (a cumulative sum), so this equals
+        :meth:`_forces_at`, which sums many cells' samples at once, to the bit.
+        """
         fs = st.force
         last = fs.last_t_ns
         if last is None or last <= t_ns:
@@ -1094,23 +1130,56 @@ class Windower:
         j = lo + int(t[lo:fs._hi].searchsorted(t_ns, side="right"))  # the samples up to t_ns
         i = lo + int(t[lo:j].searchsorted(t_ns - self.smooth_ns, side="left"))
         recent = fs._v[0, i:j]
-        if recent.size:
-            total = np.add.reduce(recent)
-            if math.isfinite(total):
-                return float(total / recent.size)
-            finite = recent[np.isfinite(recent)]
-            if finite.size:
-                return float(finite.mean())
+        finite = recent[np.isfinite(recent)]
+        if finite.size:
+            return float(np.cumsum(finite)[-1] / finite.size)
         before = fs._v[0, lo:j]  # none finite in the last smooth_s: the last finite one
         finite = before[np.isfinite(before)]
         return float(finite[-1]) if finite.size else 0.0
 
+    def _forces_at(self, part: _Part, rows: np.ndarray, t_ns: int) -> np.ndarray:
+        """:meth:`_force_at` of a body part's cells (``rows``, each holding force samples) at ``t_ns`` at once.
+
+        Each cell's newest samples (``smooth_k``, more than ``smooth_s`` holds
+        at the force rate, plus :data:`FORCE_TAIL_EXTRA` for samples after
+        ``t_ns``) are one row of a 2-D array; the finite ones inside the
+        ``smooth_s`` up to ``t_ns`` are summed in order.  A cell whose look
+        does not reach back far enough, or with no finite sample in it, goes
+        through :meth:`_force_at` alone.
+        """
+        buf = part.force
+        out = part.last_force[rows].copy()  # a cell whose newest sample is at or before t_ns: its latest
+        later = buf.last[rows] > t_ns
+        if not later.any():
+            return out
+        r = rows[later]
+        lo, hi = buf.lo[r], buf.hi[r]
+        k = part.smooth_k + FORCE_TAIL_EXTRA
+        idx = (hi - k)[:, None] + np.arange(k)[None, :]
+        inside = idx >= lo[:, None]
+        idx = np.maximum(idx, 0)
+        t = buf.t[r[:, None], idx]
+        v = buf.v[0][r[:, None], idx]
+        start = t_ns - self.smooth_ns
+        short = inside[:, 0] & (t[:, 0] >= start)  # the look may miss older samples of the smooth_s
+        fin = inside & (t >= start) & (t <= t_ns) & np.isfinite(v)
+        n = fin.sum(axis=1)
+        total = np.cumsum(np.where(fin, v, 0.0), axis=1)[:, -1]
+        ok = (n > 0) & ~short
+        got = np.empty(r.size)
+        got[ok] = total[ok] / n[ok]
+        for i in np.flatnonzero(~ok).tolist():  # rare: a long look, or nothing finite to average
+            got[i] = self._force_at(self._cells[part.cell_ids[int(r[i])]], t_ns)
+        out[later] = got
+        return out
+
     def _contact_at(self, t_ns: int) -> tuple[bool, bool]:
         """(any cell at or above onset, all cells below release) at ``t_ns``."""
-        forces = [self._force_at(st, t_ns) for st in self._live]  # a stalled cell's last force is no contact
-        if not forces:
+        # a stalled cell's last force is no contact
+        peaks = [float(f.max()) for part, rows in self._live_rows if (f := self._forces_at(part, rows, t_ns)).size]
+        if not peaks:
             return False, True
-        return max(forces) >= self.onset_n, max(forces) < self.release_n
+        return max(peaks) >= self.onset_n, max(peaks) < self.release_n
 
     def _poll_exploration(self) -> list[Window]:
         """Run the exploration state machine up to the watermark, stopping at every moment it could change.
@@ -1125,6 +1194,13 @@ class Windower:
         now = self._watermark()
         if now is None:
             return out
+        # The watermark moves with the slowest body part's messages, so most polls find it where the last
+        # left it: with the same live cells and settings, the forces up to it and so the step are the same.
+        key = (now, self.onset_n, self.release_n, self.release_ns, self.min_ns, self.max_ns)
+        if key == self._swept_key and len(self._live_rows) == len(self._swept_rows) and all(
+                p is q and np.array_equal(a, b) for (p, a), (q, b) in zip(self._live_rows, self._swept_rows)):
+            return out
+        self._swept_key, self._swept_rows = key, self._live_rows
         if self._swept_ns is None:  # from the first force sample held
             t = min(int(st.force._t[st.force._lo]) for st in self._cells.values() if len(st.force)) - 1
         else:
@@ -1178,7 +1254,8 @@ class Windower:
         if after_ns >= until_ns:
             return None
         since = after_ns - self.smooth_ns
-        hot = [st for st in self._live if st.hot_until_ns is not None and st.hot_until_ns >= since]
+        hot = [self._cells[part.cell_ids[r]] for part, rows in self._live_rows
+               for r in rows[part.hot[rows] & (part.hot_until[rows] >= since)].tolist()]
         candidates = []
         if self._onset_ns is None:  # idle: an onset needs a cell whose raw force reached onset
             level_cells = [st for st in hot if self._raw(st, since, until_ns, np.fmax) >= self.onset_n]

@@ -139,3 +139,58 @@ def test_an_in_order_message_takes_the_array_path_and_a_faulty_one_the_reference
     assert len(w._cells[CELLS[0]].vib) == 10 and w._cells[CELLS[0]].hot_until_ns is not None
     assert w.add_part(ok).tolist() == [False, False, False] and calls  # the same again: duplicates
     assert w.faults["duplicate"] == 3
+
+
+def _same(a: list[float], b: list[float]) -> bool:
+    """Equal to the bit, NaN equal to NaN."""
+    return np.array_equal(np.asarray(a, float), np.asarray(b, float), equal_nan=True)
+
+
+@settings(max_examples=100, deadline=None)
+@given(messages, st.integers(0, 2**16), st.sampled_from([0.0, 0.004, 0.02, 0.2]),
+       st.lists(st.floats(-0.1, 1.1), min_size=1, max_size=8))
+def test_forces_of_a_body_part_at_once_equal_each_cells_own(spec, seed, smooth_s, where):
+    """``_forces_at`` (a body part's cells as one array) gives each cell's ``_force_at`` to the bit.
+
+    At times before, inside and after the cells' force stamps, with NaN force,
+    cells far ahead of the time (the look falls back to the cell alone) and
+    smoothing spans from none to 50 force samples.
+    """
+    w = Windower(NAO, mode="exploration", smooth_s=smooth_s, min_duration_s=0.0, release_s=0.005,
+                 force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0)
+    for chunk in _messages(spec, seed):
+        w.add_part(chunk)
+    part = w._parts.get(PART.name)
+    if part is None:
+        return
+    rows = np.flatnonzero(part.force.hi > part.force.lo)
+    if not rows.size:
+        return
+    buf = part.force
+    stamps = np.concatenate([buf.t[r, buf.lo[r]:buf.hi[r]] for r in rows.tolist()])
+    lo, hi = int(stamps.min()), int(stamps.max())
+    pick = [stamps[int(abs(x) * 1e6) % stamps.size] for x in where]
+    times = [lo + int(x * (hi - lo)) for x in where] + pick + [int(p) + w.smooth_ns for p in pick]
+    for t_ns in times:  # anywhere, on a stamp, and a smoothing span after one (a span starting on it)
+        own = [w._force_at(w._cells[part.cell_ids[r]], t_ns) for r in rows.tolist()]
+        assert _same(w._forces_at(part, rows, t_ns), own)
+
+
+def test_forces_of_a_body_part_at_the_watermark_take_the_array_path(monkeypatch):
+    """At the watermark (every cell's newest sample at it or a message after) no cell is looked at alone but
+    one whose force is all NaN; a cell far ahead of the time is (the hypothesis test above covers that)."""
+    w = Windower(NAO, mode="exploration")
+    spec = [[(0, "ok", 12, 2.0 + k), (1, "ok", 12, 0.3 * k), (2, "ok", 12, float("nan")), (3, "ok", 12, 1.0)]
+            for k in range(20)]
+    spec.append([(0, "ok", 12, 3.0), (1, "ok", 12, 3.0), (2, "ok", 12, float("nan"))])  # ahead of cell 3
+    for chunk in _messages(spec, 3):
+        w.add_part(chunk)
+    part = w._parts[PART.name]
+    rows = np.flatnonzero(part.force.hi > part.force.lo)
+    t_ns = w._watermark()
+    assert (part.force.last[rows] > t_ns).sum() == 3
+    own = [w._force_at(w._cells[part.cell_ids[r]], t_ns) for r in rows.tolist()]
+    alone = []
+    monkeypatch.setattr(w, "_force_at", lambda st, t: alone.append(st) or Windower._force_at(w, st, t))
+    assert _same(w._forces_at(part, rows, t_ns), own)
+    assert len(alone) == 1  # only the cell whose force is all NaN: nothing finite to average

@@ -153,11 +153,11 @@ EXPLORATION_TOUCH_S = 1.2
 
 
 def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40, repeat: int = 5,
-                 seed: int = 0) -> dict:
+                 seed: int = 0, mode: str = "fixed") -> dict:
     """Per-message CPU cost of the window node's work outside the executor, in microseconds.
 
-    ``rounds`` batches of one ``SkinPartFrames`` per body part (fixed 2 s
-    windows, 0.5 s hop) go through CDR deserialisation (what rclpy does
+    ``rounds`` batches of one ``SkinPartFrames`` per body part (``mode``:
+    fixed 2 s windows, 0.5 s hop, or explorations, every cell touching) go through CDR deserialisation (what rclpy does
     before the callback), then two paths, each followed by one ``poll`` per
     batch (window cutting included):
 
@@ -211,7 +211,7 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
         chunks = [[item for m in mm for item in skin_part_msg_to_chunks(m)] for mm in msgs]
         best["convert"] = min(best["convert"], time.thread_time() - c)
         for key in ("add_part_poll", "add_poll", "add_many_poll"):
-            w = Windower(desc, mode="fixed", length_s=2.0, hop_s=0.5, lateness_s=0.0)
+            w = Windower(desc, mode=mode, length_s=2.0, hop_s=0.5, lateness_s=0.0)
             cut = 0
             c = time.thread_time()
             for batch, part_batch in zip(chunks, parts):
@@ -229,7 +229,7 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
             best[key] = min(best[key], time.thread_time() - c)
             windows[key] = cut
     per = {k: 1e6 * v / n for k, v in best.items()}
-    return {"robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "messages": n,
+    return {"robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "mode": mode, "messages": n,
             "us_per_message": per, "windows_cut": windows,
             "us_per_message_batched": per["deserialize"] + per["convert_part"] + per["add_part_poll"],
             "us_per_message_per_cell": per["deserialize"] + per["convert"] + min(per["add_poll"],
@@ -318,7 +318,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     desc = load_robot(robot)
     release_ns = int(round(desc.window.release_s * 1e9))
     load_before = os.getloadavg()
-    per_message = message_cost(robot=robot, batch_s=batch_s, seed=seed) if micro else None
+    per_message = message_cost(robot=robot, batch_s=batch_s, seed=seed, mode=mode) if micro else None
     if mode == "fixed":
         phases = {"contact": probe_frames(desc, batch_s, seed)}
     else:
