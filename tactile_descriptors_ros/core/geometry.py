@@ -138,14 +138,14 @@ class Pose:
         """The frame at ``xyz`` whose z axis is ``normal`` (the shortest rotation from z; any length > 0)."""
         n = np.asarray(normal, dtype=float)
         n = n / np.linalg.norm(n)
-        # about z x n by the angle between them; written out rather than scipy's align_vectors, which near -z
-        # picks an arbitrary axis and, snapped to it there, leaves normals within 1e-8 of -z off by that much
-        axis = np.cross(_Z, n)
-        sin = float(np.linalg.norm(axis))
+        # about z x n = (-n_y, n_x, 0) by the angle between them; written out rather than scipy's
+        # align_vectors, which near -z picks an arbitrary axis and, snapped to it there, leaves normals within
+        # 1e-8 of -z off by that much.  hypot, not a sum of squares: those underflow for n_x, n_y near 1e-160
+        sin = math.hypot(float(n[0]), float(n[1]))
         if sin == 0.0:  # along z, or exactly opposite: then z -> -z about x
             rotvec = [math.pi, 0.0, 0.0] if n[2] < 0 else [0.0, 0.0, 0.0]
         else:
-            rotvec = axis / sin * math.atan2(sin, float(n[2]))
+            rotvec = np.array([-n[1] / sin, n[0] / sin, 0.0]) * math.atan2(sin, float(n[2]))
         return cls.from_rotation(xyz, Rotation.from_rotvec(rotvec))
 
     @property
