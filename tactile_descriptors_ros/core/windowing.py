@@ -412,6 +412,14 @@ class _RowBuffer:
         self.last[rows[has]] = t_ns[np.cumsum(counts)[has] - 1]
         self.has[rows[has]] = True
 
+    def tails(self, rows: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The newest ``k`` samples of each of ``rows`` as 2-D arrays: stamps, first channel's values, and
+        which are held (a row with fewer than ``k`` shows other samples, or its first, where it has none)."""
+        idx = (self.hi[rows] - k)[:, None] + np.arange(k)[None, :]
+        held = idx >= self.lo[rows][:, None]
+        idx = np.maximum(idx, 0)
+        return self.t[rows[:, None], idx], self.v[0][rows[:, None], idx], held
+
     def trim_before(self, t_ns: int) -> None:
         """Drop every row's samples older than ``t_ns``."""
         live = np.flatnonzero(self.hi > self.lo)
@@ -993,12 +1001,7 @@ class Windower:
             r = rows[more]
             k = int(max(hi[more] - lo[more] - np.array([np.searchsorted(buf.t[x, buf.lo[x]:buf.hi[x]], st_, "left")
                                                          for x, st_ in zip(r.tolist(), start[more].tolist())])))
-            first = hi - k
-        idx = first[:, None] + np.arange(k)[None, :]
-        inside = idx >= lo[:, None]
-        idx = np.maximum(idx, 0)
-        t = buf.t[rows[:, None], idx]
-        v = buf.v[0][rows[:, None], idx]
+        t, v, inside = buf.tails(rows, k)
         inside &= (t >= start[:, None]) & (t <= last[:, None])
         fin = inside & np.isfinite(v)
         n = fin.sum(axis=1)
@@ -1153,13 +1156,7 @@ class Windower:
         if not later.any():
             return out
         r = rows[later]
-        lo, hi = buf.lo[r], buf.hi[r]
-        k = part.smooth_k + FORCE_TAIL_EXTRA
-        idx = (hi - k)[:, None] + np.arange(k)[None, :]
-        inside = idx >= lo[:, None]
-        idx = np.maximum(idx, 0)
-        t = buf.t[r[:, None], idx]
-        v = buf.v[0][r[:, None], idx]
+        t, v, inside = buf.tails(r, part.smooth_k + FORCE_TAIL_EXTRA)
         start = t_ns - self.smooth_ns
         short = inside[:, 0] & (t[:, 0] >= start)  # the look may miss older samples of the smooth_s
         fin = inside & (t >= start) & (t <= t_ns) & np.isfinite(v)
