@@ -126,7 +126,7 @@ $(VENV)/.ros2cli: $(VENV)/.deps $(wildcard $(ROS2_CLI)/install.sh)
 
 # The nodes find the compiled descriptor kernel in the venv's cache instead of
 # compiling it for about 30 s at their first start (docs/nodes.md, window_node).
-$(VENV)/.kernel: $(VENV)/.installed tactile_descriptors_ros/core/numba_kernel.py
+$(VENV)/.kernel: $(VENV)/.installed tactile_descriptors_ros/core/numba_kernel.py tactile_descriptors_ros/core/fast.py
 	$(STEP) "setup 7/7: compiling the descriptor kernel into $(VENV)/var/cache (about 30-60 s)"
 	$(VPY) -c "import sys; from tactile_descriptors_ros.core.fast import main; sys.exit(main())"
 	touch $@

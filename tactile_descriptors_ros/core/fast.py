@@ -57,7 +57,8 @@ __all__ = [
 
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
-#: ``central_moments``, ``power_spectrum``, ``band_moments``, the status ``OK`` and ``CACHE_DIR``
+#: ``central_moments``, ``power_spectrum``, ``band_moments``, ``rocket_ppv``, the windowing intake's
+#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the status ``OK`` and ``CACHE_DIR``
 #: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 
@@ -330,6 +331,19 @@ def warm_up() -> dict:
     one = np.ones(1, dtype=np.int64)  # the rocket group: one kernel, one dilation, one bias
     kernel.rocket_ppv(np.zeros((1, 1, 9)), one, one, one, np.zeros(1, dtype=np.int64), np.zeros(1),
                       np.array([[0, 1, 2]], dtype=np.int64), np.empty((1, 1)))
+    # the window node's intake (windowing.INTAKE_DTYPES; int64 stamps, runs and rows, bool validity)
+    rows = np.zeros(1, dtype=np.int64)
+    counts = np.ones(1, dtype=np.int64)
+    t = np.zeros(1, dtype=np.int64)
+    flags = np.zeros(1, dtype=bool)
+    kernel.runs_in_order(t, counts, rows, 1, flags, t, flags, t)
+    kernel.explore_runs(rows, counts, t, np.zeros(1), 1.0, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
+                        np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1)), np.zeros(1, dtype=np.int64),
+                        np.ones(1, dtype=np.int64), 1, np.zeros(1))
+    for dtype in (np.int32, np.int64, np.float64):
+        kernel.append_runs(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1), dtype=dtype),
+                           np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                           np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info

@@ -47,7 +47,8 @@ from pathlib import Path
 import numba
 import numpy as np
 
-__all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "CACHE_DIR", "PATH_INDEPENDENT_CACHE",
+__all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
+           "runs_in_order", "append_runs", "explore_runs", "CACHE_DIR", "PATH_INDEPENDENT_CACHE",
            "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE"]
 
@@ -809,3 +810,122 @@ def rocket_ppv(x, dilations, per_dilation, channels_per_combination, channel_ind
                 f += m
                 c0 += nc
                 comb += 1
+
+
+# ------------------------------------------------------------------ windowing intake
+@_jit
+def runs_in_order(t, counts, rows, n_rows, has_a, last_a, has_b, last_b):  # pragma: no cover - compiled
+    """Whether a message's runs may be written as they are (:func:`.windowing._in_order`, one pass).
+
+    Run ``i`` holds ``counts[i]`` samples of ``t`` (runs concatenated in
+    order) for row ``rows[i]`` (every row ``0 <= r < n_rows``).  True when no
+    row takes two runs, every run's stamps increase strictly, and every
+    non-empty run starts after its row's newest stamp in both buffers
+    (``has_*``, ``last_*``; pass one buffer twice to check one).
+    """
+    seen = np.zeros(n_rows, dtype=np.bool_)
+    pos = 0
+    for i in range(counts.shape[0]):
+        r = rows[i]
+        if r < 0 or r >= n_rows or seen[r]:
+            return False
+        seen[r] = True
+        n = counts[i]
+        if n < 0 or pos + n > t.shape[0]:
+            return False
+        if n > 0:
+            first = t[pos]
+            if (has_a[r] and first <= last_a[r]) or (has_b[r] and first <= last_b[r]):
+                return False
+            for k in range(pos + 1, pos + n):
+                if t[k] <= t[k - 1]:
+                    return False
+        pos += n
+    return True
+
+
+@_jit
+def append_runs(t_buf, v_buf, ok_buf, hi, last, has, rows, counts, t, values, valid, use_valid
+                ):  # pragma: no cover - compiled
+    """Write run ``i`` (``counts[i]`` samples of ``t``, ``values``, ``valid``) after row ``rows[i]``'s end.
+
+    The compiled form of :meth:`.windowing._RowBuffer.append_runs` for rows
+    taking one run each, checked by :func:`runs_in_order`: the same copies,
+    sample by sample instead of through a flat index per sample.  Returns
+    False, having written nothing, when a run does not fit in its row's
+    remaining capacity (the caller makes room and writes it itself).
+    """
+    cap = t_buf.shape[1]
+    n_ch = v_buf.shape[0]
+    for i in range(counts.shape[0]):
+        if hi[rows[i]] + counts[i] > cap:
+            return False
+    pos = 0
+    for i in range(counts.shape[0]):
+        r = rows[i]
+        n = counts[i]
+        h = hi[r]
+        for k in range(n):
+            t_buf[r, h + k] = t[pos + k]
+        if use_valid:
+            for k in range(n):
+                ok_buf[r, h + k] = valid[pos + k]
+        else:
+            for k in range(n):
+                ok_buf[r, h + k] = True
+        for c in range(n_ch):
+            for k in range(n):
+                v_buf[c, r, h + k] = values[c, pos + k]
+        if n > 0:
+            hi[r] = h + n
+            last[r] = t[pos + n - 1]
+            has[r] = True
+        pos += n
+    return True
+
+
+@_jit
+def explore_runs(rows, counts, t, f, release_n, hot_until, hot, f_t, f_v, f_lo, f_hi, smooth_ns, last_force
+                 ):  # pragma: no cover - compiled
+    """Exploration state of a message's cells after its force runs were buffered (:meth:`.windowing.Windower._add_runs`).
+
+    Per non-empty run ``i`` (``counts[i]`` samples of stamps ``t`` and
+    forces ``f``, runs concatenated in order; each row at most one run): a
+    run whose largest force (NaN ignored, as ``numpy.fmax``) reaches
+    ``release_n`` marks its row hot until its last stamp; the row's latest
+    smoothed force becomes the mean of its buffered finite forces ``f_v[0, r]``
+    stamped within ``smooth_ns`` of its newest (kept when none is finite),
+    summed in sample order.
+    """
+    pos = 0
+    for i in range(counts.shape[0]):
+        n = counts[i]
+        if n <= 0:
+            continue
+        r = rows[i]
+        peak = np.nan
+        for k in range(pos, pos + n):
+            x = f[k]
+            if x == x and (peak != peak or x > peak):  # fmax: a NaN never wins over a number
+                peak = x
+        if peak >= release_n:
+            hot_until[r] = t[pos + n - 1]
+            hot[r] = True
+        pos += n
+        lo = f_lo[r]
+        hi = f_hi[r]
+        if hi <= lo:
+            continue
+        start = f_t[r, hi - 1] - smooth_ns
+        j = hi - 1
+        while j > lo and f_t[r, j - 1] >= start:
+            j -= 1
+        total = 0.0
+        m = 0
+        for k in range(j, hi):
+            x = f_v[0, r, k]
+            if np.isfinite(x):
+                total += x
+                m += 1
+        if m > 0:
+            last_force[r] = total / m

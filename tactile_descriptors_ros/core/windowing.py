@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ConfigError, SignalError
+from . import fast
 from .aggregation import CellSignals
 from .robot import RobotDescription
 
@@ -390,6 +391,8 @@ class _RowBuffer:
             raise SignalError(f"expected samples of shape ({self.n_channels}, {total}), got {values.shape}")
         if total == 0:
             return
+        if self._append_compiled(rows, counts, t_ns, values, valid):
+            return
         if like is not None and like._plan is not None and like.capacity == self.capacity \
                 and np.array_equal(like._plan[2], self.hi):
             flat, need, _ = like._plan
@@ -411,6 +414,23 @@ class _RowBuffer:
         has = counts > 0  # the newest stamp of each row: the last sample of its run
         self.last[rows[has]] = t_ns[np.cumsum(counts)[has] - 1]
         self.has[rows[has]] = True
+
+    def _append_compiled(self, rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, values: np.ndarray,
+                         valid: np.ndarray | None) -> bool:
+        """:meth:`append_runs` by the compiled intake; False (nothing written) where it does not serve."""
+        kernel = _intake_kernel()
+        if not values.flags.c_contiguous:  # e.g. a message's force samples, stored per sample (3, n) transposed
+            values = np.ascontiguousarray(values)
+        if kernel is None or values.dtype != self.v.dtype or values.dtype not in _INTAKE_DTYPES \
+                or not _compiled_args(rows, counts, t_ns, values) \
+                or (valid is not None and not (isinstance(valid, np.ndarray) and valid.dtype == np.bool_
+                                                and _compiled_args(rows, counts, t_ns, valid))):
+            return False
+        if not kernel.append_runs(self.t, self.v, self.ok, self.hi, self.last, self.has, rows, counts, t_ns, values,
+                                  _NO_VALID if valid is None else valid, valid is not None):
+            return False  # a row out of room: the numpy path makes room
+        self._plan = None  # no positions to share: a buffer given this one as ``like`` computes its own
+        return True
 
     def tails(self, rows: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The newest ``k`` samples of each of ``rows`` as 2-D arrays: stamps, first channel's values, and
@@ -778,8 +798,6 @@ class Windower:
                 or t_v.shape != (n_a,) or t_d.shape != (n_d,) or np.shape(chunk.force_n) != (n_d,)
                 or vc.shape != rows.shape or dc.shape != rows.shape or vc.min() <= 0 or dc.min() < 0):
             return False
-        if np.bincount(rows).max() > 1:  # a cell twice in one message: run by run
-            return False
         for valid, size in ((chunk.vibration_valid, n_a), (chunk.deformation_valid, n_d)):
             if valid is not None and np.shape(valid) != (size,):
                 return False
@@ -789,6 +807,17 @@ class Windower:
         if chunk.deformation_tare is not None and np.shape(chunk.deformation_tare)[0] != rows.size:
             return False
         part = self._parts.get(self._part_names[part_code])
+        kernel = _intake_kernel()
+        if kernel is not None and part is not None and _compiled_args(rows, vc, t_v) and _compiled_args(rows, dc, t_d):
+            # one compiled pass each: a cell twice in the message, stamps not increasing, or a run that does
+            # not start after its buffers' newest stamp sends the message run by run
+            n_rows = part.vib.t.shape[0]
+            return bool(kernel.runs_in_order(t_v, vc, rows, n_rows, part.vib.has, part.vib.last, part.vib.has,
+                                             part.vib.last)
+                        and kernel.runs_in_order(t_d, dc, rows, n_rows, part.dfm.has, part.dfm.last, part.force.has,
+                                                 part.force.last))
+        if np.bincount(rows).max() > 1:  # a cell twice in one message: run by run
+            return False
         if not _in_order(t_v, vc, rows, None if part is None else (part.vib,)):
             return False
         return _in_order(t_d, dc, rows, None if part is None else (part.dfm, part.force))
@@ -817,7 +846,7 @@ class Windower:
             tare = np.asarray(chunk.deformation_tare, np.float64)
             for i, c in enumerate(ids.tolist()):  # a copy per run: messages own their arrays
                 self._cells[c].tare = tare[i].copy()
-        if self._exploration:
+        if self._exploration and not self._explore_compiled(part, rows, dc, t_d, f):
             with_f = np.flatnonzero(dc > 0)
             if with_f.size:
                 starts = np.cumsum(dc) - dc
@@ -842,6 +871,18 @@ class Windower:
                 if hit.size:
                     self._jump = (int(before[hit[-1]]), int(firsts[hit[-1]]))
             self._latest_ns = max(self._latest_ns, int(lasts.max()))
+
+    def _explore_compiled(self, part: _Part, rows: np.ndarray, dc: np.ndarray, t_d: np.ndarray,
+                          f: np.ndarray) -> bool:
+        """The exploration state of :meth:`_add_runs` (hot cells, smoothed forces) by the compiled intake;
+        False (nothing changed) where it does not serve."""
+        kernel = _intake_kernel()
+        buf = part.force
+        if kernel is None or not _compiled_args(rows, dc, t_d, f) or f.dtype != np.float64:
+            return False
+        kernel.explore_runs(rows, dc, t_d, f, float(self.release_n), part.hot_until, part.hot, buf.t, buf.v, buf.lo,
+                            buf.hi, int(self.smooth_ns), part.last_force)
+        return True
 
     @staticmethod
     def _unsorted_flags(items: list[tuple[int, CellChunk]]) -> list[bool] | None:
@@ -984,7 +1025,7 @@ class Windower:
         Each cell's last ``smooth_k`` force samples (more than ``smooth_s``
         holds at the cell type's force rate) are looked at as one row of a
         2-D array; the mean of those within ``smooth_s`` of the newest that
-        are finite becomes the cell's latest force.  A cell whose oldest
+        are finite (summed in sample order) becomes the cell's latest force.  A cell whose oldest
         looked-at sample is still within ``smooth_s`` (samples faster than
         the rate says) is looked at again with all its samples in it.
         """
@@ -1005,7 +1046,7 @@ class Windower:
         inside &= (t >= start[:, None]) & (t <= last[:, None])
         fin = inside & np.isfinite(v)
         n = fin.sum(axis=1)
-        total = np.add.reduce(np.where(fin, v, 0.0), axis=1)
+        total = np.cumsum(np.where(fin, v, 0.0), axis=1)[:, -1]  # in sample order, as the compiled intake sums
         upd = n > 0
         part.last_force[rows[upd]] = total[upd] / n[upd]
 
@@ -1492,6 +1533,36 @@ class Windower:
     def in_contact(self) -> bool:
         """True while an exploration is open."""
         return self._onset_ns is not None
+
+
+#: The dtypes :meth:`_RowBuffer.append_runs` hands to the compiled intake (:func:`.numba_kernel.append_runs`):
+#: those the window node's buffers hold, compiled at set-up (:func:`.fast.warm_up`).  Other dtypes, arrays that
+#: are not C-contiguous or are read-only (each would be another compiled variant, compiled while the node runs)
+#: take the numpy path, which makes the same copies.
+INTAKE_DTYPES = (np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64))
+_INTAKE_DTYPES = frozenset(INTAKE_DTYPES)
+_INDEX_DTYPE = np.dtype(np.int64)
+_NO_VALID = np.ones(1, dtype=bool)
+#: Whether the windower may use the compiled intake when the compiled backend is loaded (the tests switch it
+#: off to compare both paths).
+COMPILED_INTAKE = True
+
+
+def _intake_kernel():
+    """The compiled backend's module when the intake may use it (:data:`COMPILED_INTAKE`), else None."""
+    return fast.kernel_module() if COMPILED_INTAKE else None
+
+
+def _compiled_args(rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, *arrays: np.ndarray) -> bool:
+    """Arrays the compiled intake takes as they are (one compiled variant): ``rows``, ``counts`` and ``t_ns``
+    int64, and every array C-contiguous and writeable."""
+    if not (rows.dtype == counts.dtype == t_ns.dtype == _INDEX_DTYPE):
+        return False
+    for a in (rows, counts, t_ns) + arrays:
+        flags = a.flags
+        if not (flags.c_contiguous and flags.writeable):
+            return False
+    return True
 
 
 def _in_order(t_ns: np.ndarray, counts: np.ndarray, rows: np.ndarray, bufs: tuple[_RowBuffer, ...] | None) -> bool:

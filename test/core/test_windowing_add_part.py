@@ -7,16 +7,24 @@ runs, unknown cells, NaN force, invalid samples) -- and feeds them as one
 ``PartChunk`` to one windower and as its per-run ``CellChunk`` s to another:
 the return values, the faults, every cell's buffers, smoothed force and
 contact state, and the windows cut from them are the same, in fixed and
-exploration mode.  In-order messages take the array path, the others the
-per-run reference; both are exercised (the test counts them).
+exploration mode (``touching``: a run that starts on its cell's newest stamp;
+``repeated``: a stamp twice in a run).  In-order messages take the array path, the others the
+per-run reference; both are exercised (the test counts them).  The array
+path runs twice: with the compiled intake (``numba_kernel.runs_in_order``
+and ``append_runs``) where the compiled backend is loaded, and with numpy
+alone; both must give the per-run reference's buffers to the bit.
 """
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tactile_descriptors_ros.core import fast, windowing
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.core.windowing import PartChunk, Windower
 
@@ -27,7 +35,7 @@ CELLS = [c.id for c in PART.cells][:4]
 UNKNOWN = max(NAO.cell_index()) + 1000
 
 KINDS = ("ok", "ok", "ok", "ok", "ok", "ok", "duplicate", "late", "overlap", "unsorted", "clock_jump", "empty",
-         "nan_force", "invalid", "unknown")
+         "nan_force", "invalid", "unknown", "repeated", "touching")
 
 messages = st.lists(
     st.lists(st.tuples(st.sampled_from(range(len(CELLS))), st.sampled_from(KINDS), st.integers(1, 24),
@@ -53,11 +61,15 @@ def _messages(spec, seed: int) -> list[PartChunk]:
                 t0 = prev[cid] - (n * MS if kind == "late" else MS)
             elif kind == "clock_jump":
                 t0 = max(0, t0 - 3_000 * MS)
+            elif kind == "touching":  # starts on the cell's newest stamp
+                t0 -= MS
             ta = t0 + np.arange(0 if kind == "empty" else n, dtype=np.int64) * MS
             if kind == "unsorted" and n > 2:
                 ta[[0, 1]] = ta[[1, 0]]
+            if kind == "repeated" and n > 2:  # one stamp twice in a row
+                ta[2] = ta[1]
             tf = ta[::4].copy()
-            fn = np.full(tf.size, f)
+            fn = f + rng.uniform(-0.2, 0.2, tf.size)  # forces vary within a run: smoothing spans matter
             if kind == "nan_force":
                 fn[::2] = np.nan
             ids.append(UNKNOWN if kind == "unknown" else cid)
@@ -105,6 +117,17 @@ def _windows(ws) -> list:
                     c.invalid_samples) for cid, c in w.cells.items()}) for w in ws]
 
 
+@contextlib.contextmanager
+def _compiled_intake(on: bool):
+    """The windower's compiled intake switched on or off for a block (hypothesis runs many examples per test)."""
+    was = windowing.COMPILED_INTAKE
+    windowing.COMPILED_INTAKE = on
+    try:
+        yield
+    finally:
+        windowing.COMPILED_INTAKE = was
+
+
 def _run(chunks: list[PartChunk], mode: str, part: bool):
     w = Windower(NAO, mode=mode, length_s=0.02, hop_s=0.01, min_duration_s=0.0, release_s=0.005,
                  lateness_s=0.0, force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0,
@@ -123,10 +146,12 @@ def _run(chunks: list[PartChunk], mode: str, part: bool):
 def test_add_part_equals_add_many(spec, seed, mode):
     chunks = _messages(spec, seed)
     ref = _run(chunks, mode, part=False)
-    got = _run(chunks, mode, part=True)
-    assert got[0] == ref[0]
-    assert got[2] == ref[2]
-    assert got[1] == ref[1]
+    for compiled in (True, False):
+        with _compiled_intake(compiled):
+            got = _run(chunks, mode, part=True)
+        assert got[0] == ref[0], compiled
+        assert got[2] == ref[2], compiled
+        assert got[1] == ref[1], compiled
 
 
 def test_an_in_order_message_takes_the_array_path_and_a_faulty_one_the_reference(monkeypatch):
@@ -139,6 +164,90 @@ def test_an_in_order_message_takes_the_array_path_and_a_faulty_one_the_reference
     assert len(w._cells[CELLS[0]].vib) == 10 and w._cells[CELLS[0]].hot_until_ns is not None
     assert w.add_part(ok).tolist() == [False, False, False] and calls  # the same again: duplicates
     assert w.faults["duplicate"] == 3
+
+
+class _Counting:
+    """The compiled backend's module, recording each call of the intake's functions and what it returned."""
+
+    def __init__(self, module) -> None:
+        self.module = module
+        self.results: dict[str, list[bool]] = {"runs_in_order": [], "append_runs": [], "explore_runs": []}
+
+    def __getattr__(self, name: str):
+        func = getattr(self.module, name)
+
+        def call(*args):
+            out = func(*args)
+            self.results[name].append(bool(out))
+            return out
+        return call
+
+
+def _counting_kernel(monkeypatch) -> _Counting:
+    kernel = fast.kernel_module()
+    if kernel is None:
+        pytest.skip(f"no compiled backend here ({fast.backend()}): the numpy intake serves, tested above")
+    counting = _Counting(kernel)
+    monkeypatch.setattr(windowing, "_intake_kernel", lambda: counting)
+    return counting
+
+
+def test_in_order_messages_take_the_compiled_intake(monkeypatch):
+    """Once a body part has buffers, an in-order message is checked and written by the compiled intake alone."""
+    counting = _counting_kernel(monkeypatch)
+    chunks = _messages([[(0, "ok", 10, 2.0), (1, "ok", 12, 0.5), (2, "ok", 9, 0.0)]] * 3, 7)
+    for mode in ("fixed", "exploration"):
+        for calls in counting.results.values():
+            calls.clear()
+        got = _run(chunks, mode, part=True)
+        # the first message finds no buffers (numpy checks it); every message writes four buffers compiled
+        assert counting.results["runs_in_order"] == [True] * 4
+        assert counting.results["append_runs"] == [True] * 12
+        # hot cells and smoothed forces: compiled in exploration mode, not needed in fixed mode
+        assert len(counting.results["explore_runs"]) == (3 if mode == "exploration" else 0)
+        assert got == _run(chunks, mode, part=False)
+
+
+def test_a_run_past_its_rows_capacity_is_written_by_numpy_after_making_room(monkeypatch):
+    counting = _counting_kernel(monkeypatch)
+    w = Windower(NAO, mode="fixed", length_s=0.02, hop_s=0.01, lateness_s=0.0)
+    cap = w.buffer_capacity(CELLS[0])[0]
+    chunks = _messages([[(0, "ok", 24, 2.0)], [(0, "ok", 24, 2.0), (1, "ok", cap + 50, 2.0)]], 3)
+    got = _run(chunks, "fixed", part=True)
+    assert False in counting.results["append_runs"]  # the long run did not fit: numpy grew the rows
+    assert got == _run(chunks, "fixed", part=False)
+
+
+def test_the_compiled_intake_takes_only_the_arrays_it_was_compiled_for(monkeypatch):
+    """Other dtypes, non-contiguous and read-only arrays take the numpy path (a compiled variant of their own
+    would be compiled while a node runs); transposed samples are made contiguous first."""
+    counting = _counting_kernel(monkeypatch)
+    first, second = _messages([[(0, "ok", 10, 2.0)], [(0, "ok", 10, 2.0)]], 5)
+    base = Windower(NAO, mode="fixed")
+    base.add_part(first)
+    part = base._parts[PART.name]
+    rows = np.zeros(1, np.int64)
+    counts = np.array([10], np.int64)
+    t = second.vibration_t_ns
+    for kind in ("int16", "readonly", "strided_t", "transposed"):
+        buf = part.vib
+        values = second.vibration.copy()
+        stamps = t.copy()
+        if kind == "int16":
+            values = values.astype(np.int16)
+        elif kind == "readonly":
+            values.flags.writeable = False
+        elif kind == "strided_t":
+            stamps = np.repeat(t, 2)[::2]
+        else:
+            values = np.asfortranarray(values)
+        before = len(counting.results["append_runs"])
+        hi = buf.hi.copy()
+        assert buf._append_compiled(rows, counts, stamps, values, None) is (kind == "transposed"), kind
+        assert len(counting.results["append_runs"]) == before + (kind == "transposed"), kind
+        if kind == "transposed":
+            assert buf.t[0, hi[0]:hi[0] + 10].tolist() == t.tolist()
+            assert buf.v[:, 0, hi[0]:hi[0] + 10].tolist() == second.vibration.tolist()
 
 
 def _same(a: list[float], b: list[float]) -> bool:
