@@ -310,3 +310,29 @@ def test_exploration_windows_do_not_depend_on_how_many_chunks_a_poll_sees(batch)
     got = [(x.exploration_id, x.start_ns // MS, x.end_ns // MS) for x in wins]
     # touch 1.0-4.0 s, re-touch 4.5-4.7 s, touch 5.0-7.5 s, 8.5 s onwards cut at the longest duration
     assert got == [(1, 1000, 4000), (2, 4500, 4700), (3, 5000, 7500), (4, 8500, 18500)]
+
+
+def test_a_cell_that_joins_without_moving_the_watermark_is_judged_at_that_poll():
+    """A poll whose watermark has not moved skips the state machine only when the live cells are the same.
+
+    Cell 0 has sent no force up to 990 ms; cell 1 starts sending at 900 ms, pressing, with samples past the
+    watermark, so the watermark (the slowest live cell's newest stamp) stays at 990 ms while the live cells
+    change: the onset at 900 ms must be decided at this poll, not one message later.
+    """
+    rng = np.random.default_rng(0)
+    w = Windower(load_robot("shadow_hand"), mode="exploration")
+    wins = []
+    for k in range(10):
+        w.add(0, _chunk(k * 100 * MS, 0.0, rng))
+        wins += w.poll()
+    assert w._watermark() == 990 * MS and not w.in_contact
+    w.add(1, _chunk(900 * MS, 2.0, rng))
+    wins += w.poll()
+    assert w._watermark() == 990 * MS
+    assert w.in_contact
+    for k in range(10, 40):
+        w.add(0, _chunk(k * 100 * MS, 0.0, rng))
+        w.add(1, _chunk((k + 9) * 100 * MS, 2.0 if k < 25 else 0.0, rng))
+        wins += w.poll()
+    wins += w.flush()
+    assert [(x.start_ns, x.exploration_id) for x in wins] == [(900 * MS, 1)]
