@@ -140,12 +140,17 @@ class Pose:
         n = n / np.linalg.norm(n)
         # about z x n = (-n_y, n_x, 0) by the angle between them; written out rather than scipy's
         # align_vectors, which near -z picks an arbitrary axis and, snapped to it there, leaves normals within
-        # 1e-8 of -z off by that much.  hypot, not a sum of squares: those underflow for n_x, n_y near 1e-160
-        sin = math.hypot(float(n[0]), float(n[1]))
-        if sin == 0.0:  # along z, or exactly opposite: then z -> -z about x
+        # 1e-8 of -z off by that much.  hypot, not a sum of squares: those underflow for n_x, n_y near 1e-160.
+        # The axis is scaled to its larger component before it is made a unit vector: divided by the hypot of
+        # denormal components (5e-324 has one significant bit) it came out up to sqrt(2) long.
+        nx, ny = float(n[0]), float(n[1])
+        big = max(abs(nx), abs(ny))
+        if big == 0.0:  # along z, or exactly opposite: then z -> -z about x
             rotvec = [math.pi, 0.0, 0.0] if n[2] < 0 else [0.0, 0.0, 0.0]
         else:
-            rotvec = np.array([-n[1] / sin, n[0] / sin, 0.0]) * math.atan2(sin, float(n[2]))
+            ax, ay = -ny / big, nx / big  # one of them is +-1
+            length = math.hypot(ax, ay)
+            rotvec = np.array([ax / length, ay / length, 0.0]) * math.atan2(math.hypot(nx, ny), float(n[2]))
         return cls.from_rotation(xyz, Rotation.from_rotvec(rotvec))
 
     @property

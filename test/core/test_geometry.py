@@ -65,6 +65,8 @@ def test_biotac_sites_cover_its_electrodes_and_pressure():
        st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3))
 @example(normal=[0.0, 1e-9, -0.5], xyz=[0.0, 0.0, 0.0])  # within 1e-8 of -z: once snapped to -z
 @example(normal=[0.0, 2.569624494688365e-160, -1.0], xyz=[0.0, 0.0, 0.0])  # |z x n| squared underflows
+@example(normal=[5e-324, 5e-324, -1.0], xyz=[0.0, 0.0, 0.0])  # the axis over its denormal length: sqrt(2) long
+@example(normal=[-5e-324, 1e-320, 1.0], xyz=[0.0, 0.0, 0.0])
 @example(normal=[0.0, 0.0, -2.0], xyz=[0.0, 0.0, 0.0])
 @example(normal=[0.0, 0.0, 3.0], xyz=[0.0, 0.0, 0.0])
 def test_a_pose_from_a_normal_points_its_z_axis_along_it(normal, xyz):
