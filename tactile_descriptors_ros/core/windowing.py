@@ -419,10 +419,11 @@ class _RowBuffer:
                          valid: np.ndarray | None) -> bool:
         """:meth:`append_runs` by the compiled intake; False (nothing written) where it does not serve."""
         kernel = _intake_kernel()
+        if kernel is None or values.dtype != self.v.dtype or values.dtype not in _INTAKE_DTYPES:
+            return False
         if not values.flags.c_contiguous:  # e.g. a message's force samples, stored per sample (3, n) transposed
             values = np.ascontiguousarray(values)
-        if kernel is None or values.dtype != self.v.dtype or values.dtype not in _INTAKE_DTYPES \
-                or not _compiled_args(rows, counts, t_ns, values) \
+        if not _compiled_args(rows, counts, t_ns, values) \
                 or (valid is not None and not (isinstance(valid, np.ndarray) and valid.dtype == np.bool_
                                                 and _compiled_args(rows, counts, t_ns, valid))):
             return False
