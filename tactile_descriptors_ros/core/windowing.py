@@ -423,9 +423,13 @@ class _RowBuffer:
             return False
         if not values.flags.c_contiguous:  # e.g. a message's force samples, stored per sample (3, n) transposed
             values = np.ascontiguousarray(values)
-        if not _compiled_args(rows, counts, t_ns, values) \
-                or (valid is not None and not (isinstance(valid, np.ndarray) and valid.dtype == np.bool_
-                                                and _compiled_args(rows, counts, t_ns, valid))):
+        if valid is None:
+            arrays = (values,)
+        elif isinstance(valid, np.ndarray) and valid.dtype == np.bool_:
+            arrays = (values, valid)
+        else:
+            return False
+        if not _compiled_args(rows, counts, t_ns, *arrays):
             return False
         if not kernel.append_runs(self.t, self.v, self.ok, self.hi, self.last, self.has, rows, counts, t_ns, values,
                                   _NO_VALID if valid is None else valid, valid is not None):

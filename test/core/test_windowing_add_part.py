@@ -10,14 +10,14 @@ contact state, and the windows cut from them are the same, in fixed and
 exploration mode (``touching``: a run that starts on its cell's newest stamp;
 ``repeated``: a stamp twice in a run).  In-order messages take the array path, the others the
 per-run reference; both are exercised (the test counts them).  The array
-path runs twice: with the compiled intake (``numba_kernel.runs_in_order``
-and ``append_runs``) where the compiled backend is loaded, and with numpy
-alone; both must give the per-run reference's buffers to the bit.
+path runs twice: with the compiled intake (``numba_kernel.runs_in_order``,
+``append_runs`` and ``explore_runs``) where the compiled backend is loaded,
+and with numpy alone; both must give the per-run reference's buffers to the bit.
 """
 
 from __future__ import annotations
 
-import contextlib
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -117,17 +117,6 @@ def _windows(ws) -> list:
                     c.invalid_samples) for cid, c in w.cells.items()}) for w in ws]
 
 
-@contextlib.contextmanager
-def _compiled_intake(on: bool):
-    """The windower's compiled intake switched on or off for a block (hypothesis runs many examples per test)."""
-    was = windowing.COMPILED_INTAKE
-    windowing.COMPILED_INTAKE = on
-    try:
-        yield
-    finally:
-        windowing.COMPILED_INTAKE = was
-
-
 def _run(chunks: list[PartChunk], mode: str, part: bool):
     w = Windower(NAO, mode=mode, length_s=0.02, hop_s=0.01, min_duration_s=0.0, release_s=0.005,
                  lateness_s=0.0, force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0,
@@ -147,7 +136,7 @@ def test_add_part_equals_add_many(spec, seed, mode):
     chunks = _messages(spec, seed)
     ref = _run(chunks, mode, part=False)
     for compiled in (True, False):
-        with _compiled_intake(compiled):
+        with mock.patch.object(windowing, "COMPILED_INTAKE", compiled):  # not monkeypatch: per example
             got = _run(chunks, mode, part=True)
         assert got[0] == ref[0], compiled
         assert got[2] == ref[2], compiled
