@@ -28,9 +28,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Hashable
 from enum import IntEnum
+from types import ModuleType
 
 import numpy as np
 
+from ..core import fast
 from ..errors import ConfigError
 
 __all__ = ["unwrap", "unwrap_array", "Unwrapper", "SequenceEvent", "SequenceTracker"]
@@ -95,6 +97,18 @@ class Unwrapper:
     def reset(self) -> None:
         """Forget the history (the device restarted)."""
         self.value = None
+
+
+#: Whether :meth:`SequenceTracker.track_many` may use the compiled backend when it is loaded (the tests switch it
+#: off to compare both paths).
+COMPILED_TRACKING = True
+#: The largest modulus the compiled pass takes (its arithmetic is int64 and its advance float64, exact below).
+_COMPILED_MODULUS = 1 << 32
+
+
+def _tracker_kernel() -> ModuleType | None:
+    """The compiled backend's module when the tracker may use it (:data:`COMPILED_TRACKING`), else None."""
+    return fast.kernel_module() if COMPILED_TRACKING else None
 
 
 class SequenceEvent(IntEnum):
@@ -393,6 +407,9 @@ class SequenceTracker:
         unwrapped_out = np.empty(n, dtype=np.int64)
         if not n:
             return events, unwrapped_out
+        kernel = _tracker_kernel()
+        if kernel is not None and self.modulus <= _COMPILED_MODULUS:
+            return self._track_compiled(kernel, codes, seqs, key_of, t_ns, period_ns, events, unwrapped_out)
         m = self.modulus
         order = np.argsort(codes, kind="stable")
         sc = codes[order]
@@ -463,3 +480,50 @@ class SequenceTracker:
         events[order] = ev
         unwrapped_out[order] = unwrapped
         return events, unwrapped_out
+
+    def _track_compiled(self, kernel: ModuleType, codes: np.ndarray, seqs: np.ndarray,
+                        key_of: Callable[[int], Hashable], t_ns: np.ndarray | None,
+                        period_ns: np.ndarray | float | None, events: np.ndarray, unwrapped: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`track_many` in one compiled pass in arrival order (:func:`~..core.numba_kernel.track_forward`):
+        every key's forward steps there, the rest (duplicates, late frames, restarts) number by number here."""
+        n = codes.size
+        i = np.searchsorted(self._code_sorted, codes)
+        known = i < self._code_sorted.size
+        known[known] = self._code_sorted[i[known]] == codes[known]
+        if not known.all():  # codes seen for the first time get their keys' slots (in sorted order, as numpy)
+            self._slots_of_codes(np.unique(codes[~known]), key_of)
+            i = np.searchsorted(self._code_sorted, codes)
+        slot = self._code_slot[i]
+        seq = np.asarray(seqs, dtype=np.int64) % self.modulus
+        period = self.period_ns if period_ns is None else period_ns
+        if t_ns is not None and period is not None:
+            t = np.array(t_ns, dtype=np.int64)  # copies: writeable and contiguous, the one compiled variant
+            p = np.empty(n)
+            p[:] = period
+        else:  # no times: every advance unknown, as numpy's path (the newest number's time forgotten)
+            t = np.full(n, -1, dtype=np.int64)
+            p = np.zeros(n)
+        gap_slot, gap_from, gap_to = (np.empty(n, dtype=np.int64) for _ in range(3))
+        deferred = np.zeros(self._live.size, dtype=bool)
+        n_gaps, lost, left = kernel.track_forward(slot, seq, t, p, self.modulus, self._live, self._low, self._high,
+                                                  self._t_high, deferred, events, unwrapped, gap_slot, gap_from,
+                                                  gap_to)
+        self.gaps += int(n_gaps)
+        self.lost += int(lost)
+        if self.window:
+            # the numbers a gap skipped become holes; holes fall behind the window as the newest moves on
+            for s, first, stop in zip(gap_slot[:n_gaps].tolist(), gap_from[:n_gaps].tolist(),
+                                      gap_to[:n_gaps].tolist()):
+                self._add_holes(s, first, stop)
+            if self._holes:
+                for s in set(np.unique(slot).tolist()).intersection(self._holes):
+                    self._prune_holes(s)
+        if left:  # any other number: by the rules of track, in arrival order, from where its key stopped
+            t_list, p_list = t.tolist(), p.tolist()
+            have_period = period is not None
+            for k in np.flatnonzero(events < 0).tolist():
+                e, u = self._track_slot(int(slot[k]), int(seq[k]), t_list[k], p_list[k] if have_period else None)
+                events[k] = e
+                unwrapped[k] = u
+        return events, unwrapped

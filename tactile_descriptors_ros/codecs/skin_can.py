@@ -33,10 +33,12 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
+from types import ModuleType
 
 import can
 import numpy as np
 
+from ..core import fast
 from ..errors import CodecError
 from .can_frames import CAN_FRAME_DTYPE, FLAG_ERROR, FLAG_EXTENDED, FLAG_REMOTE, empty_frames
 from .framing import SequenceEvent, SequenceTracker
@@ -235,6 +237,7 @@ class SkinCanDecoder:
         for m, r in rates.items():
             self._period_ns[int(m)] = 1e9 / float(r)
         self.stats = SkinCanStats()
+        self._known_table: tuple[frozenset[int] | None, np.ndarray] | None = None  # (its source, the table)
 
     def decode(self, msg: can.Message) -> SkinSample | None:
         """The sample in one frame, or ``None`` if the frame was rejected (and counted)."""
@@ -298,6 +301,11 @@ class SkinCanDecoder:
         st.frames += n
         if not n:
             return SkinSampleBatch.empty()
+        kernel = _codec_kernel()
+        # one compiled variant (strided, writeable field arrays): a single frame's fields are contiguous and a
+        # read-only buffer's are read-only, each another variant compiled while the driver runs; numpy serves them
+        if kernel is not None and frames.ndim == 1 and n >= 2 and frames.flags.writeable:
+            return self._decode_compiled(kernel, frames, arrival_ns)
         flags = frames["flags"]
         arb = frames["arbitration_id"].astype(np.int64)
         dlc = frames["dlc"].astype(np.int64)
@@ -352,6 +360,72 @@ class SkinCanDecoder:
         stamp[ts == 0.0] = NO_STAMP
         return SkinSampleBatch(cell[idx], mod[idx], seq, values, stamp)
 
+    def warm_up(self) -> None:
+        """Load the compiled pass and the tracker's now (about 0.3 s from the on-disk cache), not on the first
+        read, whose frames would wait meanwhile; counters and tracker untouched.  Nothing where numpy serves."""
+        kernel = _codec_kernel()
+        if kernel is None:
+            return
+        frames = empty_frames(2)
+        frames["flags"] = FLAG_REMOTE  # rejected at the first check: nothing written but the verdicts
+        none = np.empty(0, dtype=np.int64)
+        kernel.decode_can_rows(frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"],
+                               frames["timestamp"], np.ones(1, dtype=bool), FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED,
+                               PROTOCOL_TAG, _PAYLOAD_BY_NUMBER, self._period_ns, np.empty(2, dtype=np.int8),
+                               np.empty((2, 3), dtype=np.int64), none, none, none, np.empty(0), none)
+        one = np.zeros(1, dtype=np.int64)
+        kernel.track_forward(none, none, none, np.empty(0), 256, np.zeros(1, dtype=bool), one, one, one,
+                             np.zeros(1, dtype=bool), np.empty(0, dtype=np.int8), none, none, none, none)
+
+    def _decode_compiled(self, kernel: ModuleType, frames: np.ndarray, arrival_ns: int | None) -> SkinSampleBatch:
+        """:meth:`decode_frames` with the checks and unpacking in one compiled pass
+        (:func:`~..core.numba_kernel.decode_can_rows`); the sequence numbers go through the same tracker."""
+        st = self.stats
+        n = int(frames.size)
+        if self._known_table is None or self._known_table[0] is not self.known_cell_ids:
+            table = np.ones(_CELL_IDS, dtype=bool)
+            if self.known_cell_ids is not None:
+                table[:] = False
+                ids = np.fromiter(self.known_cell_ids, dtype=np.int64, count=len(self.known_cell_ids))
+                table[ids[(ids >= 0) & (ids < _CELL_IDS)]] = True
+            self._known_table = (self.known_cell_ids, table)
+        status = np.empty(n, dtype=np.int8)
+        values = np.empty((n, 3), dtype=np.int64)
+        seq, code, t, stamp = (np.empty(n, dtype=np.int64) for _ in range(4))
+        period = np.empty(n)
+        k, any_stamped = kernel.decode_can_rows(
+            frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"], frames["timestamp"],
+            self._known_table[1], FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED, PROTOCOL_TAG, _PAYLOAD_BY_NUMBER,
+            self._period_ns, status, values, seq, code, t, period, stamp)
+        verdicts = np.bincount(status, minlength=7).tolist()
+        st.remote_or_error_frames += verdicts[1]
+        st.foreign_frames += verdicts[2]
+        st.unknown_modality += verdicts[3]
+        st.bad_length += verdicts[4]
+        if verdicts[5]:
+            st.unknown_cells += verdicts[5]
+            cells = frames["arbitration_id"][status == 5].astype(np.int64) & 0xFFFF
+            ids, counts = np.unique(cells, return_counts=True)
+            for c, m in zip(ids.tolist(), counts.tolist()):
+                st.unknown_cell_ids[c] += m
+        st.bad_payload += verdicts[6]
+        values, seq, code, t, stamp, period = values[:k], seq[:k], code[:k], t[:k], stamp[:k], period[:k]
+        if arrival_ns is not None and not any_stamped:  # one clock per key: the arrival time for all, or none
+            t[:] = int(arrival_ns)
+        events = self.tracker.update_many(code, seq, _key_of_code, t, period)
+        st.sequence_gaps = self.tracker.gaps
+        st.lost_frames = self.tracker.lost
+        st.sequence_resets = self.tracker.resets
+        dup = events == SequenceEvent.DUPLICATE
+        n_dup = int(dup.sum())
+        st.duplicates += n_dup
+        st.out_of_order += int((events == SequenceEvent.LATE).sum())
+        if n_dup:
+            keep = ~dup
+            values, seq, code, stamp = values[keep], seq[keep], code[keep], stamp[keep]
+        st.samples += int(code.size)
+        return SkinSampleBatch(code >> 4, code & 0xF, seq, values, stamp)
+
     def decode_many(self, messages: Iterable[can.Message]) -> list[SkinSample]:
         """Samples of many frames, in arrival order (rejected frames counted, left out)."""
         out = []
@@ -360,6 +434,22 @@ class SkinCanDecoder:
             if s is not None:
                 out.append(s)
         return out
+
+
+#: Whether :meth:`SkinCanDecoder.decode_frames` may use the compiled backend when it is loaded (the tests switch
+#: it off to compare both paths).
+COMPILED_DECODE = True
+#: Cell ids an arbitration id can carry (its low 16 bits).
+_CELL_IDS = 0x10000
+#: Payload bytes by modality number (0: no such modality).
+_PAYLOAD_BY_NUMBER = np.zeros(16, dtype=np.int64)
+for _m, _size in PAYLOAD_SIZE.items():
+    _PAYLOAD_BY_NUMBER[int(_m)] = _size
+
+
+def _codec_kernel() -> ModuleType | None:
+    """The compiled backend's module when the decoder may use it (:data:`COMPILED_DECODE`), else None."""
+    return fast.kernel_module() if COMPILED_DECODE else None
 
 
 def _key_of_code(code: int) -> tuple[int, int]:

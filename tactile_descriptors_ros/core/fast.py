@@ -58,7 +58,8 @@ __all__ = [
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
 #: ``central_moments``, ``power_spectrum``, ``band_moments``, ``rocket_ppv``, the windowing intake's
-#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the status ``OK`` and ``CACHE_DIR``
+#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the CAN decoder's ``decode_can_rows``, the
+#: sequence tracker's ``track_forward``, the status ``OK`` and ``CACHE_DIR``
 #: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 
@@ -344,6 +345,18 @@ def warm_up() -> dict:
         kernel.append_runs(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1), dtype=dtype),
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                            np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
+    # the CAN decoder (codecs.skin_can): the fields of a frame array, strided views
+    byte, word = np.zeros(4, dtype=np.uint8)[::2], np.zeros(4, dtype=np.uint32)[::2]
+    i64 = np.zeros(2, dtype=np.int64)
+    kernel.decode_can_rows(byte, word, byte, np.zeros((4, 8), dtype=np.uint8)[::2], np.zeros(4)[::2],
+                           np.ones(1, dtype=bool), 6, 1, 0, np.zeros(16, dtype=np.int64), np.zeros(16),
+                           np.empty(2, dtype=np.int8), np.empty((2, 3), dtype=np.int64), i64, i64, i64, np.empty(2),
+                           i64)
+    # the sequence tracker (codecs.sequence): slots, numbers, times, periods; its state arrays
+    kernel.track_forward(i64, i64, i64, np.ones(2), 256, np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64),
+                         np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
+                         np.empty(2, dtype=np.int8), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
+                         np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64))
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info

@@ -48,8 +48,8 @@ import numba
 import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
-           "runs_in_order", "append_runs", "explore_runs", "CACHE_DIR", "PATH_INDEPENDENT_CACHE",
-           "OK", "NOT_EXACT", "DEGENERATE",
+           "runs_in_order", "append_runs", "explore_runs", "decode_can_rows", "track_forward", "CACHE_DIR",
+           "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE"]
 
 
@@ -929,3 +929,169 @@ def explore_runs(rows, counts, t, f, release_n, hot_until, hot, f_t, f_v, f_lo, 
                 m += 1
         if m > 0:
             last_force[r] = total / m
+
+
+#: Frame verdicts of :func:`decode_can_rows`, in the order the decoder checks them
+#: (:meth:`~tactile_descriptors_ros.codecs.skin_can.SkinCanDecoder.decode`).
+CAN_OK, CAN_REMOTE_OR_ERROR, CAN_FOREIGN, CAN_UNKNOWN_MODALITY, CAN_BAD_LENGTH, CAN_UNKNOWN_CELL, CAN_BAD_PAYLOAD = \
+    0, 1, 2, 3, 4, 5, 6
+
+
+@_jit
+def decode_can_rows(flags, arb, dlc, data, ts, known, rejected_flags, extended_flag, tag, size_by_mod, period_by_mod,
+                    status, values, seq, code, t, period, stamp):  # pragma: no cover - compiled
+    """Skin-cell CAN frames (the fields of ``CAN_FRAME_DTYPE``) checked and unpacked in one pass.
+
+    Each frame gets a verdict in ``status`` (``CAN_*``): a flag of
+    ``rejected_flags`` (remote, error), then ``extended_flag`` and the
+    arbitration id's tag, a modality with a payload size in ``size_by_mod``,
+    the length ``1 + size_by_mod[modality]``, ``known[cell]``, then the
+    payload's must-be-zero bits and reserved values, as
+    :func:`~tactile_descriptors_ros.codecs.skin.unpack_values` checks them
+    (modality numbers 1-4: accelerometer, force, proximity, temperature).
+    The accepted frames go, in order, to the first ``k`` rows of ``values`` (accelerometer and force: 3 values;
+    proximity and temperature: 1, then zeros), ``seq`` (the sequence byte),
+    ``code`` (``cell << 4 | modality``), ``t`` (the bus time in ns rounded
+    half to even, -1 without one), ``period`` (``period_by_mod[modality]``)
+    and ``stamp`` (the bus time, ``int64`` minimum without one).  Returns
+    ``k`` and whether any accepted frame has a bus time.
+    """
+    k = 0
+    any_stamped = False
+    no_stamp = np.iinfo(np.int64).min
+    for i in range(arb.shape[0]):
+        fl = flags[i]
+        if fl & rejected_flags:
+            status[i] = CAN_REMOTE_OR_ERROR
+            continue
+        a = np.int64(arb[i])
+        if (fl & extended_flag) == 0 or ((a >> 20) & 0x1FF) != tag:
+            status[i] = CAN_FOREIGN
+            continue
+        m = (a >> 16) & 0xF
+        size = size_by_mod[m]
+        if size == 0:
+            status[i] = CAN_UNKNOWN_MODALITY
+            continue
+        if np.int64(dlc[i]) != 1 + size:
+            status[i] = CAN_BAD_LENGTH
+            continue
+        cell = a & 0xFFFF
+        if not known[cell]:
+            status[i] = CAN_UNKNOWN_CELL
+            continue
+        w = np.int64(0)
+        for b in range(size):
+            w = (w << 8) | np.int64(data[i, 1 + b])
+        v0 = np.int64(0)
+        v1 = np.int64(0)
+        v2 = np.int64(0)
+        if m == 1:
+            ok = (w >> 30) == 0
+            v0 = (w >> 20) & 0x3FF
+            v1 = (w >> 10) & 0x3FF
+            v2 = w & 0x3FF
+            if v0 & 0x200:
+                v0 -= 1024
+            if v1 & 0x200:
+                v1 -= 1024
+            if v2 & 0x200:
+                v2 -= 1024
+        elif m == 2:
+            ok = (w & 0xF) == 0
+            v0 = (w >> 28) & 0xFFF
+            v1 = (w >> 16) & 0xFFF
+            v2 = (w >> 4) & 0xFFF
+        elif m == 3:
+            ok = w != 0xFFFF
+            v0 = w
+        else:
+            v0 = w - 0x10000 if w & 0x8000 else w
+            ok = v0 != -32768
+        if not ok:
+            status[i] = CAN_BAD_PAYLOAD
+            continue
+        status[i] = CAN_OK
+        values[k, 0] = v0
+        values[k, 1] = v1
+        values[k, 2] = v2
+        seq[k] = np.int64(data[i, 0])
+        code[k] = (cell << 4) | m
+        period[k] = period_by_mod[m]
+        s = ts[i]
+        if s == 0.0:
+            t[k] = -1
+            stamp[k] = no_stamp
+        else:
+            any_stamped = True
+            t[k] = np.int64(np.rint(s * 1e9))
+            stamp[k] = t[k]
+        k += 1
+    return k, any_stamped
+
+
+@_jit
+def track_forward(slot, seq, t, period, modulus, live, low, high, t_high, deferred, events, unwrapped, gap_slot,
+                  gap_from, gap_to):  # pragma: no cover - compiled
+    """Sequence numbers in arrival order, each key's forward steps on its slot's state
+    (:meth:`~tactile_descriptors_ros.codecs.sequence.SequenceTracker.track_many`).
+
+    Number ``i`` (key slot ``slot[i]``, ``seq[i]`` already below ``modulus``,
+    time ``t[i]`` [ns] and frame period ``period[i]``; ``t`` < 0 or ``period``
+    <= 0: no time) is unwrapped against its key's newest number ``high``
+    (:func:`~tactile_descriptors_ros.codecs.sequence.unwrap`, the elapsed
+    periods since the newest as the expected advance).  A key's first number
+    starts it (event 0, FIRST); a number past the newest is the next one
+    (1, IN_ORDER) or follows a gap (2, GAP: ``gap_slot``, ``gap_from`` and
+    ``gap_to`` get the slot and the skipped numbers ``gap_from..gap_to - 1``).
+    Any other number (a duplicate, a late frame, a restart) needs the
+    tracker's memory of holes: it and every later number of its key are left
+    to the caller, event -1 (``deferred`` marks the slot).  Returns the
+    number of gaps, the frames they lost and the numbers left to the caller.
+    """
+    n_gaps = 0
+    lost = 0
+    left = 0
+    for i in range(slot.shape[0]):
+        s = slot[i]
+        if deferred[s]:
+            events[i] = -1
+            left += 1
+            continue
+        ti = t[i]
+        if ti < 0:
+            ti = -1
+        if not live[s]:
+            live[s] = True
+            low[s] = seq[i]
+            high[s] = seq[i]
+            t_high[s] = ti
+            events[i] = 0
+            unwrapped[i] = seq[i]
+            continue
+        h = high[s]
+        advance = 0.0
+        th = t_high[s]
+        if ti >= 0 and th >= 0 and period[i] > 0:
+            advance = (ti - th) / period[i]
+        d = (seq[i] - h) % modulus
+        j = np.int64(np.ceil((advance - d) / modulus - 0.5))
+        u = h + d + j * modulus
+        if u <= h:
+            deferred[s] = True
+            events[i] = -1
+            left += 1
+            continue
+        if u == h + 1:
+            events[i] = 1
+        else:
+            events[i] = 2
+            gap_slot[n_gaps] = s
+            gap_from[n_gaps] = h + 1
+            gap_to[n_gaps] = u
+            n_gaps += 1
+            lost += u - h - 1
+        high[s] = u
+        t_high[s] = ti
+        unwrapped[i] = u
+    return n_gaps, lost, left

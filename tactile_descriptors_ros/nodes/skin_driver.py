@@ -128,6 +128,8 @@ class SkinDriver(DriverBase):
         rates = self.stream.rates_hz()
         self.decoder = SkinCanDecoder(known_cell_ids=self.known, rates_hz=rates) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known, rates_hz=rates)
+        if self.is_can:
+            self.decoder.warm_up()  # the compiled decoding, loaded before the first read rather than during it
         self._rates = {p.name: RateMeter() for p in self.robot.body_parts}
         self._part_index = np.full(0x10000, -1, np.int64)
         for k, p in enumerate(self.robot.body_parts):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+from unittest import mock
 
 import can
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tactile_descriptors_ros.codecs import sequence, skin_can
 from tactile_descriptors_ros.codecs.can_frames import frames_from_messages, messages_from_frames
 from tactile_descriptors_ros.codecs.framing import SequenceTracker
 from tactile_descriptors_ros.codecs.skin import (
@@ -22,6 +24,7 @@ from tactile_descriptors_ros.codecs.skin import (
     unpack_values_batch,
 )
 from tactile_descriptors_ros.codecs.skin_can import PROTOCOL_TAG, SkinCanDecoder, encode_can_frames, encode_can_message
+from tactile_descriptors_ros.core import fast
 from tactile_descriptors_ros.errors import CodecError
 
 _RANGE = {Modality.ACCEL: (-512, 511), Modality.FORCE: (0, 4095), Modality.PROXIMITY: (0, 0xFFFE),
@@ -83,8 +86,8 @@ def test_batch_payload_validation_matches_the_reference():
 KNOWN = (3, 4, 5)
 
 
-_KINDS = ["good"] * 12 + ["repeat", "jump", "back", "foreign", "std", "remote", "error", "bad_mod", "bad_len",
-                          "bad_payload", "unknown_cell"]
+_KINDS = ["good"] * 12 + ["repeat", "jump", "back", "foreign", "std", "std_tagged", "remote", "error", "bad_mod",
+                          "bad_len", "bad_payload", "unknown_cell"]
 
 
 def _random_values(rng: random.Random, m: Modality) -> tuple[int, ...]:
@@ -118,6 +121,8 @@ def can_stream(seed: int, n: int) -> list[can.Message]:
             msg.arbitration_id = ((PROTOCOL_TAG + 1) << 20) | (msg.arbitration_id & 0xFFFFF)
         elif kind == "std":
             msg = can.Message(arbitration_id=0x123, is_extended_id=False, data=bytes(msg.data))
+        elif kind == "std_tagged":  # an adapter's standard frame whose id bits look like ours: still foreign
+            msg.is_extended_id = False
         elif kind == "remote":
             msg = can.Message(arbitration_id=msg.arbitration_id, is_remote_frame=True, dlc=2)
         elif kind == "error":
@@ -143,10 +148,11 @@ def can_stream(seed: int, n: int) -> list[can.Message]:
     return msgs
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(st.integers(0, 2 ** 32), st.integers(0, 300), st.lists(st.integers(0, 300), max_size=6),
-       st.sampled_from([None, KNOWN]), st.integers(2, 40))
-def test_can_batch_decoder_equals_the_per_frame_decoder(seed, n, cuts, known, window):
+       st.sampled_from([None, KNOWN]), st.integers(2, 40), st.booleans())
+def test_can_batch_decoder_equals_the_per_frame_decoder(seed, n, cuts, known, window, compiled):
+    """Both batch paths (the compiled pass where the backend is loaded, and numpy) against the per-frame decoder."""
     msgs = can_stream(seed, n)
     cuts = sorted(min(c, n) for c in cuts)
     ref = SkinCanDecoder(known_cell_ids=known, duplicate_window=window)
@@ -154,23 +160,116 @@ def test_can_batch_decoder_equals_the_per_frame_decoder(seed, n, cuts, known, wi
     dec = SkinCanDecoder(known_cell_ids=known, duplicate_window=window)
     frames = frames_from_messages(msgs)
     got = []
-    for a, b in zip([0] + cuts, cuts + [len(msgs)]):
-        got += dec.decode_frames(frames[a:b]).to_samples()
+    with mock.patch.object(skin_can, "COMPILED_DECODE", compiled):  # not monkeypatch: per example
+        for a, b in zip([0] + cuts, cuts + [len(msgs)]):
+            got += dec.decode_frames(frames[a:b]).to_samples()
     assert got == want
     assert dec.stats == ref.stats
     assert dec.tracker.snapshot() == ref.tracker.snapshot()  # everything that decides future events
 
 
+needs_kernel = pytest.mark.skipif(fast.kernel_module() is None, reason="the compiled backend is not loaded here")
+
+
+@needs_kernel
 @settings(max_examples=100, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 5), st.integers(0, 255)), max_size=200), st.integers(2, 60))
-def test_sequence_tracker_update_many_equals_update(pairs, window):
+@given(st.integers(0, 2 ** 32), st.integers(1, 300), st.integers(1, 2 ** 62), st.booleans())
+def test_compiled_can_decoder_equals_numpy_with_arrival_times(seed, n, arrival_ns, unstamped):
+    """Frames without bus times are unwrapped on the read's arrival time on both paths alike; bus times that
+    fall between two nanoseconds round half to even on both."""
+    frames = frames_from_messages(can_stream(seed, n))
+    if unstamped:
+        frames["timestamp"] = 0.0
+    else:
+        frames["timestamp"][::3] = 0.0
+        frames["timestamp"][1::3] = np.arange(len(frames[1::3])) * 1e-9 + 0.5e-9 + 1.0  # ties and near-ties
+    out = []
+    for compiled in (True, False):
+        dec = SkinCanDecoder(known_cell_ids=KNOWN)
+        with mock.patch.object(skin_can, "COMPILED_DECODE", compiled):
+            batch = dec.decode_frames(frames, arrival_ns)
+        out.append((batch, dec.stats, dec.tracker.snapshot()))
+    (a, sa, ta), (b, sb, tb) = out
+    for field in ("cell_id", "modality", "sequence", "values", "stamp_ns"):
+        x, y = getattr(a, field), getattr(b, field)
+        assert x.dtype == y.dtype and np.array_equal(x, y), field
+    assert sa == sb and ta == tb
+
+
+@needs_kernel
+def test_the_decoder_takes_the_compiled_pass_when_the_backend_is_loaded():
+    frames = frames_from_messages(can_stream(7, 200))
+    dec = SkinCanDecoder(known_cell_ids=KNOWN)
+    with mock.patch.object(dec, "_decode_compiled", wraps=dec._decode_compiled) as spy:
+        dec.decode_frames(frames)
+        dec.decode_frames(frames[:0])  # nothing to decode: nothing called
+    assert spy.call_count == 1
+    with mock.patch.object(skin_can, "COMPILED_DECODE", False), \
+            mock.patch.object(dec, "_decode_compiled", wraps=dec._decode_compiled) as off:
+        dec.decode_frames(frames)
+    assert off.call_count == 0
+
+
+@needs_kernel
+def test_the_compiled_can_decoder_runs_one_variant_warmed_up_at_set_up():
+    """Frame arrays of any length, slices and strides take the variant ``make setup`` compiles; a single frame and
+    a read-only buffer take numpy (each would be another variant, compiled while the driver runs)."""
+    kernel = fast.kernel_module()
+    fast.warm_up()
+    before = list(kernel.decode_can_rows.signatures)
+    frames = frames_from_messages(can_stream(11, 120))
+    readonly = np.frombuffer(frames.tobytes(), dtype=frames.dtype)
+    want = SkinCanDecoder(known_cell_ids=KNOWN)
+    with mock.patch.object(skin_can, "COMPILED_DECODE", False):
+        ref = [want.decode_frames(f).to_samples() for f in (frames, frames[:1], frames[::3], frames[5:7], readonly)]
+    dec = SkinCanDecoder(known_cell_ids=KNOWN)
+    got = [dec.decode_frames(f).to_samples() for f in (frames, frames[:1], frames[::3], frames[5:7], readonly)]
+    assert got == ref and dec.stats == want.stats
+    assert kernel.decode_can_rows.signatures == before and len(before) == 1
+
+
+@needs_kernel
+def test_the_compiled_tracker_runs_one_variant_and_the_decoders_warm_up_counts_nothing():
+    """Scalar or per-number periods, read-only times or none take the variant ``make setup`` compiles; the
+    driver's warm-up (before its first read) loads both passes and leaves counters and tracker as they were."""
+    kernel = fast.kernel_module()
+    dec = SkinCanDecoder(known_cell_ids=KNOWN)
+    dec.warm_up()
+    assert dec.stats == SkinCanDecoder(known_cell_ids=KNOWN).stats and dec.tracker.snapshot() == {}
+    before = list(kernel.track_forward.signatures)
+    codes, seqs = np.repeat(np.arange(4), 5), np.tile(np.arange(5), 4)
+    times = np.arange(20, dtype=np.int64) * 1000
+    times.flags.writeable = False
+    for t, period in ((None, None), (times, 1000.0), (times, np.full(20, 1000.0)), (times.astype(np.int32), 1000)):
+        SequenceTracker(256, 8).track_many(codes, seqs, int, t, period)
+    assert kernel.track_forward.signatures == before and len(before) == 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 5), st.integers(0, 255)), max_size=200), st.integers(0, 60),
+       st.booleans(), st.one_of(st.none(), st.integers(0, 2 ** 16)))
+def test_sequence_tracker_update_many_equals_update(pairs, window, compiled, time_seed):
+    """Both batch paths (compiled where the backend is loaded, numpy) against ``update`` one by one, with and
+    without duplicate memory, with frame times (some unknown) that carry keys over silences, or without."""
     ref, got = SequenceTracker(256, window), SequenceTracker(256, window)
-    want = [int(ref.update(("k", k), s)) for k, s in pairs]
     codes = np.array([k for k, _ in pairs], dtype=np.int64)
     seqs = np.array([s for _, s in pairs], dtype=np.int64)
+    period = 1000.0
+    if time_seed is None:
+        t = None
+        want = [int(ref.update(("k", k), s)) for k, s in pairs]
+    else:  # increasing times, a silence of up to 600 periods now and then, a few unknown (-1)
+        rng = np.random.default_rng(time_seed)
+        t = np.cumsum(rng.choice([1000, 1000, 1000, 2000, 600_000], size=len(pairs))).astype(np.int64)
+        t[rng.random(len(pairs)) < 0.1] = -1
+        want = [int(ref.update(("k", k), s, None if ti < 0 else ti, period)) for (k, s), ti in zip(pairs, t.tolist())]
     half = len(pairs) // 2
-    ev = np.concatenate([got.update_many(codes[:half], seqs[:half], lambda c: ("k", c)),
-                         got.update_many(codes[half:], seqs[half:], lambda c: ("k", c))])
+    with mock.patch.object(sequence, "COMPILED_TRACKING", compiled):
+        ev = np.concatenate([
+            got.update_many(codes[:half], seqs[:half], lambda c: ("k", c), None if t is None else t[:half],
+                            None if t is None else period),
+            got.update_many(codes[half:], seqs[half:], lambda c: ("k", c), None if t is None else t[half:],
+                            None if t is None else period)])
     assert ev.tolist() == want
     assert (got.gaps, got.lost, got.duplicates, got.late, got.resets) == \
         (ref.gaps, ref.lost, ref.duplicates, ref.late, ref.resets)
