@@ -108,8 +108,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instead of timing: the CPU a node pays per message taken in each executor it can spin in "
                         "(TACTILE_EXECUTOR single and events), one NAO body part's frames at 700 messages/s, "
                         "--rounds alternating runs of --seconds each (lab/docs/performance.md, section Latency)")
+    p.add_argument("--read-cost", action="store_true",
+                   help="instead of timing: the skin driver's read path in one process (decode, stamp, cut, build "
+                        "the messages) on --read-cost-cells cells read every --read-period-s, CPU per read with "
+                        "the compiled decoding and with numpy's, checked equal first, --rounds alternating runs "
+                        "each (lab/docs/performance.md, section Scale)")
+    p.add_argument("--read-cost-cells", type=int, default=200, help="skin cells of --read-cost (default 200)")
     p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead, "
-                   "runs of each executor of --executor-overhead (default 2 each)")
+                   "runs of each executor of --executor-overhead, of each path of --read-cost (default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
     p.add_argument("--parts", type=int, default=None,
                    help="body parts of --scale-graph, one driver and one window node each (default: one per 500 "
@@ -126,10 +132,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--groups", default="paper",
                    help="descriptor feature groups of --scale-graph, comma-separated (default paper)")
     p.add_argument("--batch-s", type=float, default=None,
-                   help="the skin drivers' batch_s for --scale-graph (default: the NAO graph's)")
+                   help="the skin drivers' batch_s for --scale-graph and --read-cost (default: the NAO graph's)")
     p.add_argument("--read-period-s", type=float, default=None,
-                   help="the skin drivers' read_period_s for --scale-graph (default: the NAO graph's; 0 reads as soon "
-                        "as frames are due)")
+                   help="the skin drivers' read_period_s for --scale-graph and --read-cost (default: the NAO graph's; "
+                        "0 reads as soon as frames are due, not for --read-cost)")
     p.add_argument("--one-driver", action="store_true",
                    help="--scale-graph with one skin driver for all body parts instead of one per body part")
     p.add_argument("--hosts", type=int, default=0,
@@ -158,6 +164,8 @@ def run(args: argparse.Namespace) -> int:
         return _view_overhead(args)
     if args.executor_overhead:
         return _executor_overhead(args)
+    if args.read_cost:
+        return _read_cost(args)
 
     from tactile_descriptors_lab.bench.bench import BenchMismatch, format_report, run_bench
     from tactile_descriptors_ros.core import fast
@@ -312,6 +320,24 @@ def _view_overhead(args: argparse.Namespace) -> int:
         return 1
     bar.close()
     print(json.dumps(report, default=float) if args.json else format_view_overhead(report))
+    return 0
+
+
+def _read_cost(args: argparse.Namespace) -> int:
+    from tactile_descriptors_lab.bench.read_cost import format_read_cost, read_cost
+
+    if args.read_cost_cells < 1 or args.rounds < 1 or (args.batch_s is not None and not args.batch_s > 0):
+        print("tactile bench: error: --read-cost-cells, --rounds and --batch-s must be positive", file=sys.stderr)
+        return 2
+    print(f"tactile bench: the skin driver's read path, {args.read_cost_cells} cells, {args.rounds} run(s) of each "
+          "path ...", file=sys.stderr)
+    try:
+        report = read_cost(args.read_cost_cells, read_period_s=args.read_period_s, batch_s=args.batch_s,
+                           repeat=args.rounds)
+    except RuntimeError as exc:
+        print(f"tactile bench: error: read cost: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(report) if args.json else format_read_cost(report))
     return 0
 
 

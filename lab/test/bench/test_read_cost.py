@@ -1,0 +1,43 @@
+"""``tactile bench --read-cost``: the skin driver's read path, compiled against numpy, checked equal first."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tactile_descriptors_lab.bench.read_cost import read_cost
+from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder
+from tactile_descriptors_ros.core import fast
+from tactile_descriptors_ros.sim.synthetic import cell_samples_per_s
+
+pytestmark = pytest.mark.skipif(fast.kernel_module() is None, reason="the compiled backend is not loaded here")
+
+
+def test_bench_read_cost_times_both_paths_of_the_same_reads():
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--read-cost",
+                          "--read-cost-cells", "20", "--rounds", "1", "--json"],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0, out.stderr[-2000:]
+    r = json.loads(out.stdout)
+    assert r["same_messages"] is True and r["cells"] == 20
+    assert r["read_period_s"] == 0.005 and r["batch_s"] == 0.01  # the NAO graph's drivers
+    assert r["reads"] == 800 and r["messages"] == 400  # 4 s read every 5 ms, a message every 10 ms
+    assert r["frames"] == pytest.approx(20 * cell_samples_per_s() * 4.0, rel=0.01)
+    for path in ("compiled", "numpy"):
+        assert r["ms_per_read"][path] > 0
+        assert r["ms_per_cell_second"][path] == pytest.approx(r["ms_per_read"][path] / (20 * 0.005))
+    assert r["speedup"] == pytest.approx(r["ms_per_read"]["numpy"] / r["ms_per_read"]["compiled"])
+
+
+def test_read_cost_times_nothing_when_the_paths_disagree(monkeypatch):
+    compiled = SkinCanDecoder._decode_compiled
+
+    def one_sample_short(self, kernel, frames, arrival_ns):  # the compiled path loses each read's last frame
+        return compiled(self, kernel, frames[:-1], arrival_ns)
+
+    monkeypatch.setattr(SkinCanDecoder, "_decode_compiled", one_sample_short)
+    with pytest.raises(RuntimeError, match="disagree"):
+        read_cost(10, seconds=0.5, repeat=1)
