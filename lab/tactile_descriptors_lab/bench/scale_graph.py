@@ -60,6 +60,7 @@ import numpy as np
 
 from tactile_descriptors_lab.bench.multi_host import MultiHostResult
 from tactile_descriptors_lab.bench.netns import LinkCounters
+from tactile_descriptors_lab.bench.soak import LATE_KEYS, LOST_KEYS
 from tactile_descriptors_ros.errors import ConfigError
 from tactile_descriptors_ros.sim.synthetic import (
     WINDOW_HOP_S,
@@ -91,10 +92,6 @@ MEMORY_FLOOR_GB = 3.0
 #: Longest wait for every node's diagnostics at the start and the end of the measurement [s]; a node
 #: that is later than this (an overloaded machine) is reported in ``stale_diagnostics``.
 DIAGNOSTICS_WAIT_S = 30.0
-#: Window node fault counters that mean a lost frame, and those that mean a late or missing one.
-LOST_KEYS = ("fault_lost_frames", "fault_bad_frames", "fault_sequence_restart")
-LATE_KEYS = ("fault_windower_gap", "fault_windower_out_of_order", "fault_windower_duplicate",
-             "fault_windower_clock_jump", "fault_windower_unsorted_stamps")
 
 
 def scale_graph_specs(robot_path: str | os.PathLike[str], model_path: str | None = None) -> list:

@@ -28,7 +28,9 @@ buffers, and the frames in three parts:
   the bus delivered (the soak's scene injects none);
 * **sent and lost**: messages the driver published that the window node
   never received (gaps in the messages' sequence numbers, counted when a
-  later message arrives): the graph's own loss, in messages and in frames.
+  later message arrives; for a body part's ``SkinPartFrames``, gaps in each
+  cell's batch numbers, so a message dropped on the way is all its cells'
+  batches): the graph's own loss, in messages or cell batches and in frames.
 
 Late frames (out of order, duplicates, clock jumps, windows with gaps) are
 counted apart, and the load of the machine is part of the result: on a
@@ -67,8 +69,9 @@ CELL_SECOND_GOAL_MS = 1.0
 #: Nodes that serve seeing the skin (contact markers, the TF tree), not recognising: left out of the
 #: recognition path's CPU and reported beside it.
 SEEING_EXECUTABLES = ("contact_node", "tf_publisher")
-#: Window node fault counters that mean a lost frame.
-LOST_KEYS = ("fault_lost_frames", "fault_bad_frames", "fault_sequence_restart")
+#: Window node fault counters that mean a lost frame: a message's (BioTac batches) or a cell's batch in a body
+#: part's message (a whole ``SkinPartFrames`` dropped on the way is every one of its cells' batches).
+LOST_KEYS = ("fault_lost_frames", "fault_lost_cell_batches", "fault_bad_frames", "fault_sequence_restart")
 #: The machine kept up when the simulated bus sent at least this share of the real rate.
 KEEPS_UP_FRACTION = 0.99
 #: Window node fault counters that mean a late (or out-of-order) frame.
@@ -182,8 +185,13 @@ class SoakReport:
         due = int(round(self.scene_frames_per_s * self.driver_run_s))
         sent = self._node_sum("skin_driver", "bus_frames")
         messages = self._node_sum("skin_driver", "messages")
+        cell_batches = self._node_sum("skin_driver", "cell_batches")
         lost_msgs = self._sum(("fault_lost_frames",))["lost_frames"]
+        lost_batches = self._sum(("fault_lost_cell_batches",))["lost_cell_batches"]
         rate = self.frames_sent_in_run / due if due else None
+        # what the lost messages and cell batches carried, at the mean frames per message and per cell batch
+        frames_lost = (lost_msgs * sent / messages if messages else 0) \
+            + (lost_batches * sent / cell_batches if cell_batches else 0)
         return {"driver_run_s": self.driver_run_s, "frames_due_at_real_rate": due,
                 "frames_sent_meanwhile": self.frames_sent_in_run, "never_sent": max(0, due - self.frames_sent_in_run),
                 "sent_percent_of_real_rate": None if rate is None else 100.0 * rate, "frames_sent": sent,
@@ -192,7 +200,9 @@ class SoakReport:
                 "messages_sent": messages,
                 "messages_received": self._sum(("frames_messages_taken",))["frames_messages_taken"],
                 "messages_sent_and_lost": lost_msgs,
-                "frames_sent_and_lost": int(round(lost_msgs * sent / messages)) if messages else 0}
+                "cell_batches_sent": cell_batches,
+                "cell_batches_sent_and_lost": lost_batches,
+                "frames_sent_and_lost": int(round(frames_lost))}
 
     def cpu(self) -> dict[str, Any]:
         """The graph's mean CPU [% of one core], whole and on the recognition path (every node but
@@ -246,8 +256,8 @@ class SoakReport:
                   if v["rss_growth_after_warmup_percent"] is not None]
         lost = self.lost_frames()
         split = self.frames_split()
-        graph_lost = split["lost_on_bus"] + split["messages_sent_and_lost"] + lost["bad_frames"] \
-            + lost["sequence_restart"]
+        graph_lost = split["lost_on_bus"] + split["messages_sent_and_lost"] + split["cell_batches_sent_and_lost"] \
+            + lost["bad_frames"] + lost["sequence_restart"]
         buffers = [float(v["windower_buffer_mb"]) for n, v in self.diagnostics.items()
                    if n.split(": ")[-1] == "windows" and "windower_buffer_mb" in v]
         cpu = self.cpu()
@@ -442,7 +452,8 @@ def format_soak(report: SoakReport) -> str:
                  f"real rate, {fr['frames_sent_meanwhile']} sent by the simulated bus "
                  f"({'-' if pct is None else format(pct, '.1f')} %), never sent {fr['never_sent']} (the simulator "
                  f"behind real time); lost on the bus {fr['lost_on_bus']}; sent and lost between driver and window "
-                 f"node {fr['messages_sent_and_lost']} of {fr['messages_sent']} messages "
+                 f"node {fr['messages_sent_and_lost']} of {fr['messages_sent']} messages and "
+                 f"{fr['cell_batches_sent_and_lost']} of {fr['cell_batches_sent']} cell batches "
                  f"({fr['frames_sent_and_lost']} frames)")
     lines.append(f"descriptors {d['descriptors']}; window node counters: lost {d['lost_frames']}; "
                  f"late {d['late_frames']}")

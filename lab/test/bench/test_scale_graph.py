@@ -125,6 +125,7 @@ def test_bench_scale_graph_runs_a_small_skin_in_real_time_without_lost_frames():
         assert p["cpu_percent"] > 0 and p["rss_mb"] > 0 and p["cells"] == cells // parts
     for name, p in d["parts"].items():
         assert p["lost_frames"] == 0, (name, p)
+        assert "lost_cell_batches" in p["lost"]  # a dropped body-part message: its cells' batches, counted
         assert p["messages_sent"] > 0 and p["messages_received"] > 0
         assert p["windows"] >= math.floor(p["windows_expected"]) - 1, (name, p)
         assert p["cells_in_contact"] == cells // parts  # every cell touches: the descriptor's full cost

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from tactile_descriptors_lab.bench.soak import NodeSamples, SoakReport, soak_scene
+from tactile_descriptors_lab.bench.soak import NodeSamples, SoakReport, format_soak, soak_scene
 
 
 def test_growth_is_measured_after_the_first_minute_and_the_slope_per_minute():
@@ -75,7 +75,7 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     assert ("tf_publisher (tf_publisher) left out" in out.stderr) is not has_tf, out.stderr[-2000:]
     for n in d["nodes"].values():
         assert len(n["rss_mb"]) >= 5 and n["rss_end_mb"] > 0 and n["cpu_percent"] is not None
-    assert set(d["lost_frames"]) == {"lost_frames", "bad_frames", "sequence_restart"}
+    assert set(d["lost_frames"]) == {"lost_frames", "lost_cell_batches", "bad_frames", "sequence_restart"}
     assert "windower_gap" in d["late_frames"] and d["exit_codes"]
     f = d["frames"]  # 8 s may end before the driver's first frames: the split is consistent either way
     assert f["frames_sent_meanwhile"] + f["never_sent"] >= f["frames_due_at_real_rate"]
@@ -116,6 +116,26 @@ def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
                          (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {}, scene_frames_per_s=1000.0, driver_run_s=10.0,
                          frames_sent_in_run=9950)
     assert kept_up.frames_split()["machine_kept_up"] is True and kept_up.to_dict()["goal"]["no_lost_frames"]
+
+
+def test_body_part_messages_dropped_on_the_way_are_lost_cell_batches():
+    """A dropped ``SkinPartFrames`` shows only as gaps in its cells' batch numbers (the window node's
+    ``lost_cell_batches``): the soak counts them as lost, in cell batches and in frames, and the goal of no lost
+    frames is not met even though no message-level counter moved."""
+    nodes = [NodeSamples("skin_driver", "skin_driver", 1), NodeSamples("window_node", "window_node", 2)]
+    diag = {"skin_driver: bus": {"bus_frames": "12000", "bus_lost_frames": "0"},
+            "skin_driver: left_hand": {"messages": "100", "cell_batches": "800"},
+            "skin_driver: chest": {"messages": "100", "cell_batches": "400"},
+            "window_node: windows": {"fault_lost_frames": "0", "fault_lost_cell_batches": "6"}}
+    r = SoakReport("nao", 10.0, 10.0, 1.0, nodes, diag, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=12000)
+    f = r.frames_split()
+    assert f["machine_kept_up"] is True and f["messages_sent_and_lost"] == 0
+    assert f["cell_batches_sent"] == 1200 and f["cell_batches_sent_and_lost"] == 6
+    assert f["frames_sent_and_lost"] == 60  # 10 frames a cell batch
+    d = r.to_dict()
+    assert d["lost_frames"]["lost_cell_batches"] == 6 and d["goal"]["no_lost_frames"] is False
+    assert "6 of 1200 cell batches (60 frames)" in format_soak(r)
 
 
 def test_rss_per_minute_takes_the_first_sample_of_every_minute():
