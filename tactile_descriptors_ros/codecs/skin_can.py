@@ -65,6 +65,8 @@ __all__ = [
     "SkinCanEncoder",
     "SkinCanStats",
     "SkinCanDecoder",
+    "load_compiled",
+    "COMPILED_DECODE",
 ]
 
 _MODALITIES: dict[int, Modality] = {int(m): m for m in Modality}
@@ -360,23 +362,6 @@ class SkinCanDecoder:
         stamp[ts == 0.0] = NO_STAMP
         return SkinSampleBatch(cell[idx], mod[idx], seq, values, stamp)
 
-    def warm_up(self) -> None:
-        """Load the compiled pass and the tracker's now (about 0.3 s from the on-disk cache), not on the first
-        read, whose frames would wait meanwhile; counters and tracker untouched.  Nothing where numpy serves."""
-        kernel = _codec_kernel()
-        if kernel is None:
-            return
-        frames = empty_frames(2)
-        frames["flags"] = FLAG_REMOTE  # rejected at the first check: nothing written but the verdicts
-        none = np.empty(0, dtype=np.int64)
-        kernel.decode_can_rows(frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"],
-                               frames["timestamp"], np.ones(1, dtype=bool), FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED,
-                               PROTOCOL_TAG, _PAYLOAD_BY_NUMBER, self._period_ns, np.empty(2, dtype=np.int8),
-                               np.empty((2, 3), dtype=np.int64), none, none, none, np.empty(0), none)
-        one = np.zeros(1, dtype=np.int64)
-        kernel.track_forward(none, none, none, np.empty(0), 256, np.zeros(1, dtype=bool), one, one, one,
-                             np.zeros(1, dtype=bool), np.empty(0, dtype=np.int8), none, none, none, none)
-
     def _decode_compiled(self, kernel: ModuleType, frames: np.ndarray, arrival_ns: int | None) -> SkinSampleBatch:
         """:meth:`decode_frames` with the checks and unpacking in one compiled pass
         (:func:`~..core.numba_kernel.decode_can_rows`); the sequence numbers go through the same tracker."""
@@ -445,6 +430,26 @@ _CELL_IDS = 0x10000
 _PAYLOAD_BY_NUMBER = np.zeros(16, dtype=np.int64)
 for _m, _size in PAYLOAD_SIZE.items():
     _PAYLOAD_BY_NUMBER[int(_m)] = _size
+
+
+def load_compiled() -> bool:
+    """Load the compiled decoding and sequence tracking now (about 0.3 s from the on-disk cache ``make setup``
+    fills) rather than on a decoder's first read, whose frames would queue meanwhile: a driver calls this before
+    it opens its bus.  Returns whether they serve (False where numpy does)."""
+    kernel = _codec_kernel()
+    if kernel is None:
+        return False
+    frames = empty_frames(2)
+    frames["flags"] = FLAG_REMOTE  # rejected at the first check: nothing written but the verdicts
+    none = np.empty(0, dtype=np.int64)
+    kernel.decode_can_rows(frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"],
+                           frames["timestamp"], np.ones(1, dtype=bool), FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED,
+                           PROTOCOL_TAG, _PAYLOAD_BY_NUMBER, np.zeros(16), np.empty(2, dtype=np.int8),
+                           np.empty((2, 3), dtype=np.int64), none, none, none, np.empty(0), none)
+    one = np.zeros(1, dtype=np.int64)
+    kernel.track_forward(none, none, none, np.empty(0), 256, np.zeros(1, dtype=bool), one, one, one,
+                         np.zeros(1, dtype=bool), np.empty(0, dtype=np.int8), none, none, none, none)
+    return True
 
 
 def _codec_kernel() -> ModuleType | None:

@@ -42,7 +42,7 @@ import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
 from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
-from ..codecs.skin_can import SkinCanDecoder
+from ..codecs.skin_can import SkinCanDecoder, load_compiled
 from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..params.skin_driver import SKIN_DRIVER
@@ -76,6 +76,10 @@ class SkinDriver(DriverBase):
             self.tp["can"]["bitrate"] = params["can.bitrate"]
         self.sim_wire = params["sim.wire"]
         self.sim_loop = params["sim.loop"]
+        if self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can"):
+            # the compiled decoding, loaded before the bus opens: its frames would queue meanwhile, and a first
+            # read more than MAX_BACKLOG_S behind sheds the oldest
+            load_compiled()
 
         ct = self.robot.cell_types[self.robot.body_parts[0].cell_type]
         self.accel_rate_hz = ct.vibration.rate_hz
@@ -128,8 +132,6 @@ class SkinDriver(DriverBase):
         rates = self.stream.rates_hz()
         self.decoder = SkinCanDecoder(known_cell_ids=self.known, rates_hz=rates) if self.is_can else \
             SkinSerialDecoder(known_cell_ids=self.known, rates_hz=rates)
-        if self.is_can:
-            self.decoder.warm_up()  # the compiled decoding, loaded before the first read rather than during it
         self._rates = {p.name: RateMeter() for p in self.robot.body_parts}
         self._part_index = np.full(0x10000, -1, np.int64)
         for k, p in enumerate(self.robot.body_parts):

@@ -196,6 +196,11 @@ def test_compiled_can_decoder_equals_numpy_with_arrival_times(seed, n, arrival_n
     assert sa == sb and ta == tb
 
 
+def test_load_compiled_says_numpy_serves_when_the_compiled_decoding_is_off():
+    with mock.patch.object(skin_can, "COMPILED_DECODE", False):
+        assert skin_can.load_compiled() is False
+
+
 @needs_kernel
 def test_the_decoder_takes_the_compiled_pass_when_the_backend_is_loaded():
     frames = frames_from_messages(can_stream(7, 200))
@@ -216,6 +221,7 @@ def test_the_compiled_can_decoder_runs_one_variant_warmed_up_at_set_up():
     a read-only buffer take numpy (each would be another variant, compiled while the driver runs)."""
     kernel = fast.kernel_module()
     fast.warm_up()
+    skin_can.load_compiled()
     before = list(kernel.decode_can_rows.signatures)
     frames = frames_from_messages(can_stream(11, 120))
     readonly = np.frombuffer(frames.tobytes(), dtype=frames.dtype)
@@ -229,13 +235,11 @@ def test_the_compiled_can_decoder_runs_one_variant_warmed_up_at_set_up():
 
 
 @needs_kernel
-def test_the_compiled_tracker_runs_one_variant_and_the_decoders_warm_up_counts_nothing():
-    """Scalar or per-number periods, read-only times or none take the variant ``make setup`` compiles; the
-    driver's warm-up (before its first read) loads both passes and leaves counters and tracker as they were."""
+def test_the_compiled_tracker_runs_one_variant_the_drivers_warm_up_loads():
+    """Scalar or per-number periods, read-only times or none take the variant that ``load_compiled`` (the
+    driver, before it opens its bus) and ``make setup`` load."""
     kernel = fast.kernel_module()
-    dec = SkinCanDecoder(known_cell_ids=KNOWN)
-    dec.warm_up()
-    assert dec.stats == SkinCanDecoder(known_cell_ids=KNOWN).stats and dec.tracker.snapshot() == {}
+    assert skin_can.load_compiled() is True
     before = list(kernel.track_forward.signatures)
     codes, seqs = np.repeat(np.arange(4), 5), np.tile(np.arange(5), 4)
     times = np.arange(20, dtype=np.int64) * 1000

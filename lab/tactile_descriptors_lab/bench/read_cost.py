@@ -78,7 +78,7 @@ def _compiled(on: bool) -> Iterator[None]:
 
 def _run(robot, reads: list[np.ndarray], batch_s: float, compiled: bool) -> tuple[float, list, dict]:
     """One pass of the driver's read path over ``reads``; its thread's CPU time, the messages and counters."""
-    from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder
+    from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder, load_compiled
     from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
     from tactile_descriptors_ros.streams.skin import SkinStream
 
@@ -90,7 +90,7 @@ def _run(robot, reads: list[np.ndarray], batch_s: float, compiled: bool) -> tupl
     decoder = SkinCanDecoder(known_cell_ids=set(cells), rates_hz=stream.rates_hz())
     msgs = []
     with _compiled(compiled):
-        decoder.warm_up()
+        load_compiled()
         c = time.thread_time()
         for frames in reads:
             batch = decoder.decode_frames(frames, time.time_ns())
