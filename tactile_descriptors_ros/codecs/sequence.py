@@ -160,8 +160,9 @@ class SequenceTracker:
     ``window`` of the newest (a number further back is a restart, so nothing
     older is ever asked).  A number in that span is a duplicate exactly when
     it is not a hole.  Streams in order have no holes, so :meth:`track_many`
-    updates all their keys with array operations, with no Python work per key
-    (a skin driver tracks hundreds of keys on every read).
+    updates all their keys in one compiled pass (array operations where the
+    compiled backend does not serve), with no Python work per key (a skin
+    driver tracks hundreds of keys on every read).
     """
 
     def __init__(self, modulus: int, window: int = 64, period_ns: float | None = None) -> None:

@@ -346,7 +346,8 @@ class SkinCanDecoder:
         ts = frames["timestamp"][idx]
         # the arrival time stands in only on a bus that gives no times at all (one clock per key)
         stand_in = -1 if arrival_ns is None or (ts != 0.0).any() else int(arrival_ns)
-        t = np.where(ts == 0.0, stand_in, np.rint(ts * 1e9)).astype(np.int64)
+        t = np.rint(ts * 1e9).astype(np.int64)
+        t[ts == 0.0] = stand_in  # exact: through a float64 array, a host time in ns (~1.8e18) lost its last 8 bits
         events = self.tracker.update_many(code, seq, _key_of_code, t, self._period_ns[mod[idx]])
         st.sequence_gaps = self.tracker.gaps
         st.lost_frames = self.tracker.lost
@@ -382,18 +383,18 @@ class SkinCanDecoder:
             frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"], frames["timestamp"],
             self._known_table[1], FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED, PROTOCOL_TAG, _PAYLOAD_BY_NUMBER,
             self._period_ns, status, values, seq, code, t, period, stamp)
-        verdicts = np.bincount(status, minlength=7).tolist()
-        st.remote_or_error_frames += verdicts[1]
-        st.foreign_frames += verdicts[2]
-        st.unknown_modality += verdicts[3]
-        st.bad_length += verdicts[4]
-        if verdicts[5]:
-            st.unknown_cells += verdicts[5]
-            cells = frames["arbitration_id"][status == 5].astype(np.int64) & 0xFFFF
+        verdicts = np.bincount(status, minlength=kernel.CAN_BAD_PAYLOAD + 1).tolist()
+        st.remote_or_error_frames += verdicts[kernel.CAN_REMOTE_OR_ERROR]
+        st.foreign_frames += verdicts[kernel.CAN_FOREIGN]
+        st.unknown_modality += verdicts[kernel.CAN_UNKNOWN_MODALITY]
+        st.bad_length += verdicts[kernel.CAN_BAD_LENGTH]
+        if verdicts[kernel.CAN_UNKNOWN_CELL]:
+            st.unknown_cells += verdicts[kernel.CAN_UNKNOWN_CELL]
+            cells = frames["arbitration_id"][status == kernel.CAN_UNKNOWN_CELL].astype(np.int64) & 0xFFFF
             ids, counts = np.unique(cells, return_counts=True)
             for c, m in zip(ids.tolist(), counts.tolist()):
                 st.unknown_cell_ids[c] += m
-        st.bad_payload += verdicts[6]
+        st.bad_payload += verdicts[kernel.CAN_BAD_PAYLOAD]
         values, seq, code, t, stamp, period = values[:k], seq[:k], code[:k], t[:k], stamp[:k], period[:k]
         if arrival_ns is not None and not any_stamped:  # one clock per key: the arrival time for all, or none
             t[:] = int(arrival_ns)

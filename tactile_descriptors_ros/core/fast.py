@@ -58,8 +58,8 @@ __all__ = [
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
 #: ``central_moments``, ``power_spectrum``, ``band_moments``, ``rocket_ppv``, the windowing intake's
-#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the CAN decoder's ``decode_can_rows``, the
-#: sequence tracker's ``track_forward``, the status ``OK`` and ``CACHE_DIR``
+#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the CAN decoder's ``decode_can_rows`` (and its
+#: verdicts ``CAN_*``), the sequence tracker's ``track_forward``, the status ``OK`` and ``CACHE_DIR``
 #: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 

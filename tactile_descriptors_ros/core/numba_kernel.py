@@ -50,7 +50,8 @@ import numpy as np
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
            "runs_in_order", "append_runs", "explore_runs", "decode_can_rows", "track_forward", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
-           "UNSORTED", "TOO_WIDE"]
+           "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
+           "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
 
 
 def _writable_dir(path: Path) -> bool:

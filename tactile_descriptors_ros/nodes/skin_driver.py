@@ -76,7 +76,8 @@ class SkinDriver(DriverBase):
             self.tp["can"]["bitrate"] = params["can.bitrate"]
         self.sim_wire = params["sim.wire"]
         self.sim_loop = params["sim.loop"]
-        if self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can"):
+        self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
+        if self.is_can:
             # the compiled decoding, loaded before the bus opens: its frames would queue meanwhile, and a first
             # read more than MAX_BACKLOG_S behind sheds the oldest
             load_compiled()
@@ -123,7 +124,6 @@ class SkinDriver(DriverBase):
         return source_cls(scene, speed=self.sim_speed, chunk_s=2.0)
 
     def _configured(self) -> TransitionCallbackReturn:
-        self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
         self.stream = SkinStream({cid: (part, self.frame_ids[cid]) for cid, part in self.served.items()},
                                  self.accel_rate_hz, self.force_rate_hz, self.batch_s, self.stamp_source,
                                  self.resync_s, self.tare_on_start_s, lambda: self.get_clock().now().nanoseconds,
