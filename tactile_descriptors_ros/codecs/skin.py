@@ -33,6 +33,7 @@ __all__ = [
     "check_batch_ids",
     "Modality",
     "PAYLOAD_SIZE",
+    "PAYLOAD_SIZE_BY_NUMBER",
     "VALUE_COUNT",
     "NOMINAL_RATE_HZ",
     "ACCEL_MPS2_PER_COUNT",
@@ -180,10 +181,11 @@ def unpack_values(modality: int, data: bytes) -> tuple[int, ...]:
 #: ``SkinSampleBatch.stamp_ns`` of a sample without a bus time stamp (``SkinSample.stamp_ns is None``).
 NO_STAMP: int = int(np.iinfo(np.int64).min)
 
-_SIZE_BY_NUMBER = np.zeros(16, dtype=np.int64)
+#: :data:`PAYLOAD_SIZE` indexed by modality number (0..15; 0 where no modality has that number).
+PAYLOAD_SIZE_BY_NUMBER = np.zeros(16, dtype=np.int64)
 _COUNT_BY_NUMBER = np.zeros(16, dtype=np.int64)
 for _m in Modality:
-    _SIZE_BY_NUMBER[int(_m)] = PAYLOAD_SIZE[_m]
+    PAYLOAD_SIZE_BY_NUMBER[int(_m)] = PAYLOAD_SIZE[_m]
     _COUNT_BY_NUMBER[int(_m)] = VALUE_COUNT[_m]
 
 
@@ -310,7 +312,7 @@ def pack_values_batch(modality: np.ndarray, values: np.ndarray) -> np.ndarray:
             word[sel] = (v[:, 0] << 28) | (v[:, 1] << 16) | (v[:, 2] << 4)
         else:
             word[sel] = v[:, 0] & 0xFFFF
-    size = _SIZE_BY_NUMBER[mod]
+    size = PAYLOAD_SIZE_BY_NUMBER[mod]
     out = np.zeros((mod.size, 5), dtype=np.uint8)
     for k in range(5):
         shift = 8 * (size - 1 - k)
@@ -338,7 +340,7 @@ def unpack_values_batch(modality: np.ndarray, payload: np.ndarray) -> tuple[np.n
     """
     mod = np.asarray(modality, dtype=np.int64)
     pay = np.asarray(payload, dtype=np.int64)[:, :5]
-    size = _SIZE_BY_NUMBER[mod]
+    size = PAYLOAD_SIZE_BY_NUMBER[mod]
     word = np.zeros(mod.size, dtype=np.int64)
     for k in range(5):
         shift = 8 * (size - 1 - k)

@@ -46,6 +46,7 @@ from .skin import (
     NO_STAMP,
     NOMINAL_RATE_HZ,
     PAYLOAD_SIZE,
+    PAYLOAD_SIZE_BY_NUMBER,
     Modality,
     SkinSample,
     SkinSampleBatch,
@@ -124,7 +125,7 @@ def encode_can_frames(samples: SkinSampleBatch, corrupt: np.ndarray | None = Non
     out["flags"] = FLAG_EXTENDED
     out["data"][:, 0] = seq
     out["data"][:, 1:6] = payload
-    dlc = 1 + np.array([0, 4, 5, 2, 2], dtype=np.int64)[mod]
+    dlc = 1 + PAYLOAD_SIZE_BY_NUMBER[mod]
     if corrupt is not None:
         bad = np.asarray(corrupt, dtype=bool)
         dlc = dlc - bad
@@ -321,7 +322,7 @@ class SkinCanDecoder:
         known_mod = (mod >= 1) & (mod <= 4)
         unknown_mod = ours & ~known_mod
         ours &= known_mod
-        want = 1 + np.array([0, 4, 5, 2, 2] + [0] * 11, dtype=np.int64)[mod]
+        want = 1 + PAYLOAD_SIZE_BY_NUMBER[mod]
         bad_len = ours & (dlc != want)
         ours &= ~bad_len
         st.remote_or_error_frames += int(rem_err.sum())
@@ -381,7 +382,7 @@ class SkinCanDecoder:
         period = np.empty(n)
         k, any_stamped = kernel.decode_can_rows(
             frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"], frames["timestamp"],
-            self._known_table[1], FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED, PROTOCOL_TAG, _PAYLOAD_BY_NUMBER,
+            self._known_table[1], FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED, PROTOCOL_TAG, PAYLOAD_SIZE_BY_NUMBER,
             self._period_ns, status, values, seq, code, t, period, stamp)
         verdicts = np.bincount(status, minlength=kernel.CAN_BAD_PAYLOAD + 1).tolist()
         st.remote_or_error_frames += verdicts[kernel.CAN_REMOTE_OR_ERROR]
@@ -427,10 +428,6 @@ class SkinCanDecoder:
 COMPILED_DECODE = True
 #: Cell ids an arbitration id can carry (its low 16 bits).
 _CELL_IDS = 0x10000
-#: Payload bytes by modality number (0: no such modality).
-_PAYLOAD_BY_NUMBER = np.zeros(16, dtype=np.int64)
-for _m, _size in PAYLOAD_SIZE.items():
-    _PAYLOAD_BY_NUMBER[int(_m)] = _size
 
 
 def load_compiled() -> bool:
@@ -440,16 +437,7 @@ def load_compiled() -> bool:
     kernel = _codec_kernel()
     if kernel is None:
         return False
-    frames = empty_frames(2)
-    frames["flags"] = FLAG_REMOTE  # rejected at the first check: nothing written but the verdicts
-    none = np.empty(0, dtype=np.int64)
-    kernel.decode_can_rows(frames["flags"], frames["arbitration_id"], frames["dlc"], frames["data"],
-                           frames["timestamp"], np.ones(1, dtype=bool), FLAG_REMOTE | FLAG_ERROR, FLAG_EXTENDED,
-                           PROTOCOL_TAG, _PAYLOAD_BY_NUMBER, np.zeros(16), np.empty(2, dtype=np.int8),
-                           np.empty((2, 3), dtype=np.int64), none, none, none, np.empty(0), none)
-    one = np.zeros(1, dtype=np.int64)
-    kernel.track_forward(none, none, none, np.empty(0), 256, np.zeros(1, dtype=bool), one, one, one,
-                         np.zeros(1, dtype=bool), np.empty(0, dtype=np.int8), none, none, none, none)
+    fast.warm_up_codecs(kernel)
     return True
 
 

@@ -32,6 +32,7 @@ from ..errors import CodecError, FrameError
 from .framing import SequenceTracker, StreamDecoder, crc32
 from .skin import (
     NOMINAL_RATE_HZ,
+    PAYLOAD_SIZE_BY_NUMBER,
     Modality,
     SkinSample,
     SkinSampleBatch,
@@ -111,7 +112,7 @@ def encode_skin_frames(samples: SkinSampleBatch, corrupt: np.ndarray | None = No
     cell, mod, seq = samples.cell_id, samples.modality, samples.sequence
     check_batch_ids(samples)
     payload = pack_values_batch(mod, samples.values)
-    size = np.array([0, 4, 5, 2, 2], dtype=np.int64)[mod] if n else np.zeros(0, dtype=np.int64)
+    size = PAYLOAD_SIZE_BY_NUMBER[mod] if n else np.zeros(0, dtype=np.int64)
     frame = np.zeros((n, 7 + 5 + 4), dtype=np.uint8)
     frame[:, 0], frame[:, 1] = SYNC[0], SYNC[1]
     frame[:, 2] = size

@@ -52,6 +52,7 @@ __all__ = [
     "scratch",
     "release_buffers",
     "warm_up",
+    "warm_up_codecs",
     "main",
 ]
 
@@ -345,21 +346,27 @@ def warm_up() -> dict:
         kernel.append_runs(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1), dtype=dtype),
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                            np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
-    # the CAN decoder (codecs.skin_can): the fields of a frame array, strided views
+    warm_up_codecs(kernel)
+    info["first_call_s"] = time.perf_counter() - t1
+    info["cache_dir"] = kernel.CACHE_DIR
+    return info
+
+
+def warm_up_codecs(kernel: ModuleType) -> None:
+    """Load (or compile) the CAN decoder's and the sequence tracker's compiled passes (``decode_can_rows``,
+    ``track_forward``) in the one variant their callers use: a frame array's fields are strided views, times
+    and periods int64 and float64 arrays.  :func:`warm_up` calls it for ``make setup``; a skin driver calls it
+    (``codecs.skin_can.load_compiled``) before it opens its bus."""
     byte, word = np.zeros(4, dtype=np.uint8)[::2], np.zeros(4, dtype=np.uint32)[::2]
     i64 = np.zeros(2, dtype=np.int64)
     kernel.decode_can_rows(byte, word, byte, np.zeros((4, 8), dtype=np.uint8)[::2], np.zeros(4)[::2],
                            np.ones(1, dtype=bool), 6, 1, 0, np.zeros(16, dtype=np.int64), np.zeros(16),
                            np.empty(2, dtype=np.int8), np.empty((2, 3), dtype=np.int64), i64, i64, i64, np.empty(2),
                            i64)
-    # the sequence tracker (codecs.sequence): slots, numbers, times, periods; its state arrays
     kernel.track_forward(i64, i64, i64, np.ones(2), 256, np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64),
                          np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
                          np.empty(2, dtype=np.int8), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
                          np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64))
-    info["first_call_s"] = time.perf_counter() - t1
-    info["cache_dir"] = kernel.CACHE_DIR
-    return info
 
 
 def main(argv: list[str] | None = None) -> int:
