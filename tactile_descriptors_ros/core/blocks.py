@@ -155,8 +155,10 @@ def split_cells(cells: Mapping[int, CellSignals], block_s: float, block_hop_s: f
         For a bad block setting (:func:`.robot.check_blocks`), or a block shorter than 3 frames.
     """
     block_s, block_hop_s = check_blocks(block_s, block_hop_s)
+    if not block_s:  # before the frame period, which costs a difference per cell
+        return [dict(cells)]
     period = _frame_period_ns(cells)
-    if not block_s or period is None:
+    if period is None:
         return [dict(cells)]
     t0 = min(int(c.deformation_t_ns[0]) for c in cells.values() if len(c.deformation_t_ns))
     t_last = max(int(c.deformation_t_ns[-1]) for c in cells.values() if len(c.deformation_t_ns))

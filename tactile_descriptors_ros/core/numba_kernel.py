@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
-           "runs_in_order", "append_runs", "explore_runs", "decode_can_rows", "track_forward", "CACHE_DIR",
+           "runs_in_order", "append_runs", "explore_runs", "cut_rows", "decode_can_rows", "track_forward", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -883,6 +883,54 @@ def append_runs(t_buf, v_buf, ok_buf, hi, last, has, rows, counts, t, values, va
             has[r] = True
         pos += n
     return True
+
+
+@_jit
+def cut_rows(t_buf, ok_buf, lo, hi, start, end, first, stop, n_bad, widest):  # pragma: no cover - compiled
+    """Each row's samples with ``start <= t < end``: where they are, how many are invalid, the widest step.
+
+    The compiled form of the cut that :meth:`.windowing.Windower._make_window`
+    makes of every row of a body part's buffer (row ``r`` holds its samples
+    between ``lo[r]`` and ``hi[r]``, in time order): ``first[r]``,
+    ``stop[r]`` are the positions of the window's samples (``searchsorted``
+    left of ``start`` and of ``end``), ``n_bad[r]`` how many of them are not
+    valid, and ``widest[r]`` the longest step between the window's valid
+    samples with ``start`` and ``end`` as the outer edges (``end - start``
+    when none is valid).
+    """
+    for r in range(lo.shape[0]):
+        a = lo[r]
+        b = hi[r]
+        while a < b:
+            m = (a + b) >> 1
+            if t_buf[r, m] < start:
+                a = m + 1
+            else:
+                b = m
+        i = a
+        b = hi[r]
+        while a < b:
+            m = (a + b) >> 1
+            if t_buf[r, m] < end:
+                a = m + 1
+            else:
+                b = m
+        first[r] = i
+        stop[r] = a
+        bad = 0
+        prev = start
+        step = 0
+        for k in range(i, a):
+            if ok_buf[r, k]:
+                if t_buf[r, k] - prev > step:
+                    step = t_buf[r, k] - prev
+                prev = t_buf[r, k]
+            else:
+                bad += 1
+        if end - prev > step:
+            step = end - prev
+        n_bad[r] = bad
+        widest[r] = step
 
 
 @_jit

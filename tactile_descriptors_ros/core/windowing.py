@@ -437,6 +437,14 @@ class _RowBuffer:
         self._plan = None  # no positions to share: a buffer given this one as ``like`` computes its own
         return True
 
+    def cut(self, kernel, start_ns: int, end_ns: int) -> np.ndarray:
+        """Every row's samples with ``start <= t < end``: rows ``first``, ``stop`` (positions), ``n_bad`` (invalid
+        samples among them) and ``widest`` (longest step between the valid ones, ``start`` and ``end`` included)
+        of a (4, rows) array, from the compiled backend's :func:`.numba_kernel.cut_rows`."""
+        out = np.empty((4, self.lo.size), dtype=np.int64)
+        kernel.cut_rows(self.t, self.ok, self.lo, self.hi, start_ns, end_ns, out[0], out[1], out[2], out[3])
+        return out
+
     def tails(self, rows: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The newest ``k`` samples of each of ``rows`` as 2-D arrays: stamps, first channel's values, and
         which are held (a row with fewer than ``k`` shows other samples, or its first, where it has none)."""
@@ -1459,37 +1467,85 @@ class Windower:
         return self._make_window(start, end_ns, self._exploration_id, "exploration")
 
     def _make_window(self, start: int, end: int, exploration_id: int, mode: str) -> Window:
+        """The window ``[start, end)``: every cell's samples in it, as :class:`CellSignals` (copies).
+
+        Each body part's buffers are cut at once by the compiled backend
+        (:func:`.numba_kernel.cut_rows`: where each row's samples lie, how
+        many are invalid, the widest step), so a cell costs a few slice
+        copies; a cell with invalid samples, or every cell without the
+        compiled backend (or with :data:`COMPILED_CUT` off), takes the
+        per-cell path (:meth:`_cell_window`), which gives the same arrays.
+        """
         w = Window(start, end, exploration_id, mode)
-        for cid, st in self._cells.items():
-            tv, v, okv = st.vib.between(start, end)
-            if tv.size == 0:
-                continue
-            # Only samples inside the window: a V sample from before it would
-            # enter V's Hjorth parameters (S samples before the first V sample
-            # of the window are simply not paired, at most one V period).
-            td, d, okd = st.dfm.between(start, end)
-            x = st.extra.between(start, end)[1] if st.extra is not None else None
-            tf, f, _ = st.force.between(start, end)
-            n_bad = int(np.count_nonzero(~okv) + np.count_nonzero(~okd))
-            valid = n_bad <= self.max_invalid_fraction * (okv.size + okd.size)
-            if n_bad:
-                # Invalid samples are removed, never replaced: the time stamps stay
-                # true, so the hold of V and the derivative see a short hole.
-                self.faults["windows_with_invalid_samples"] += 1
-                tv, v, td, d = tv[okv], v[:, okv], td[okd], d[:, okd]
-                x = x[:, okd] if x is not None else None
-                if tv.size == 0:
+        kernel = fast.kernel_module() if COMPILED_CUT else None
+        if kernel is None:
+            for cid, st in self._cells.items():
+                if (cell := self._cell_window(cid, st, start, end)) is not None:
+                    w.cells[cid] = cell
+            return w
+        made: dict[int, CellSignals] = {}
+        for part in self._parts.values():
+            (v0, v1, v_bad, v_step), (d0, d1, d_bad, _), (f0, f1, _, _) = (
+                b.cut(kernel, start, end).tolist() for b in (part.vib, part.dfm, part.force))
+            x0, x1 = part.extra.cut(kernel, start, end)[:2].tolist() if part.extra is not None else (None, None)
+            limit = self._gap_limit_ns(part.cell_ids[0])
+            vib, dfm = part.vib, part.dfm
+            for r, cid in enumerate(part.cell_ids):
+                i, j = v0[r], v1[r]
+                if j == i:
                     continue
-            gap = self._has_gap(cid, tv, start, end)
-            if gap:
-                self.faults["gap"] += 1
-            w.cells[cid] = CellSignals(v, tv, d, td, f[0], valid, gap, n_bad, x, st.tare)
+                st = self._cells[cid]
+                if v_bad[r] or d_bad[r]:  # invalid samples: removed on the per-cell path
+                    if (cell := self._cell_window(cid, st, start, end)) is not None:
+                        made[cid] = cell
+                    continue
+                gap = v_step[r] > limit
+                if gap:
+                    self.faults["gap"] += 1
+                a, b = d0[r], d1[r]
+                x = part.extra.v[:, r, x0[r]:x1[r]].copy() if x0 is not None else None
+                made[cid] = CellSignals(vib.v[:, r, i:j].copy(), vib.t[r, i:j].copy(), dfm.v[:, r, a:b].copy(),
+                                        dfm.t[r, a:b].copy(), part.force.v[0, r, f0[r]:f1[r]].copy(), True, gap, 0,
+                                        x, st.tare)
+        for cid in self._cells:  # the cells in the order they first sent, as the per-cell path gives them
+            if (cell := made.get(cid)) is not None:
+                w.cells[cid] = cell
         return w
+
+    def _cell_window(self, cid: int, st: _CellState, start: int, end: int) -> CellSignals | None:
+        """One cell's samples in ``[start, end)``, invalid ones removed; None if it has no valid vibration sample."""
+        tv, v, okv = st.vib.between(start, end)
+        if tv.size == 0:
+            return None
+        # Only samples inside the window: a V sample from before it would
+        # enter V's Hjorth parameters (S samples before the first V sample
+        # of the window are simply not paired, at most one V period).
+        td, d, okd = st.dfm.between(start, end)
+        x = st.extra.between(start, end)[1] if st.extra is not None else None
+        tf, f, _ = st.force.between(start, end)
+        n_bad = int(np.count_nonzero(~okv) + np.count_nonzero(~okd))
+        valid = n_bad <= self.max_invalid_fraction * (okv.size + okd.size)
+        if n_bad:
+            # Invalid samples are removed, never replaced: the time stamps stay
+            # true, so the hold of V and the derivative see a short hole.
+            self.faults["windows_with_invalid_samples"] += 1
+            tv, v, td, d = tv[okv], v[:, okv], td[okd], d[:, okd]
+            x = x[:, okd] if x is not None else None
+            if tv.size == 0:
+                return None
+        gap = self._has_gap(cid, tv, start, end)
+        if gap:
+            self.faults["gap"] += 1
+        return CellSignals(v, tv, d, td, f[0], valid, gap, n_bad, x, st.tare)
+
+    def _gap_limit_ns(self, cell_id: int) -> float:
+        """The longest step between a cell's vibration samples that is not a gap: :data:`GAP_PERIODS` periods."""
+        part, _ = self._index[cell_id]
+        return GAP_PERIODS * 1e9 / self.robot.cell_types[part.cell_type].vibration.rate_hz
 
     def _has_gap(self, cell_id: int, t_ns: np.ndarray, start: int, end: int) -> bool:
         """A hole of more than :data:`GAP_PERIODS` vibration periods inside the window."""
-        part, _ = self._index[cell_id]
-        limit = GAP_PERIODS * 1e9 / self.robot.cell_types[part.cell_type].vibration.rate_hz
+        limit = self._gap_limit_ns(cell_id)
         edges = np.concatenate(([start], t_ns, [end]))
         return bool(np.max(np.diff(edges)) > limit)
 
@@ -1551,6 +1607,9 @@ _NO_VALID = np.ones(1, dtype=bool)
 #: Whether the windower may use the compiled intake when the compiled backend is loaded (the tests switch it
 #: off to compare both paths).
 COMPILED_INTAKE = True
+#: Whether the windower cuts its windows with the compiled backend when it is loaded (the tests switch it off to
+#: compare both paths).
+COMPILED_CUT = True
 
 
 def _intake_kernel():

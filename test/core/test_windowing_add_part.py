@@ -13,6 +13,8 @@ per-run reference; both are exercised (the test counts them).  The array
 path runs twice: with the compiled intake (``numba_kernel.runs_in_order``,
 ``append_runs`` and ``explore_runs``) where the compiled backend is loaded,
 and with numpy alone; both must give the per-run reference's buffers to the bit.
+The windows are cut twice as well: by the compiled cut (``numba_kernel.cut_rows``,
+a body part's rows at once) and cell by cell, to the same arrays, layouts and faults.
 """
 
 from __future__ import annotations
@@ -292,3 +294,59 @@ def test_forces_of_a_body_part_at_the_watermark_take_the_array_path(monkeypatch)
     monkeypatch.setattr(w, "_force_at", lambda st, t: alone.append(st) or Windower._force_at(w, st, t))
     assert _same(w._forces_at(part, rows, t_ns), own)
     assert len(alone) == 1  # only the cell whose force is all NaN: nothing finite to average
+
+
+def _cut_windows(chunks: list[PartChunk], mode: str) -> tuple[list, dict]:
+    """Every window's cells, each array with its dtype and layout, and the faults after the last poll."""
+    w = Windower(NAO, mode=mode, length_s=0.02, hop_s=0.01, min_duration_s=0.0, release_s=0.005,
+                 lateness_s=0.0, force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0,
+                 smooth_s=0.004)
+    windows = []
+    for chunk in chunks:
+        w.add_part(chunk)
+        windows += w.poll()
+    windows += w.flush()
+
+    def arr(a):
+        return None if a is None else (_plain(a), a.dtype.str, a.shape, a.flags.c_contiguous)
+    out = [(x.start_ns, x.end_ns, x.exploration_id, x.mode,
+            [(cid, [arr(getattr(c, f)) for f in ("vibration", "vibration_t_ns", "deformation", "deformation_t_ns",
+                                                 "force_n", "extra", "deformation_tare")],
+              c.valid, c.gap, c.invalid_samples) for cid, c in x.cells.items()]) for x in windows]
+    return out, dict(w.faults)
+
+
+@settings(max_examples=150, deadline=None)
+@given(messages, st.integers(0, 2**16), st.sampled_from(["fixed", "exploration"]))
+def test_compiled_cut_equals_the_per_cell_cut(spec, seed, mode):
+    if fast.kernel_module() is None:
+        pytest.skip(f"no compiled backend here ({fast.backend()}): the per-cell cut serves")
+    chunks = _messages(spec, seed)
+    with mock.patch.object(windowing, "COMPILED_CUT", False):
+        ref = _cut_windows(chunks, mode)
+    with mock.patch.object(windowing, "COMPILED_CUT", True):
+        got = _cut_windows(chunks, mode)
+    assert got == ref
+
+
+def test_windows_are_cut_by_the_compiled_cut(monkeypatch):
+    """A window of clean samples is cut by ``cut_rows`` (once per buffer of each body part), not cell by cell."""
+    kernel = fast.kernel_module()
+    if kernel is None:
+        pytest.skip(f"no compiled backend here ({fast.backend()}): the per-cell cut serves")
+    calls = []
+
+    class Spy:
+        def __getattr__(self, name):
+            if name == "cut_rows":
+                return lambda *a: calls.append(a) or kernel.cut_rows(*a)
+            return getattr(kernel, name)
+    monkeypatch.setattr(windowing.fast, "kernel_module", Spy)
+    per_cell = []
+    monkeypatch.setattr(Windower, "_cell_window", lambda self, *a: per_cell.append(a))
+    chunks = _messages([[(0, "ok", 12, 2.0), (1, "ok", 12, 2.0), (2, "ok", 12, 2.0)]] * 4, 3)
+    windows, _ = _cut_windows(chunks, "fixed")
+    assert windows and all(len(x[4]) == 3 for x in windows)
+    assert len(calls) == 4 * len(windows)  # vibration, deformation, extra and force of the one body part
+    assert not per_cell
+    assert len(kernel.cut_rows.signatures) == 1  # the one variant make setup compiles (fast.warm_up)
