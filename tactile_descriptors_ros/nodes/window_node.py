@@ -34,8 +34,9 @@ its newest sample's stamp: acquisition to intake, for sensor stamps on the
 host clock, as the drivers' ``clock`` stamps are; messages stamped on
 another clock, ``device`` stamps, are counted in ``frames_not_host_time``
 instead) and
-``describe_ms_*`` (window cut to descriptor published), median, p95 and max
-over the last messages and windows.
+``cut_ms_*`` (the windower's poll that cut one or more windows: their cells'
+samples copied out of its buffers) and ``describe_ms_*`` (window cut to
+descriptor published), median, p95 and max over the last messages and windows.
 
 Topics, parameters and QoS: ``docs/nodes.md``.
 """
@@ -157,6 +158,7 @@ class WindowNode(Node):
         self._frames_age_ms: deque[float] = deque(maxlen=5000)
         self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
+        self._cut_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
         # served cells as sorted arrays (a message's runs are checked at once): id, body part, batch numbers
         served = sorted((c.id, k) for k, p in enumerate(self.robot.body_parts) for c in p.cells)
@@ -250,7 +252,11 @@ class WindowNode(Node):
                     self.frames_not_host_time += 1
         took |= self._buffer(items)
         if took:
-            self._emit(self.windower.poll())
+            started = time.perf_counter()
+            windows = self.windower.poll()
+            if windows:
+                self._cut_ms.append(1e3 * (time.perf_counter() - started))
+            self._emit(windows)
 
     def _buffer(self, data: list[tuple[int, CellChunk]] | PartChunk) -> bool:
         """Hand a message's chunks (one per cell, or a body part's runs) to the windower; False if there are none."""
@@ -440,7 +446,7 @@ class WindowNode(Node):
                         "largest_frames_batch": self.largest_batch,
                         "frames_not_host_time": self.frames_not_host_time,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
-        for name, samples in (("frames_age", self._frames_age_ms), ("describe", self._describe_ms)):
+        for name, samples in (("frames_age", self._frames_age_ms), ("cut", self._cut_ms), ("describe", self._describe_ms)):
             if samples:
                 arr = np.fromiter(samples, np.float64, len(samples))
                 values.update({f"{name}_ms_p50": float(np.median(arr)), f"{name}_ms_p95": float(np.percentile(arr, 95)),

@@ -504,7 +504,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
                 faults[key[6:]] = faults.get(key[6:], 0) + int(float(value))
         if "frames_per_callback" in values:
             per_callback.append(float(values["frames_per_callback"]))
-        node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "frames_age_"))}
+        node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "cut_", "frames_age_"))}
     e2e_summary = _summary(e2e)
     design_wait_ms = 1e3 * (batch_s + (lateness_s if mode == "fixed" else 0.0))
     return {
@@ -528,6 +528,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             "design_wait": _summary(wait),
             "frames_age_at_window_node": _node_summary(node_timing, "frames_age"),
             "window_node": _summary(window_stage),
+            "cut": _node_summary(node_timing, "cut"),
             "describe": _node_summary(node_timing, "describe"),
             "classifier": _summary(classifier_stage),
         },

@@ -30,6 +30,7 @@ def test_latency_through_the_node_graph_in_process():
     parts = res["parts_ms"]
     assert parts["window_node"]["n"] == parts["classifier"]["n"] == e2e["n"]
     assert parts["describe"]["n"] >= 1 and parts["frames_age_at_window_node"]["n"] >= 1
+    assert parts["cut"]["n"] >= 1 and 0.0 < parts["cut"]["median_ms"] <= parts["cut"]["max_ms"]
     for total, waited in zip(res["e2e_ms"], res["wait_ms"]):
         assert total >= waited
     assert res["settings"]["batch_s"] == 0.05 and res["settings"]["messages_per_s"] == pytest.approx(140)
