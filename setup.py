@@ -14,7 +14,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
-        ("share/" + PACKAGE + "/config", glob("config/*.yaml")),
+        ("share/" + PACKAGE + "/config", glob("config/*.yaml") + glob("config/*.xml")),
         ("share/" + PACKAGE + "/config/scenes", glob("config/scenes/*.yaml")),
         ("share/" + PACKAGE + "/config/rocket", glob("config/rocket/*.json")),
         ("share/" + PACKAGE + "/config/rviz", glob("config/rviz/*.rviz")),

@@ -26,6 +26,7 @@ from typing import Any
 
 from ..errors import ConfigError, NodeExitedError
 from .graph import LOG_LEVELS, build_graph, unrunnable
+from .processes import dds_environment
 
 __all__ = ["LAUNCH_ARGUMENTS", "ROS2_LAUNCH_ARGUMENTS", "graph_options", "check_argument_names",
            "launch_description_for"]
@@ -135,10 +136,12 @@ def _nodes(context: Any, *args: Any, **kwargs: Any) -> list:
     left_out = unrunnable(specs)
     actions: list = [LogInfo(msg=reason) for reason in left_out.values()]
     specs = [s for s in specs if s.name not in left_out]
+    dds = dds_environment()  # the shipped Fast DDS profile, unless the user chose one (or another middleware)
     for s in specs:
         node = Node(package=s.package, executable=s.executable, name=s.name, namespace=s.namespace,
                     parameters=[s.parameters], remappings=list(s.remappings), output="screen",
-                    ros_arguments=["--log-level", s.log_level] if s.log_level else None)
+                    ros_arguments=["--log-level", s.log_level] if s.log_level else None,
+                    additional_env=dds or None)
         actions += [node, RegisterEventHandler(OnProcessExit(target_action=node, on_exit=_ended(s.name)))]
     return actions
 

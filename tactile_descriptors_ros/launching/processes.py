@@ -30,10 +30,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO
 
+from ..core.yamlreader import config_dir
 from ..errors import ConfigError
 from .graph import PACKAGE, NodeSpec, unrunnable, write_parameters_file
 
-__all__ = ["node_command", "RunningNode", "GraphProcesses", "localhost_environment", "run_until_interrupted"]
+__all__ = ["node_command", "RunningNode", "GraphProcesses", "localhost_environment", "dds_environment",
+           "DDS_PROFILE", "DDS_PROFILE_VARIABLES", "run_until_interrupted"]
+
+#: The Fast DDS profile the graph's nodes take (in the config directory): a larger shared-memory segment.
+DDS_PROFILE = "fastdds.xml"
+#: Where Fast DDS looks for a profile file: 3.x (Kilted) and 2.x (Jazzy).
+DDS_PROFILE_VARIABLES = ("FASTDDS_DEFAULT_PROFILES_FILE", "FASTRTPS_DEFAULT_PROFILES_FILE")
+_FAST_DDS_RMWS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
 
 
 def localhost_environment(env: Mapping[str, str] | None = None) -> dict[str, str]:
@@ -46,6 +54,25 @@ def localhost_environment(env: Mapping[str, str] | None = None) -> dict[str, str
     out = dict(os.environ if env is None else env)
     out.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return out
+
+
+def dds_environment(env: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The variables that give the graph's nodes the shipped Fast DDS profile (``config/fastdds.xml``).
+
+    The profile keeps Fast DDS's transports and gives each participant a
+    2 MiB shared-memory segment instead of 512 KiB, which a best-effort
+    reader of large body-part messages otherwise loses messages to (the
+    file says what was measured).  Empty when ``env`` (the process's
+    environment by default) names a profile already (a user's own profile
+    wins) or another middleware than Fast DDS in ``RMW_IMPLEMENTATION``.
+    """
+    env = os.environ if env is None else env
+    if (env.get("RMW_IMPLEMENTATION") or "rmw_fastrtps_cpp") not in _FAST_DDS_RMWS:  # Fast DDS: ROS 2's default
+        return {}
+    if any(env.get(name) for name in DDS_PROFILE_VARIABLES):
+        return {}
+    path = os.fspath(config_dir() / DDS_PROFILE)
+    return dict.fromkeys(DDS_PROFILE_VARIABLES, path)
 
 
 def node_command(spec: NodeSpec, params_file: str | os.PathLike[str], python: str | None = None) -> list[str]:
@@ -124,6 +151,7 @@ class GraphProcesses:
         if not self.specs:
             raise ConfigError("no node can start here: " + "; ".join(self.left_out.values()))
         self.env = dict(os.environ if env is None else env)
+        self.env.update(dds_environment(self.env))
         self.env.setdefault("PYTHONUNBUFFERED", "1")
         self.env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "1")
         self.env.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")

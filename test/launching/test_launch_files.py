@@ -10,7 +10,9 @@ import types
 
 import pytest
 
+from tactile_descriptors_ros.core.yamlreader import config_dir
 from tactile_descriptors_ros.launching.graph import build_graph
+from tactile_descriptors_ros.launching.processes import DDS_PROFILE, DDS_PROFILE_VARIABLES, dds_environment
 
 
 class _Config:
@@ -88,6 +90,19 @@ def test_launch_file_nodes_match_graph(repo_dir, monkeypatch, robot, sim, split)
         assert node.kwargs["parameters"] == [s.parameters]
         assert node.kwargs["remappings"] == list(s.remappings)
         assert node.kwargs["ros_arguments"] == ["--log-level", "info"]
+        assert node.kwargs["additional_env"] == (dds_environment() or None)
+
+
+def test_launched_nodes_take_the_shipped_dds_profile_unless_the_user_chose_one(repo_dir, monkeypatch):
+    for name in (*DDS_PROFILE_VARIABLES, "RMW_IMPLEMENTATION"):
+        monkeypatch.delenv(name, raising=False)
+    nodes = [a for a in _launch_actions(repo_dir, monkeypatch, robot="nao") if a.kind == "node"]
+    assert nodes and all(n.kwargs["additional_env"] == dict.fromkeys(DDS_PROFILE_VARIABLES,
+                                                                      str(config_dir() / DDS_PROFILE))
+                         for n in nodes)
+    monkeypatch.setenv("FASTDDS_DEFAULT_PROFILES_FILE", "/etc/my_profile.xml")
+    nodes = [a for a in _launch_actions(repo_dir, monkeypatch, robot="nao") if a.kind == "node"]
+    assert all(n.kwargs["additional_env"] is None for n in nodes)
 
 
 def _launch_actions(repo_dir, monkeypatch, robot="shadow_hand", not_on_pypi=None, **values):

@@ -268,6 +268,32 @@ def test_launch_reaches_first_prediction(graph):
     assert graph.proc.poll() is None
 
 
+def test_every_launched_node_takes_the_shipped_dds_profile(graph):
+    """ros2 launch gives each node the package's Fast DDS profile (config/fastdds.xml; see test_dds_profile.py)."""
+    import psutil
+
+    from tactile_descriptors_ros.launching.graph import unrunnable
+    from tactile_descriptors_ros.launching.processes import DDS_PROFILE, DDS_PROFILE_VARIABLES
+
+    specs = build_graph(graph.robot, sim_scene=SCENES[graph.robot])
+    left_out = unrunnable(specs)
+    names = {s.executable for s in specs if s.package == PKG and s.name not in left_out}
+    nodes = {}
+    for proc in node_processes(graph.proc)[1:]:
+        try:
+            argv, environ = proc.cmdline(), proc.environ()
+        except psutil.Error:  # a helper process that ended meanwhile
+            continue
+        exe = next((n for n in names if any(os.path.basename(a) == n for a in argv)), None)
+        if exe is not None:
+            nodes[proc.pid] = (exe, {k: environ.get(k, "") for k in DDS_PROFILE_VARIABLES})
+    assert {exe for exe, _ in nodes.values()} == names, nodes
+    for exe, env in nodes.values():
+        assert set(env.values()) == {env["FASTDDS_DEFAULT_PROFILES_FILE"]}, (exe, env)
+        profile = Path(env["FASTDDS_DEFAULT_PROFILES_FILE"])
+        assert profile.name == DDS_PROFILE and "<segment_size>2097152</segment_size>" in profile.read_text()
+
+
 def _topics(robot: str) -> dict[str, str]:
     """Every topic the graph publishes -> its type (frames of each body part, descriptor, prediction, diagnostics)."""
     from tactile_descriptors_ros.nodes.conversions import message_kind
