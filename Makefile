@@ -87,7 +87,7 @@ $(VENV)/.installed: $(VENV)/.msgs setup.py setup.cfg lab/pyproject.toml
 # (package.xml, launch/, config/: each file a link into this checkout, like colcon's
 # --symlink-install; ros2 launch does not follow linked folders) and
 # lib/$(PKG)/<executable> for `ros2 run` and launch_ros.
-SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/scenes/*.yaml config/rviz/*.rviz)
+SHARE_FILES := package.xml $(wildcard launch/*.launch.py config/*.yaml config/*.xml config/scenes/*.yaml config/rviz/*.rviz)
 $(VENV)/.ament: Makefile $(VENV)/.installed resource/$(PKG) $(SHARE_FILES)
 	$(STEP) "setup 5/7: ament index entries of the venv prefix (a few seconds)"
 	rm -rf $(VENV)/share/$(PKG) $(VENV)/lib/$(PKG)

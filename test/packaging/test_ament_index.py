@@ -31,6 +31,8 @@ def test_package_in_ament_index_of_venv(repo_dir):
     assert (share / "package.xml").read_text() == (repo_dir / "package.xml").read_text()
     assert {p.name for p in (share / "launch").glob("*.launch.py")} == {"shadow_hand.launch.py", "nao.launch.py"}
     assert (share / "config" / "shadow_hand.yaml").is_file() and (share / "config" / "scenes").is_dir()
+    # the Fast DDS profile the launch files give the nodes (launching.processes.dds_environment)
+    assert (share / "config" / "fastdds.xml").read_text() == (repo_dir / "config" / "fastdds.xml").read_text()
     # where the README's rviz2 command finds the shipped configurations
     for robot in ("shadow_hand", "nao"):
         assert (share / "config" / "rviz" / f"{robot}.rviz").read_text() == \
