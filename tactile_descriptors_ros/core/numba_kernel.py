@@ -886,6 +886,19 @@ def append_runs(t_buf, v_buf, ok_buf, hi, last, has, rows, counts, t, values, va
 
 
 @_jit
+def _left_of(t, a, b, value):  # pragma: no cover - compiled
+    """The first position in ``t[a:b]`` (sorted) whose value is not below ``value`` (``b`` if none): a
+    ``searchsorted`` (side left) of that slice, as a position in ``t``."""
+    while a < b:
+        m = (a + b) >> 1
+        if t[m] < value:
+            a = m + 1
+        else:
+            b = m
+    return a
+
+
+@_jit
 def cut_rows(t_buf, ok_buf, lo, hi, start, end, first, stop, n_bad, widest):  # pragma: no cover - compiled
     """Each row's samples with ``start <= t < end``: where they are, how many are invalid, the widest step.
 
@@ -899,22 +912,8 @@ def cut_rows(t_buf, ok_buf, lo, hi, start, end, first, stop, n_bad, widest):  # 
     when none is valid).
     """
     for r in range(lo.shape[0]):
-        a = lo[r]
-        b = hi[r]
-        while a < b:
-            m = (a + b) >> 1
-            if t_buf[r, m] < start:
-                a = m + 1
-            else:
-                b = m
-        i = a
-        b = hi[r]
-        while a < b:
-            m = (a + b) >> 1
-            if t_buf[r, m] < end:
-                a = m + 1
-            else:
-                b = m
+        i = _left_of(t_buf[r], lo[r], hi[r], start)
+        a = _left_of(t_buf[r], i, hi[r], end)
         first[r] = i
         stop[r] = a
         bad = 0
