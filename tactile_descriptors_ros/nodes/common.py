@@ -23,6 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..core.pauses import GcPauses
 from ..errors import TactileError
 from .deadline import END_WITHIN_S, end_process_after
 from .entry import note_interrupts
@@ -150,7 +151,8 @@ def steady_clock():
 
 
 class Diagnostics:
-    """Publish named diagnostic tasks on ``/diagnostics``.
+    """Publish named diagnostic tasks on ``/diagnostics``, and after them the ``process`` status (the garbage
+    collector's runs and pauses in this process, ``gc_*``).
 
     Parameters
     ----------
@@ -170,6 +172,7 @@ class Diagnostics:
         self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._timer = node.create_timer(float(period_s), self.publish, clock=steady_clock())
         self.last: list[Any] = []
+        GC_PAUSES.install()
 
     def add(self, task: str, fn: Callable[[], Status]) -> None:
         """Register a task; ``fn`` is called at every publication."""
@@ -180,7 +183,7 @@ class Diagnostics:
         from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
         out = []
-        for task, fn in self._tasks:
+        for task, fn in [*self._tasks, ("process", _process_status)]:  # the process's own status last
             try:
                 st = fn()
             except Exception as exc:  # noqa: BLE001 - a broken task must show up, not stop the node
@@ -204,12 +207,33 @@ class Diagnostics:
         self._pub.publish(arr)
 
 
+def _process_status() -> Status:
+    """The process's garbage-collector pauses (:class:`~tactile_descriptors_ros.core.pauses.GcPauses`)."""
+    values = GC_PAUSES.snapshot()
+    return Status("ok", f"longest full collection {values['gc_max_ms_g2']:.1f} ms", values)
+
+
+def gc_mode(mode: str | None = None) -> str:
+    """The heap mode of :func:`run_node`: ``mode``, else ``$TACTILE_GC``, else ``freeze``."""
+    mode = mode or os.environ.get(GC_ENV) or "freeze"
+    if mode not in GC_MODES:
+        raise TactileError(f"{GC_ENV}={mode!r}: expected one of {', '.join(GC_MODES)}")
+    return mode
+
+
 def _fmt(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:.6g}"
     return str(v)
 
 
+#: The collector's pauses in this process, measured from the first :class:`Diagnostics` on (``gc_*`` in the
+#: ``process`` task of every node's diagnostics).
+GC_PAUSES = GcPauses()
+#: The environment variable that says whether :func:`run_node` settles the heap once the node is built
+#: (:func:`~tactile_descriptors_ros.core.pauses.settle_heap`): ``freeze`` (default) or ``off``.
+GC_ENV = "TACTILE_GC"
+GC_MODES = ("freeze", "off")
 #: The environment variable that picks the executor a node spins in (:func:`spin`): ``single`` or ``events``
 #: (default: :func:`default_executor`).
 EXECUTOR_ENV = "TACTILE_EXECUTOR"
@@ -346,6 +370,7 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
     built = False
     code = 0
     try:
+        heap = gc_mode()
         if interrupted():  # Ctrl-C came before rclpy's handler was installed: stop before building the node
             return code
         if isinstance(factory, type):
@@ -354,6 +379,8 @@ def run_node(factory: Callable[..., Any], args: Sequence[str] | None = None) -> 
         else:
             node = factory()
         built = True
+        if heap == "freeze":  # start-up's objects (modules, compiled kernels) are never scanned again
+            GC_PAUSES.install().settle()
         if rclpy.ok():  # a Ctrl-C during construction has shut the context down already
             spin(node)
     except ExternalShutdownException:

@@ -668,8 +668,9 @@ def _multi_host_results(extra: MultiHostResult, monitor: _Monitor, before: dict[
                             for h in dict.fromkeys(part_host.values())}
     extra.seconds = t1 - t0
     extra.n_cells = n_cells
-    cls_before = next((v for k, v in before.items() if k.startswith("classifier_node")), {})
-    cls_after = next((v for k, v in after.items() if k.startswith("classifier_node")), {})
+    # the classifier's own status (not its ``process`` one, which every node publishes)
+    cls_before = next((v for k, v in before.items() if k.startswith("classifier_node") and "descriptors" in v), {})
+    cls_after = next((v for k, v in after.items() if k.startswith("classifier_node") and "descriptors" in v), {})
     for key in ("descriptors", "predictions"):
         end = _int(cls_after, key)
         extra.classifier[key] = None if end is None else end - (_int(cls_before, key) or 0)

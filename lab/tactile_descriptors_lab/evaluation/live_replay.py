@@ -112,7 +112,7 @@ class _Teacher:
         with self.cond:
             for st in msg.status:
                 for prefix, who in self._names.items():
-                    if st.name.startswith(prefix):
+                    if st.name.startswith(prefix) and not st.name.endswith(": process"):  # the node's own
                         self.diag[who] = {kv.key: kv.value for kv in st.values}
                         self.diag_seq[who] = self.diag_seq.get(who, 0) + 1
             self.cond.notify_all()
