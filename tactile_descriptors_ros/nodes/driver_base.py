@@ -18,7 +18,10 @@ closed and reopened every ``reconnect_s`` until it is back, without a
 lifecycle transition; the time it was gone is counted as lost frames by the
 stream (:meth:`DriverBase._reopened`).  Any other exception while reading
 (``reader_errors``) or while handling what was read (``consume_errors``) is
-counted and reported; the thread reads on.
+counted and reported; the thread reads on.  The longest time between two
+reads (``read_gap_max_ms``) and the reads that came more than
+:data:`READ_GAP_LONG_S` after the one before (``read_gaps_long``) say when the
+thread did not read: a device that buffers less than that loses frames.
 """
 
 from __future__ import annotations
@@ -41,7 +44,10 @@ from .conversions import message_kind
 from .parameters import NodeParameters
 from .qos import qos_of
 
-__all__ = ["DriverBase"]
+__all__ = ["DriverBase", "READ_GAP_LONG_S"]
+
+#: A read that starts more than this after the one before is counted (``read_gaps_long``) [s].
+READ_GAP_LONG_S = 0.1
 
 
 class DriverBase(LifecycleNode):
@@ -84,6 +90,11 @@ class DriverBase(LifecycleNode):
         self.read_period_s = 0.0
         #: reads of the device so far (each one decode and one publish round)
         self.reads = 0
+        #: the longest time from one read's start to the next one's [s], and how many took longer than
+        #: :data:`READ_GAP_LONG_S` (a device that was lost and reopened in between is not counted)
+        self.read_gap_max_s = 0.0
+        self.read_gaps_long = 0
+        self._read_started: float | None = None
 
     # ---------------------------------------------------------- parameters
     def _declare_parameters(self, schema: NodeSchema, kind: str, example: str,
@@ -288,6 +299,7 @@ class DriverBase(LifecycleNode):
                     self._count_error("reader_errors", f"after reopening: {exc!r}")
                 continue
             started = time.monotonic()
+            self._note_read_gap(started)
             try:
                 items = self._read()
                 self.reads += 1
@@ -296,6 +308,7 @@ class DriverBase(LifecycleNode):
                 self.last_error = str(exc)
                 self.get_logger().error(f"transport: {exc}; reopening every {self.reconnect_s} s",
                                         throttle_duration_sec=5.0)
+                self._read_started = None  # the time until the device is back is no reader's gap
                 if link is not None:
                     link.lost(exc)
                 else:
@@ -318,6 +331,13 @@ class DriverBase(LifecycleNode):
                 # read as soon as anything is due pays that round a thousand times a second.
                 self._stop.wait(max(0.0, self.read_period_s - (time.monotonic() - started)))
 
+    def _note_read_gap(self, started: float) -> None:
+        if self._read_started is not None:
+            gap_s = started - self._read_started
+            self.read_gap_max_s = max(self.read_gap_max_s, gap_s)
+            self.read_gaps_long += gap_s > READ_GAP_LONG_S
+        self._read_started = started
+
     def _count_error(self, counter: str, text: str) -> None:
         self.faults[counter] += 1
         self.last_error = text
@@ -328,7 +348,8 @@ class DriverBase(LifecycleNode):
     def _transport_values(self, settings: dict[str, Any]) -> dict[str, Any]:
         """Key/values of the transport status: name, ``settings``, stamp source, device description, link, faults."""
         values = {"transport": self.transport_name, **settings, "stamp_source": self.stamp_source,
-                  "reads": self.reads}
+                  "reads": self.reads, "read_gap_max_ms": round(1e3 * self.read_gap_max_s, 3),
+                  "read_gaps_long": self.read_gaps_long}
         if self.transport is not None:
             values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
         if self.link is not None:

@@ -51,6 +51,7 @@ class Probe:
     spin_until: Callable[[Callable[[], object], float], bool]
     descs: list[tuple[float, float, float]] = field(default_factory=list)  # (arrival, window start, window end)
     diags: list[tuple[float, dict]] = field(default_factory=list)  # (arrival, the window node's values)
+    statuses: dict[str, dict] = field(default_factory=dict)  # the newest values of every node's status, by name
     # (arrival, stamp, cell runs) of one body part's messages
     frames: list[tuple[float, float, int]] = field(default_factory=list)
 
@@ -114,6 +115,7 @@ def nao_graph(tmp_path, **window_node: object) -> Iterator[Probe]:
 
     def on_diag(msg) -> None:
         for st in msg.status:
+            probe.statuses[st.name] = {kv.key: kv.value for kv in st.values}
             if st.name.endswith("window_node: windows"):
                 probe.diags.append((time.time(), {kv.key: kv.value for kv in st.values}))
 
@@ -159,6 +161,17 @@ def test_an_8_s_driver_stall_is_a_gap_and_descriptors_resume_within_2_s(tmp_path
         faults = g.faults()
         assert faults.get("fault_windower_windows_without_samples", 0) >= 1, faults
         assert faults.get("fault_windower_gap", 0) >= 1, faults
+        # the driver saw the stall as the time between two reads of its bus
+        assert g.spin_until(lambda: any(float(v.get("read_gap_max_ms", 0)) > 0.0 and name.endswith(": bus")
+                                        and int(v.get("read_gaps_long", 0)) >= 1
+                                        for name, v in g.statuses.items()), 10.0), g.statuses
+        bus = [v for name, v in g.statuses.items() if name.endswith(": bus")]
+        assert max(float(v["read_gap_max_ms"]) for v in bus) >= 1e3 * STALL_S, bus
+        # every node settled its start-up heap (frozen: no full collection scans it) and reports its pauses
+        processes = {name: v for name, v in g.statuses.items() if name.endswith(": process")}
+        assert {n.spec.name for n in g.procs.nodes} <= {name.rpartition(": ")[0].split("/")[-1]
+                                                         for name in processes}, sorted(processes)
+        assert all(int(v["gc_frozen"]) > 10_000 and float(v["gc_settle_ms"]) > 0 for v in processes.values()), processes
 
 
 def test_a_5_s_window_node_stop_is_counted_and_fresh_windows_resume_within_a_window(tmp_path):

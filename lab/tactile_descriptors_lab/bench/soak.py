@@ -140,6 +140,8 @@ class SoakReport:
     frames_sent_in_run: int = 0
     cycle_s: float = 0.0  # one cycle of the scene (the demo once)
     cells: int = 0  # the robot's skin cells (and fingertips)
+    #: (seconds from the start, status name, frames) each time a driver's ``bus_lost_frames`` grew
+    loss_events: list[tuple[float, str, int]] = field(default_factory=list)
 
     @property
     def warmup_s(self) -> float:
@@ -236,6 +238,18 @@ class SoakReport:
             out[n.name] = [round(r, 1) for r in at if r is not None]
         return out
 
+    def pauses(self) -> dict[str, dict[str, float]]:
+        """Per node, the garbage collector's runs and pauses (its ``process`` status) and, for a driver, the
+        longest time between two reads and the reads that came late (its transport status)."""
+        out: dict[str, dict[str, float]] = {}
+        for name, values in self.diagnostics.items():
+            node = name.rpartition(": ")[0]
+            for key in ("gc_collections_g2", "gc_max_ms_g0", "gc_max_ms_g1", "gc_max_ms_g2", "gc_pause_ms_total",
+                        "gc_settle_ms", "gc_frozen", "read_gap_max_ms", "read_gaps_long"):
+                if key in values:
+                    out.setdefault(node, {})[key] = float(values[key])
+        return out
+
     def descriptors(self) -> int:
         """Descriptors published by the window node(s)."""
         return sum(int(float(v.get("descriptors_published", 0))) for n, v in self.diagnostics.items()
@@ -268,7 +282,9 @@ class SoakReport:
                 "windower_buffer_mb": sum(buffers) if buffers else None, "scene_frames_per_s": self.scene_frames_per_s,
                 "driver_run_s": self.driver_run_s, "frames": split, "lost_frames": lost,
                 "late_frames": self.late_frames(), "descriptors": self.descriptors(),
-                "exit_codes": self.exit_codes, "cpu": cpu,
+                "exit_codes": self.exit_codes, "cpu": cpu, "pauses": self.pauses(),
+                "bus_loss_events": [{"t_s": round(t, 1), "status": name, "frames": n}
+                                    for t, name, n in self.loss_events],
                 "goal": {"rss_growth_max_percent": GROWTH_GOAL_PERCENT,
                          "rss_met": bool(growth) and max(growth) <= GROWTH_GOAL_PERCENT,
                          "no_lost_frames": not graph_lost,
@@ -357,6 +373,8 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
     node = rclpy.create_node("tactile_soak", context=context)
     diagnostics: dict[str, dict[str, str]] = {}
     bus_frames: dict[str, list[tuple[float, int]]] = {}  # per bus status: (time, frames) from its first frames on
+    bus_lost: dict[str, int] = {}
+    loss_events: list[tuple[float, str, int]] = []  # seconds from the graph's start (t0, below)
 
     def on_diag(msg) -> None:
         now = time.monotonic()
@@ -365,6 +383,11 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
             diagnostics[st.name] = values
             if "bus_frames" in values and (int(values["bus_frames"]) or st.name in bus_frames):
                 bus_frames.setdefault(st.name, []).append((now, int(values["bus_frames"])))
+            if "bus_lost_frames" in values:
+                lost = int(values["bus_lost_frames"])
+                if lost > bus_lost.get(st.name, 0):
+                    loss_events.append((now - t0, st.name, lost - bus_lost.get(st.name, 0)))
+                bus_lost[st.name] = lost
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 100)
     from rclpy.executors import SingleThreadedExecutor
@@ -423,7 +446,8 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
                       load_avg_end=os.getloadavg(), cpus=os.cpu_count() or 1, nice=os.nice(0),
                       exit_codes={r.spec.name: r.returncode for r in procs.nodes},
                       scene_frames_per_s=frames_per_s, driver_run_s=run_s,
-                      frames_sent_in_run=sum(n for _, n in runs), cycle_s=cycle_s, cells=rob.n_cells)
+                      frames_sent_in_run=sum(n for _, n in runs), cycle_s=cycle_s, cells=rob.n_cells,
+                      loss_events=loss_events)
 
 
 def format_soak(report: SoakReport) -> str:
@@ -457,6 +481,11 @@ def format_soak(report: SoakReport) -> str:
                  f"({fr['frames_sent_and_lost']} frames)")
     lines.append(f"descriptors {d['descriptors']}; window node counters: lost {d['lost_frames']}; "
                  f"late {d['late_frames']}")
+    if d["bus_loss_events"]:
+        lines.append("frames lost on the bus at: " + ", ".join(f"{e['t_s']:.0f} s ({e['frames']})"
+                                                             for e in d["bus_loss_events"]))
+    for name, p in d["pauses"].items():
+        lines.append(f"{name:<18} " + ", ".join(f"{k} {v:g}" for k, v in p.items()))
     c, verdict = d["cpu"], {True: "met", False: "NOT met", None: "-"}
 
     lines.append(f"CPU per cell and second of data [ms] ({c['cells']} cells): "

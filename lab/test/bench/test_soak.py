@@ -83,6 +83,11 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     # the window node reports its sample buffers with its diagnostics (none yet if it was still starting)
     assert (d["windower_buffer_mb"] is None) == ("window_node: windows" not in d["diagnostics"])
     assert all(len(r) == 1 for r in d["rss_per_minute_mb"].values())
+    # every node that reported settled its start-up heap and counts its collector's pauses; a driver its read gaps
+    for name, p in d["pauses"].items():
+        assert p["gc_settle_ms"] > 0 and p["gc_frozen"] > 10_000 and "gc_collections_g2" in p, (name, p)
+    assert all("read_gap_max_ms" in p for name, p in d["pauses"].items() if name.endswith("skin_driver"))
+    assert isinstance(d["bus_loss_events"], list) and all(e["frames"] > 0 for e in d["bus_loss_events"])
     # the recognition path's CPU is every node's but the contact node's and the TF publisher's, judged against
     # one core
     c = d["cpu"]
@@ -179,3 +184,28 @@ def test_the_recognition_paths_cpu_is_judged_under_one_core_and_per_cell_second_
     bare = SoakReport("nao", 10.0, 10.0, 1.0, [NodeSamples("window_node", "window_node", 2)], {},
                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {})
     assert bare.to_dict()["goal"]["cpu_met"] is None and bare.to_dict()["goal"]["cell_second_met"] is None
+
+
+def test_when_frames_were_lost_and_each_nodes_pauses_are_reported():
+    """The times the driver's bus lost frames (so that a loss can be matched with its cause) and, per node,
+    the collector's pauses (its ``process`` status) and a driver's longest gap between reads."""
+    nodes = [NodeSamples("skin_driver", "skin_driver", 1), NodeSamples("window_node", "window_node", 2)]
+    diag = {"skin_driver: bus": {"bus_frames": "12000", "bus_lost_frames": "300", "read_gap_max_ms": "1058.5",
+                                 "read_gaps_long": "6", "transport": "simulated"},
+            "skin_driver: process": {"gc_collections_g2": "1", "gc_max_ms_g2": "90.2", "gc_frozen": "0"},
+            "window_node: process": {"gc_collections_g2": "0", "gc_max_ms_g2": "0", "gc_settle_ms": "70.1",
+                                     "gc_frozen": "161157"},
+            "window_node: windows": {"fault_lost_frames": "0"}}
+    r = SoakReport("nao", 10.0, 10.0, 1.0, nodes, diag, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 10, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=12000,
+                   loss_events=[(284.94, "skin_driver: bus", 100), (436.9, "skin_driver: bus", 200)])
+    d = r.to_dict()
+    assert d["bus_loss_events"] == [{"t_s": 284.9, "status": "skin_driver: bus", "frames": 100},
+                                    {"t_s": 436.9, "status": "skin_driver: bus", "frames": 200}]
+    assert d["pauses"] == {"skin_driver": {"read_gap_max_ms": 1058.5, "read_gaps_long": 6.0,
+                                           "gc_collections_g2": 1.0, "gc_max_ms_g2": 90.2, "gc_frozen": 0.0},
+                           "window_node": {"gc_collections_g2": 0.0, "gc_max_ms_g2": 0.0, "gc_settle_ms": 70.1,
+                                           "gc_frozen": 161157.0}}
+    text = format_soak(r)
+    assert "frames lost on the bus at: 285 s (100), 437 s (200)" in text
+    assert "read_gap_max_ms 1058.5" in text and "gc_settle_ms 70.1" in text
