@@ -322,3 +322,42 @@ def test_a_paced_source_simulates_the_next_chunk_while_the_reader_takes_this_one
     want = plain.recv_batch(10**8, 0.0)
     got = np.concatenate([first, rest_of_first, rest])
     assert len(got) == len(want) > 0 and (got == want).all()
+
+
+def test_a_paced_source_keeps_two_chunks_simulated_ahead_of_the_reader():
+    """A short chunk followed by one that is slow to simulate must not stall the reader: while the first chunk
+    is still being read, the worker simulates the second and then the third, without a further read; the frames
+    are still those of the unpaced source, in order."""
+    import threading
+
+    from tactile_descriptors_ros.sim.sources import AHEAD_CHUNKS
+
+    assert AHEAD_CHUNKS == 2
+    data = copy.deepcopy(NAO)
+    data["explorations"] = [dict(data["explorations"][0], material=m) for m in ("steel", "cork", "felt", "cotton")]
+    scene = parse_scene(data)
+    src = SkinCanSource(scene, speed=1e6, chunk_s=0.5)
+    third = threading.Event()
+    convert = src._convert
+    calls = []
+
+    def noting(result):
+        calls.append(threading.current_thread().name)
+        if len(calls) == 3:
+            third.set()
+        return convert(result)
+
+    src._convert = noting
+    src.open()
+    first = src.recv_batch(100, 0.0)
+    assert len(first) == 100
+    assert third.wait(60.0), f"only {len(calls)} chunks simulated while the first was read"
+    assert calls[1].startswith("scene_ahead") and calls[2].startswith("scene_ahead")
+    rest = src.recv_batch(10**7, 0.0)
+    while len(more := src.recv_batch(10**7, 0.0)):
+        rest = np.concatenate([rest, more])
+    plain = SkinCanSource(scene, chunk_s=0.5)
+    plain.open()
+    want = plain.recv_batch(10**8, 0.0)
+    got = np.concatenate([first, rest])
+    assert len(got) == len(want) > 0 and (got == want).all()
