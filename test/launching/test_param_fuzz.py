@@ -9,7 +9,8 @@ was accepted is set back.  Afterwards every node still answers, and the graph st
 
 Each parameter gets ``TACTILE_PARAM_FUZZ_VALUES`` of the 11 values (default 4, in rotation so that together the
 parameters get every value; about a third of the full run's 15 minutes on 2 cores); set it to 11 for all of
-them.  ``test/params/test_node_schemas.py`` sets all 11 on every parameter of every node in process.
+them; CI's Jazzy leg sets it to 1 (the values still rotate over the parameters).
+``test/params/test_node_schemas.py`` sets all 11 on every parameter of every node in process.
 """
 
 from __future__ import annotations
