@@ -70,10 +70,7 @@ class GcPauses:
         self._clock_ns = clock_ns
         self._lock = threading.Lock()
         self._started_ns: int | None = None
-        self.collections = [0, 0, 0]
-        self.total_ms = [0.0, 0.0, 0.0]
-        self.max_ms = [0.0, 0.0, 0.0]
-        self.collected = 0
+        self.reset()
         self._installed = False
         #: the one collection of :func:`settle_heap` [ms] (``None``: the heap was not settled)
         self.settle_ms: float | None = None
@@ -94,9 +91,9 @@ class GcPauses:
     def reset(self) -> None:
         """Forget the collections so far (those of start-up, before the process does its work)."""
         with self._lock:
-            self.collections = [0, 0, 0]
-            self.total_ms = [0.0, 0.0, 0.0]
-            self.max_ms = [0.0, 0.0, 0.0]
+            self.collections = [0] * len(GENERATIONS)
+            self.total_ms = [0.0] * len(GENERATIONS)
+            self.max_ms = [0.0] * len(GENERATIONS)
             self.collected = 0
 
     def settle(self) -> dict[str, float]:

@@ -214,11 +214,18 @@ def _process_status() -> Status:
 
 
 def gc_mode(mode: str | None = None) -> str:
-    """The heap mode of :func:`run_node`: ``mode``, else ``$TACTILE_GC``, else ``freeze``."""
-    mode = mode or os.environ.get(GC_ENV) or "freeze"
-    if mode not in GC_MODES:
-        raise TactileError(f"{GC_ENV}={mode!r}: expected one of {', '.join(GC_MODES)}")
-    return mode
+    """The heap mode of :func:`run_node`: ``mode``, else ``$TACTILE_GC``, else ``freeze``; any other is
+    refused, naming the valid ones."""
+    return _env_choice(mode, GC_ENV, GC_MODES, "freeze", "a heap mode")
+
+
+def _env_choice(given: str | None, env: str, choices: Sequence[str], default: str, what: str) -> str:
+    """``given``, else the environment variable ``env``, else ``default``; a value not in ``choices`` is a
+    :class:`TactileError` naming them."""
+    value = given or os.environ.get(env, "") or default
+    if value not in choices:
+        raise TactileError(f"{env}={value!r}: not {what}; one of {', '.join(choices)}")
+    return value
 
 
 def _fmt(v: Any) -> str:
@@ -272,10 +279,7 @@ def default_executor() -> str:
 def executor_kind(kind: str | None = None) -> str:
     """The executor to spin in: ``kind`` if given, else ``$TACTILE_EXECUTOR``, else :func:`default_executor`
     (:func:`spin`); any other name is refused, naming the valid ones."""
-    kind = kind or os.environ.get(EXECUTOR_ENV, "") or default_executor()
-    if kind not in EXECUTORS:
-        raise TactileError(f"{EXECUTOR_ENV}={kind!r}: not an executor; one of {', '.join(EXECUTORS)}")
-    return kind
+    return _env_choice(kind, EXECUTOR_ENV, EXECUTORS, default_executor(), "an executor")
 
 
 def _look_at_the_context() -> None:

@@ -112,6 +112,19 @@ def test_an_executor_named_by_the_caller_is_checked_like_the_environments():
         executor_kind("multi")
 
 
+def test_the_heap_mode_comes_from_the_caller_or_the_environment_and_is_checked(monkeypatch):
+    from tactile_descriptors_ros.errors import TactileError
+    from tactile_descriptors_ros.nodes.common import gc_mode
+
+    monkeypatch.delenv("TACTILE_GC", raising=False)
+    assert gc_mode() == "freeze"
+    monkeypatch.setenv("TACTILE_GC", "off")
+    assert gc_mode() == "off" and gc_mode("freeze") == "freeze"
+    monkeypatch.setenv("TACTILE_GC", "never")
+    with pytest.raises(TactileError, match="TACTILE_GC='never': not a heap mode; one of freeze, off"):
+        gc_mode()
+
+
 @pytest.mark.parametrize("major, default", [(9, "events"), (10, "events"), (7, "single"), (0, "single")])
 def test_a_node_spins_in_events_where_rclpy_resumes_coroutines_unless_the_environment_says(monkeypatch, major,
                                                                                          default):
