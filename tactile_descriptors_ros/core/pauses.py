@@ -63,12 +63,15 @@ class GcPauses:
     -----
     A pause is the time between the interpreter's ``start`` and ``stop`` callbacks of
     one collection (the callbacks run in the thread that triggered it, with the GIL
-    held).  :meth:`snapshot` is safe to call from any thread.
+    held).  :meth:`snapshot` is safe to call from any thread.  The lock is re-entrant:
+    any allocation, also one made while a thread holds it (:meth:`snapshot` builds a
+    dict), may start a collection whose callback takes it again in the same thread; a
+    plain lock deadlocks the process there.
     """
 
     def __init__(self, clock_ns: Callable[[], int] = time.perf_counter_ns) -> None:
         self._clock_ns = clock_ns
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # re-entered by a collection that starts while it is held
         self._started_ns: int | None = None
         self.reset()
         self._installed = False

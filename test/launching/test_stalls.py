@@ -186,7 +186,11 @@ def test_a_5_s_window_node_stop_is_counted_and_fresh_windows_resume_within_a_win
         # a whole window of data sampled after SIGCONT: ends one window and at most one hop later, is then
         # cut, described and published; the node has first the queued messages to take
         whole = lambda: [d for d in g.descs if d[1] >= resumed]  # noqa: E731
-        assert g.spin_until(whole, 30.0), f"no window of fresh data after the stop: {g.descs[-3:]}"
+        after_stop = lambda: [(round(t - resumed, 2), v.get("frames_messages_taken"),  # noqa: E731
+                               v.get("descriptors_published")) for t, v in g.diags if t > resumed]
+        assert g.spin_until(whole, 30.0), (
+            f"no window of fresh data after the stop: {g.descs[-3:]}; the window node's (s after, frames messages, "
+            f"descriptors) since: {after_stop()[-5:]}; its last status: {g.diags[-1][1]}")
         late_s = whole()[0][0] - whole()[0][2]
         assert whole()[0][2] <= resumed + LENGTH_S + HOP_S + 1e-3, whole()[0]
         assert late_s <= LENGTH_S, f"the first fresh window came {late_s:.2f} s after its end"
