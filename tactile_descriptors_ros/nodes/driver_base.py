@@ -19,9 +19,10 @@ lifecycle transition; the time it was gone is counted as lost frames by the
 stream (:meth:`DriverBase._reopened`).  Any other exception while reading
 (``reader_errors``) or while handling what was read (``consume_errors``) is
 counted and reported; the thread reads on.  The longest time between two
-reads (``read_gap_max_ms``) and the reads that came more than
-:data:`READ_GAP_LONG_S` after the one before (``read_gaps_long``) say when the
-thread did not read: a device that buffers less than that loses frames.
+reads (``read_gap_max_ms``, ending ``read_gap_max_at_s`` after the first read)
+and the reads that came more than :data:`READ_GAP_LONG_S` after the one before
+(``read_gaps_long``) say when the thread did not read: a device that buffers
+less than that loses frames.
 """
 
 from __future__ import annotations
@@ -94,7 +95,10 @@ class DriverBase(LifecycleNode):
         #: :data:`READ_GAP_LONG_S` (a device that was lost and reopened in between is not counted)
         self.read_gap_max_s = 0.0
         self.read_gaps_long = 0
+        #: when the longest gap ended, after the first read [s]
+        self.read_gap_max_at_s = 0.0
         self._read_started: float | None = None
+        self._first_read: float | None = None
 
     # ---------------------------------------------------------- parameters
     def _declare_parameters(self, schema: NodeSchema, kind: str, example: str,
@@ -332,9 +336,13 @@ class DriverBase(LifecycleNode):
                 self._stop.wait(max(0.0, self.read_period_s - (time.monotonic() - started)))
 
     def _note_read_gap(self, started: float) -> None:
+        if self._first_read is None:
+            self._first_read = started
         if self._read_started is not None:
             gap_s = started - self._read_started
-            self.read_gap_max_s = max(self.read_gap_max_s, gap_s)
+            if gap_s > self.read_gap_max_s:
+                self.read_gap_max_s = gap_s
+                self.read_gap_max_at_s = started - self._first_read
             self.read_gaps_long += gap_s > READ_GAP_LONG_S
         self._read_started = started
 
@@ -349,7 +357,7 @@ class DriverBase(LifecycleNode):
         """Key/values of the transport status: name, ``settings``, stamp source, device description, link, faults."""
         values = {"transport": self.transport_name, **settings, "stamp_source": self.stamp_source,
                   "reads": self.reads, "read_gap_max_ms": round(1e3 * self.read_gap_max_s, 3),
-                  "read_gaps_long": self.read_gaps_long}
+                  "read_gap_max_at_s": round(self.read_gap_max_at_s, 3), "read_gaps_long": self.read_gaps_long}
         if self.transport is not None:
             values.update({f"device_{k}": v for k, v in self.transport.describe().items()})
         if self.link is not None:

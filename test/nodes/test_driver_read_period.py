@@ -85,6 +85,8 @@ def test_a_reader_that_stops_reading_is_seen_in_the_longest_gap_between_reads(ro
         assert float(values["read_gap_max_ms"]) >= 1e3 * stall_s
         assert int(values["read_gaps_long"]) >= 1
         assert READ_GAP_LONG_S < stall_s
+        # the gap ended after 20 reads at least one period apart and the stall, and before now
+        assert 20 * 0.02 + stall_s <= float(values["read_gap_max_at_s"]) <= time.monotonic() - started
     finally:
         drv.close()
         ex.remove_node(drv)

@@ -245,7 +245,7 @@ class SoakReport:
         for name, values in self.diagnostics.items():
             node = name.rpartition(": ")[0]
             for key in ("gc_collections_g2", "gc_max_ms_g0", "gc_max_ms_g1", "gc_max_ms_g2", "gc_pause_ms_total",
-                        "gc_settle_ms", "gc_frozen", "read_gap_max_ms", "read_gaps_long"):
+                        "gc_settle_ms", "gc_frozen", "read_gap_max_ms", "read_gap_max_at_s", "read_gaps_long"):
                 if key in values:
                     out.setdefault(node, {})[key] = float(values[key])
         return out

@@ -86,7 +86,8 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     # every node that reported settled its start-up heap and counts its collector's pauses; a driver its read gaps
     for name, p in d["pauses"].items():
         assert p["gc_settle_ms"] > 0 and p["gc_frozen"] > 10_000 and "gc_collections_g2" in p, (name, p)
-    assert all("read_gap_max_ms" in p for name, p in d["pauses"].items() if name.endswith("skin_driver"))
+    assert all("read_gap_max_ms" in p and "read_gap_max_at_s" in p
+               for name, p in d["pauses"].items() if name.endswith("skin_driver"))
     assert isinstance(d["bus_loss_events"], list) and all(e["frames"] > 0 for e in d["bus_loss_events"])
     # the recognition path's CPU is every node's but the contact node's and the TF publisher's, judged against
     # one core
@@ -191,7 +192,7 @@ def test_when_frames_were_lost_and_each_nodes_pauses_are_reported():
     the collector's pauses (its ``process`` status) and a driver's longest gap between reads."""
     nodes = [NodeSamples("skin_driver", "skin_driver", 1), NodeSamples("window_node", "window_node", 2)]
     diag = {"skin_driver: bus": {"bus_frames": "12000", "bus_lost_frames": "300", "read_gap_max_ms": "1058.5",
-                                 "read_gaps_long": "6", "transport": "simulated"},
+                                 "read_gap_max_at_s": "437.2", "read_gaps_long": "6", "transport": "simulated"},
             "skin_driver: process": {"gc_collections_g2": "1", "gc_max_ms_g2": "90.2", "gc_frozen": "0"},
             "window_node: process": {"gc_collections_g2": "0", "gc_max_ms_g2": "0", "gc_settle_ms": "70.1",
                                      "gc_frozen": "161157"},
@@ -202,10 +203,10 @@ def test_when_frames_were_lost_and_each_nodes_pauses_are_reported():
     d = r.to_dict()
     assert d["bus_loss_events"] == [{"t_s": 284.9, "status": "skin_driver: bus", "frames": 100},
                                     {"t_s": 436.9, "status": "skin_driver: bus", "frames": 200}]
-    assert d["pauses"] == {"skin_driver": {"read_gap_max_ms": 1058.5, "read_gaps_long": 6.0,
+    assert d["pauses"] == {"skin_driver": {"read_gap_max_ms": 1058.5, "read_gap_max_at_s": 437.2, "read_gaps_long": 6.0,
                                            "gc_collections_g2": 1.0, "gc_max_ms_g2": 90.2, "gc_frozen": 0.0},
                            "window_node": {"gc_collections_g2": 0.0, "gc_max_ms_g2": 0.0, "gc_settle_ms": 70.1,
                                            "gc_frozen": 161157.0}}
     text = format_soak(r)
     assert "frames lost on the bus at: 285 s (100), 437 s (200)" in text
-    assert "read_gap_max_ms 1058.5" in text and "gc_settle_ms 70.1" in text
+    assert "read_gap_max_ms 1058.5, read_gap_max_at_s 437.2" in text and "gc_settle_ms 70.1" in text
