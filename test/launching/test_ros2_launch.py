@@ -124,12 +124,16 @@ class Graph:
                 if "Node not found" in text or "waiting for service" in text:
                     # what the graph held instead, seen by CLIs of their own, and any shared-memory port that a
                     # participant of the launch could not open (docs/nodes.md: a cause of nodes not found)
-                    for verb in ("node", "service"):
-                        listed = run_ros2(verb, "list", "-a", "--no-daemon", "--spin-time", "5", env=self.env,
+                    for verb, every in (("node", ["-a"]), ("service", [])):  # service list has no -a
+                        listed = run_ros2(verb, "list", *every, "--no-daemon", "--spin-time", "5", env=self.env,
                                           timeout_s=CLI_S)
-                        seen += f"\n--- ros2 {verb} list -a:\n{listed.text}"
+                        seen += f"\n--- ros2 {verb} list {' '.join(every)}:\n{listed.text}"
                     ports = [line for line in self.output().splitlines() if "init_port" in line]
                     seen += f"\n--- launch log lines on shared-memory ports: {ports[-10:]}"
+                    # the asked node's own lines (started, died, its warnings), wherever they are in the log
+                    for name in {a.rsplit("/", 1)[-1] for a in args if a.startswith("/") and len(a) > 1}:
+                        own = [line for line in self.output().splitlines() if f"[{name}-" in line]
+                        seen += f"\n--- launch log lines of {name}: {own[-10:]}"
                 raise AssertionError(f"ros2 {' '.join(args)} exited {code}:\n{text}"
                                      + f"\n--- {len(attempts)} tries: " + "; ".join(attempts) + seen
                                      + "".join(f"\n--- earlier: {c}" for c in crashes)
