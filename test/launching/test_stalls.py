@@ -72,6 +72,15 @@ class Probe:
             os.kill(pid, signal.SIGCONT)
         return stopped, time.time()
 
+    def processes(self) -> dict[str, dict]:
+        """The newest ``process`` status of every node that sent one, by node name."""
+        return {name.rpartition(": ")[0].split("/")[-1]: v for name, v in self.statuses.items()
+                if name.endswith(": process")}
+
+    def all_reported(self) -> bool:
+        """Whether every node of the graph has sent its ``process`` status (it is up)."""
+        return {n.spec.name for n in self.procs.nodes} <= set(self.processes())
+
     def fresh(self, since: float) -> list[tuple[float, float, float]]:
         """Descriptors of windows that end after ``since`` - 1 s (data sampled after a stop)."""
         return [d for d in self.descs if d[2] > since - 1.0]
@@ -168,9 +177,8 @@ def test_an_8_s_driver_stall_is_a_gap_and_descriptors_resume_within_2_s(tmp_path
         bus = [v for name, v in g.statuses.items() if name.endswith(": bus")]
         assert max(float(v["read_gap_max_ms"]) for v in bus) >= 1e3 * STALL_S, bus
         # every node settled its start-up heap (frozen: no full collection scans it) and reports its pauses
-        processes = {name: v for name, v in g.statuses.items() if name.endswith(": process")}
-        assert {n.spec.name for n in g.procs.nodes} <= {name.rpartition(": ")[0].split("/")[-1]
-                                                         for name in processes}, sorted(processes)
+        processes = g.processes()
+        assert g.all_reported(), sorted(processes)
         assert all(int(v["gc_frozen"]) > 10_000 and float(v["gc_settle_ms"]) > 0 for v in processes.values()), processes
 
 
@@ -181,9 +189,7 @@ def test_a_5_s_window_node_stop_is_counted_and_fresh_windows_resume_within_a_win
     # a short queue: even a driver slowed by a loaded machine (fewer, fuller messages) overflows it in the stop
     with nao_graph(tmp_path, **{"qos.frames.depth": QUEUE_DEPTH}) as g:
         # every node of the graph up (its process status seen), so that no participant starts during the stop
-        up = lambda: {n.spec.name for n in g.procs.nodes} <= {  # noqa: E731
-            name.rpartition(": ")[0].split("/")[-1] for name in g.statuses if name.endswith(": process")}
-        assert g.spin_until(lambda: g.diags and up(), 30.0), f"not every node reported: {sorted(g.statuses)}"
+        assert g.spin_until(lambda: g.diags and g.all_reported(), 30.0), f"not every node reported: {sorted(g.statuses)}"
         before = g.faults()
         stopped, resumed = g.stop("window_node", WINDOW_NODE_STOP_S)
         # a whole window of data sampled after SIGCONT: ends one window and at most one hop later, is then
