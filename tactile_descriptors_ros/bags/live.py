@@ -8,12 +8,9 @@ Only APIs present since ROS 2 Humble are used: raw subscriptions
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import re
-import signal
-import threading
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from rosbags.interfaces import Qos
@@ -28,7 +25,6 @@ __all__ = [
     "publisher_offers",
     "subscription_qos_for",
     "TopicSelector",
-    "stop_on_signals",
 ]
 
 #: Graph bookkeeping topics that ``record --all`` and ``--regex`` leave out unless named.
@@ -101,32 +97,3 @@ class TopicSelector:
         if self.all_topics:
             return True
         return any(r.search(topic) for r in self.regexes)
-
-
-@contextlib.contextmanager
-def stop_on_signals(stop: threading.Event) -> Iterator[threading.Event]:
-    """Turn SIGINT and SIGTERM into ``stop.set()`` while inside the block (main thread only).
-
-    A recorder or player then finishes its current message and closes the
-    bag cleanly, also when started in the background by a shell that
-    ignores SIGINT, or stopped by ``kill`` (SIGTERM).  A second signal while
-    stopping raises ``KeyboardInterrupt``.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield stop
-        return
-    watched = (signal.SIGINT, signal.SIGTERM)
-    previous = {s: signal.getsignal(s) for s in watched}
-
-    def handler(signum: int, frame: Any) -> None:
-        if stop.is_set():
-            raise KeyboardInterrupt
-        stop.set()
-
-    for s in watched:
-        signal.signal(s, handler)
-    try:
-        yield stop
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)

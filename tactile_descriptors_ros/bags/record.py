@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import BagError
+from ..launching.signals import SignalStop
 from .io import BagWriter
 from .live import TopicSelector, message_class, publisher_offers, subscription_qos_for
 
@@ -144,7 +145,7 @@ class Recorder:
         return sorted(self._subscriptions)
 
     # ------------------------------------------------------------------ running
-    def spin(self, duration_s: float | None = None, stop: threading.Event | None = None,
+    def spin(self, duration_s: float | None = None, stop: threading.Event | SignalStop | None = None,
              max_messages: int | None = None) -> RecordReport:
         """Record until ``duration_s`` passed, ``stop`` is set, ``max_messages`` arrived, or shutdown.
 
@@ -194,7 +195,7 @@ class Recorder:
 
 
 def record(bag_path: str, selector: TopicSelector, storage: str = "mcap", duration_s: float | None = None,
-           context: Any = None, stop: threading.Event | None = None, use_sim_time: bool = False,
+           context: Any = None, stop: threading.Event | SignalStop | None = None, use_sim_time: bool = False,
            max_messages: int | None = None, on_start: Callable[[Recorder], None] | None = None) -> RecordReport:
     """Record into a new bag until stopped (see :meth:`Recorder.spin`); the bag is always closed.
 

@@ -26,6 +26,7 @@ from typing import Any
 from rosbags.interfaces import Qos
 
 from ..errors import BagError
+from ..launching.signals import SignalStop
 from .io import BagReader
 from .live import message_class
 from .qos import DEFAULT_DEPTH, adapt_offered_qos, qos_to_dict, qos_to_rclpy
@@ -191,7 +192,7 @@ class Player:
             time.sleep(0.02)
 
     def _sleep_until(self, wall_target: float, wall0: float, bag0_ns: int, next_ns: int,
-                     stop: threading.Event | None) -> bool:
+                     stop: threading.Event | SignalStop | None) -> bool:
         """Sleep until ``wall_target``, ticking the clock; False if stopped."""
         opts = self.options
         tick_wall = (1.0 / opts.clock_rate_hz) / opts.rate if (self._clock_pub and opts.clock_rate_hz > 0) else None
@@ -212,7 +213,7 @@ class Player:
                 time.sleep(min(remaining, 0.05))
 
     # ------------------------------------------------------------------ running
-    def play(self, stop: threading.Event | None = None) -> PlayReport:
+    def play(self, stop: threading.Event | SignalStop | None = None) -> PlayReport:
         """Play (looping if asked) until the end, ``stop`` is set, or the context shuts down."""
         opts = self.options
         started = time.monotonic()
@@ -280,7 +281,7 @@ class Player:
 
 
 def play(bag_path: str, options: PlayOptions | None = None, context: Any = None,
-         stop: threading.Event | None = None) -> PlayReport:
+         stop: threading.Event | SignalStop | None = None) -> PlayReport:
     """Play a bag once (or looping) and return what was published."""
     player = Player(bag_path, options, context=context)
     try:

@@ -6,7 +6,9 @@
   (imports ``launch``/``launch_ros`` only when called);
 * :mod:`.processes` -- start NodeSpecs as subprocesses (``--ros-args
   --params-file ... -r from:=to``), forward their output with a prefix, stop
-  them cleanly.
+  them cleanly;
+* :mod:`.signals` -- Ctrl-C and SIGTERM as a stop flag whose handler takes no
+  lock (the launcher's, the recorder's and the player's).
 """
 
 __all__: list[str] = []

@@ -33,6 +33,7 @@ from typing import IO
 from ..core.yamlreader import config_dir
 from ..errors import ConfigError
 from .graph import PACKAGE, NodeSpec, unrunnable, write_parameters_file
+from .signals import SignalStop, stop_on_signals
 
 __all__ = ["node_command", "RunningNode", "GraphProcesses", "localhost_environment", "dds_environment",
            "DDS_PROFILE", "DDS_PROFILE_VARIABLES", "run_until_interrupted"]
@@ -201,7 +202,7 @@ class GraphProcesses:
         return [n for n in self.nodes if n.returncode is not None]
 
     def wait(self, timeout_s: float | None = None, poll_s: float = 0.2,
-             stop: threading.Event | None = None) -> list[RunningNode]:
+             stop: threading.Event | SignalStop | None = None) -> list[RunningNode]:
         """Block until a node exits (returned), ``timeout_s`` passes or ``stop`` is set (``[]``)."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         stop = stop if stop is not None else threading.Event()
@@ -265,14 +266,16 @@ def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None
     default: a graph with a node missing does not recognise anything, so it
     should not look alive, like ``ros2 launch`` with ``on_exit=Shutdown()``)
     the others are then stopped, else they keep running.  Ctrl-C and SIGTERM
-    only set an event the supervising loop waits on (nothing is raised into
-    the running code).  Returns the exit codes.
+    only raise a flag the supervising loop polls (nothing is raised into
+    the running code, and the handler takes no lock: :mod:`.signals`).  Returns the exit codes.
     """
-    stop = threading.Event()
-    old: dict[int, object] = {}
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            old[sig] = signal.signal(sig, lambda signum, frame: stop.set())
+    with stop_on_signals(second_raises=False) as stop:
+        return _supervise(procs, stop, duration_s, stop_when_one_exits)
+
+
+def _supervise(procs: GraphProcesses, stop: SignalStop, duration_s: float | None,
+               stop_when_one_exits: bool) -> dict[str, int | None]:
+    """The loop of :func:`run_until_interrupted`, inside its signal handlers."""
     deadline = None if duration_s is None else time.monotonic() + float(duration_s)
     reported: set[str] = set()
     try:
@@ -293,6 +296,4 @@ def run_until_interrupted(procs: GraphProcesses, duration_s: float | None = None
                 break
     finally:
         codes = procs.stop()
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
     return codes

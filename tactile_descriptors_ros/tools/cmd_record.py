@@ -38,13 +38,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import threading
 
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from ..bags.live import TopicSelector, stop_on_signals
+    from ..bags.live import TopicSelector
     from ..bags.record import record
+    from ..launching.signals import stop_on_signals
 
     selector = TopicSelector(args.topics, regex=args.regex, all_topics=args.all_topics, exclude=args.exclude)
     output = args.output or Path(time.strftime("rosbag2_%Y_%m_%d-%H_%M_%S"))
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     report = None
     interrupted = False
     try:
-        with stop_on_signals(threading.Event()) as stop:
+        with stop_on_signals() as stop:
             if not args.json:
                 print(f"recording to {output} ({args.storage}); Ctrl-C to stop", file=sys.stderr, flush=True)
             report = record(str(output), selector, storage=args.storage, duration_s=args.duration,

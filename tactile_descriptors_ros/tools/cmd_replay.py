@@ -107,12 +107,11 @@ def run(args: argparse.Namespace) -> int:
     if args.info:
         _print_info(args.bag, args.json)
         return 0
-    import threading
 
     import rclpy
 
-    from ..bags.live import stop_on_signals
     from ..bags.replay import PlayOptions, play
+    from ..launching.signals import stop_on_signals
 
     options = PlayOptions(
         rate=args.rate, start_offset_s=args.start_offset, loop=args.loop,
@@ -125,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     rclpy.init(context=context)
     report = None
     try:
-        with stop_on_signals(threading.Event()) as stop:
+        with stop_on_signals() as stop:
             report = play(str(args.bag), options, context=context, stop=stop)
     except KeyboardInterrupt:
         pass
