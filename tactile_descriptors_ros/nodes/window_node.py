@@ -133,6 +133,7 @@ class WindowNode(Node):
         self._cells_by_name: dict[tuple[str, str], int] = {}
         self._extra: dict[str, tuple[str, ...]] = {}  # body part -> its cell type's extra channels
         self.subs = []
+        self._part_sub: dict[str, object] = {}  # body part -> its frames subscription
         self._handlers: dict[object, object] = {}
         for part in self.robot.body_parts:
             kind = message_kind(self.robot.cell_types[part.cell_type])
@@ -149,6 +150,7 @@ class WindowNode(Node):
                 mtype = SkinPartFrames
             sub = self.create_subscription(mtype, topic, self._on_frames, qos_frames)
             self.subs.append(sub)
+            self._part_sub[part.name] = sub
             self._handlers[sub] = cb
         self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
         self.frames_taken = 0
@@ -457,7 +459,13 @@ class WindowNode(Node):
             values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin cell batches/s
             seen = self._last_seen.get(part)
             if seen is None or now - seen > self.params["diagnostics.silent_after_s"]:
-                silent.append(part)
+                # a silent part with matched publishers is a sender that stopped or a delivery that did
+                # (docs/nodes.md: a node stopped for seconds); with none, nothing publishes the topic
+                publishers = self._part_sub[part].get_publisher_count()
+                values[f"{part}_publishers"] = publishers
+                if seen is not None:
+                    values[f"{part}_silent_s"] = round(now - seen, 1)
+                silent.append(f"{part} ({_publishers(publishers)})")
         values.update({f"fault_{k}": v for k, v in sorted(faults.items())})
         values.update({f"quality_{k}": v for k, v in self.last_quality.items()})
         bad = {k: v for k, v in faults.items() if v and k != "windower_exploration_too_short"}
@@ -476,6 +484,13 @@ class WindowNode(Node):
 def _windower_settings(values) -> dict[str, float]:
     """The schema's ``windower`` parameters as :class:`Windower` keywords (``window.length_s`` -> ``length_s``)."""
     return {name.rsplit(".", 1)[1]: values[name] for name in WINDOW_NODE.apply_groups()["windower"]}
+
+
+def _publishers(count: int) -> str:
+    """``"no publisher"``, ``"1 publisher matched"``, ``"3 publishers matched"``."""
+    if count == 0:
+        return "no publisher"
+    return f"{count} publisher{'s' if count > 1 else ''} matched"
 
 
 def _newest_sample_ns(msg) -> int | None:

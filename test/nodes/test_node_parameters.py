@@ -333,7 +333,8 @@ def test_scene_end_is_announced_and_diagnostics_say_so(ros_context, tmp_path):
 
 
 def test_silent_after_is_set_at_run_time(ros_context):
-    """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more."""
+    """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more;
+    the status says whether a publisher is still matched (a stopped sender or a lost delivery) or none is."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
@@ -358,7 +359,12 @@ def test_silent_after_is_set_at_run_time(ros_context):
         assert "no frames from" not in status()
         r = w.set_parameters([Parameter("diagnostics.silent_after_s", value=0.1)])[0]
         assert r.successful, r.reason
-        assert spin_until(ex, lambda: "no frames from index" in status(), 30)
+        assert spin_until(ex, lambda: "no frames from index (1 publisher matched)" in status(), 30)
+        values = {kv.key: kv.value for kv in w.diagnostics.statuses()[0].values}
+        assert values["index_publishers"] == "1" and float(values["index_silent_s"]) >= 0.1
+        # the publisher gone: the same silence now says that nothing publishes the topic
+        io.destroy_publisher(pub)
+        assert spin_until(ex, lambda: "no frames from index (no publisher)" in status(), 30)
     finally:
         ex.shutdown()
         w.destroy_node()
