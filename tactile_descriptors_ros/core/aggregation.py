@@ -853,6 +853,31 @@ def _extra_of(sig: CellSignals, cell_type: CellType, cid: int) -> np.ndarray:
     return extra
 
 
+def _extras_of(sigs: list[CellSignals], cell_type: CellType, ids: list[int]) -> np.ndarray:
+    """The cells' extra channels stacked, shape (n_cells, n_extra, n_slow) (:func:`_extra_of` per cell).
+
+    Cells that all hold float64 arrays of the expected shape (a window cut
+    by the windower) are copied with one concatenation, without a Python
+    call per cell.
+    """
+    n_x, n_slow = len(cell_type.extra_channels), np.shape(sigs[0].deformation)[1]
+    arrays = [s.extra for s in sigs]
+    nd = np.ndarray
+    if all(a.__class__ is nd and a.dtype == np.float64 and a.shape == (n_x, n_slow) for a in arrays):
+        out = np.empty((len(arrays), n_x, n_slow))
+        if n_x:
+            np.concatenate(arrays, out=out.reshape(len(arrays) * n_x, n_slow))
+        return out
+    return _stack([_extra_of(s, cell_type, cid) for s, cid in zip(sigs, ids)])
+
+
+def _tares_of(sigs: list[CellSignals], n_v: int, ids: list[int]) -> np.ndarray:
+    """The cells' deformation tares stacked, shape (n_cells, n_v): zeros at once when no cell has one."""
+    if all(s.deformation_tare is None for s in sigs):
+        return np.zeros((len(sigs), n_v))
+    return _stack([_tare_of(s, n_v, cid) for s, cid in zip(sigs, ids)])
+
+
 def _tare_of(sig: CellSignals, n_v: int, cid: int) -> np.ndarray:
     if sig.deformation_tare is None:
         return np.zeros(n_v)
@@ -875,6 +900,7 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
         vib = _stack([sigs[k].vibration for k in rows], "groups.vib")
         dfm = _stack([sigs[k].deformation for k in rows], "groups.dfm")
         spectrum = None  # the vibration's power spectrum, shared by bands and statistics
+        tares = extras = None  # the cells' tares and extra channels, stacked once for the groups that read them
         for g in groups:
             with np.errstate(all="ignore"):  # non-finite samples give non-finite values: _cells_mean drops them
                 if g in ("bands", "statistics") and spectrum is None:
@@ -885,14 +911,16 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
                     vals = band_hjorth(vib, fs_s, spectrum)
                 elif g == "statistics":
                     vals = statistics_values(vib, fs_s, dfm, fs_v, spectrum)
-                elif g == "plain":
-                    vals = plain_values(vib, dfm, _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
-                elif g == "rocket":
-                    vals = rocket_values(cell_type, vib, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
-                                         _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
                 else:
-                    vals = level_values(cell_type, g, dfm, _stack([_tare_of(sigs[k], n_v, ids[k]) for k in rows]),
-                                        _stack([_extra_of(sigs[k], cell_type, ids[k]) for k in rows]))
+                    if extras is None:
+                        extras = _extras_of([sigs[k] for k in rows], cell_type, [ids[k] for k in rows])
+                    if g == "plain":
+                        vals = plain_values(vib, dfm, extras)
+                    else:
+                        if tares is None:
+                            tares = _tares_of([sigs[k] for k in rows], n_v, [ids[k] for k in rows])
+                        vals = (rocket_values(cell_type, vib, dfm, tares, extras) if g == "rocket"
+                                else level_values(cell_type, g, dfm, tares, extras))
             if len(batches) == 1:  # one window shape (the common case): the rows are the cells, in order
                 out[g] = vals
                 continue

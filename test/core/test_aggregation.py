@@ -210,3 +210,30 @@ def test_descriptor_is_finite_for_flat_and_nan_signals():
     assert np.all(np.isfinite(d.values))
     assert d.body_parts[1].quality & Quality.FLAT
     assert d.body_parts[2].quality & Quality.NONFINITE
+
+
+def test_stacked_extras_and_tares_equal_the_per_cell_path_whatever_the_cells_hold():
+    """The levels group's inputs stacked at once (float64 extras, no tares) or cell by cell (anything else)."""
+    from tactile_descriptors_ros.core.aggregation import _extra_of, _extras_of, _tare_of, _tares_of
+
+    nao = load_robot("nao")
+    ct = nao.cell_types[nao.body_parts[0].cell_type]
+    rng = np.random.default_rng(3)
+    n_x, n_v, n = len(ct.extra_channels), len(ct.deformation.channels), 50
+
+    def cell(extra, tare=None):
+        return CellSignals(np.zeros((3, 4 * n), np.int32), np.arange(4 * n, dtype=np.int64),
+                           rng.integers(0, 900, (n_v, n)).astype(np.int32), 4 * np.arange(n, dtype=np.int64),
+                           np.ones(n), extra=extra, deformation_tare=tare)
+
+    floats = [cell(rng.normal(size=(n_x, n))) for _ in range(4)]
+    mixed = [*floats[:2], cell(None), cell(rng.normal(size=(n_x, n)).astype(np.float32), np.full(n_v, 7.0))]
+    for sigs in (floats, mixed):
+        ids = list(range(len(sigs)))
+        want_x = np.stack([_extra_of(s, ct, c) for s, c in zip(sigs, ids)])
+        want_t = np.stack([_tare_of(s, n_v, c) for s, c in zip(sigs, ids)])
+        np.testing.assert_array_equal(_extras_of(sigs, ct, ids), want_x)
+        np.testing.assert_array_equal(_tares_of(sigs, n_v, ids), want_t)
+    assert np.isnan(_extras_of(mixed, ct, [0, 1, 2, 3])[2]).all()
+    with pytest.raises(SignalError, match="cell 11: expected extra channels"):
+        _extras_of([floats[0], cell(np.zeros((n_x, n - 1)))], ct, [10, 11])
