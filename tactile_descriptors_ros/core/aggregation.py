@@ -575,7 +575,8 @@ def _reduce_parts(feats: CellFeatures, starts: np.ndarray, counts: np.ndarray, c
 
 def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...], cells: Mapping[int, CellSignals],
                    threshold_n: float, channels: str,
-                   part_ids: tuple[tuple[int, ...], ...] | None = None) -> list[BodyPartDescriptor]:
+                   part_ids: tuple[tuple[int, ...], ...] | None = None,
+                   stacked: dict | None = None) -> list[BodyPartDescriptor]:
     """The descriptors of every body part of one cell type: one kernel call for all their cells.
 
     Gate, saturation check and per-cell quantities run once on the cells in
@@ -584,7 +585,8 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     identical to :func:`_body_part_descriptor` per body part: cells of
     different window shapes or dtypes, float data and integer data too large
     for exact moments take that path.  ``part_ids``: each body part's cell
-    ids (from the robot's cached plan).
+    ids (from the robot's cached plan).  ``stacked``: filled as
+    :func:`_type_features` says, for the groups computed after.
     """
     labels = body_part_layout(cell_type, channels)
     red = _reduction(cell_type, channels)
@@ -642,7 +644,7 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     if touching_sigs[0].vibration.shape[0] != red.n_s or touching_sigs[0].deformation.shape[0] != red.n_v:
         _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
     out: list[BodyPartDescriptor] = []
-    feats = _type_features(touching_sigs, cell_type)
+    feats = _type_features(touching_sigs, cell_type, stacked)
     if feats is None:
         # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
@@ -679,13 +681,18 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
 STACK_CHUNK_SAMPLES = 1 << 20
 
 
-def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFeatures, np.ndarray] | None:
+def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict | None = None
+                   ) -> tuple[CellFeatures, np.ndarray] | None:
     """Per-cell quantities and saturation of integer cells of one shape, in chunks of cells.
 
     Returns None when the data are too large for exact integer moments (the
     kernel's results would then depend on how cells are batched).  Chunks
     are stacked into reused buffers; with exact moments every cell's
     quantities are the same whatever the chunk, so chunking changes nothing.
+    When all cells fit one chunk and ``stacked`` is a dict, it receives
+    ``sigs`` and that chunk's ``vibration`` and ``deformation`` stacks
+    (valid until this function's next call), which the other feature
+    groups then read instead of stacking the same cells again.
     """
     s0, v0 = sigs[0].vibration, sigs[0].deformation
     n_fast, n_slow = s0.shape[1], v0.shape[1]
@@ -706,6 +713,8 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType) -> tuple[CellFe
         tv = _shared_or_stacked([s.deformation_t_ns for s in chunk])
         fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
         # the compiled kernel computes exact quantities (batch-independent) and each cell's bounds in one pass
+        if stacked is not None and step >= len(sigs):
+            stacked.update(sigs=sigs, vibration=vib, deformation=dfm)
         done = cell_quantities_bounded(vib, ts, dfm, tv, fs_s, fs_v)
         if done is not None:
             quantities, bounds = done
@@ -887,18 +896,27 @@ def _tare_of(sig: CellSignals, n_v: int, cid: int) -> np.ndarray:
     return tare
 
 
-def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals], ids: list[int]
-                ) -> dict[str, np.ndarray]:
-    """Per-cell values of the non-kernel groups, cells of one window shape stacked and computed together."""
+def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals], ids: list[int],
+                stacked: dict | None = None) -> dict[str, np.ndarray]:
+    """Per-cell values of the non-kernel groups, cells of one window shape stacked and computed together.
+
+    ``stacked``: the kernel's stacks of these same cells (:func:`_type_features`), read as they are.
+    """
     fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
     n_v = len(cell_type.deformation.channels)
     out: dict[str, list | np.ndarray] = {g: [None] * len(sigs) for g in groups}
     batches: dict[tuple, list[int]] = {}
-    for k, sig in enumerate(sigs):
+    shared = bool(stacked) and len(stacked["sigs"]) == len(sigs) and all(a is b for a, b in zip(stacked["sigs"], sigs))
+    if shared:  # the kernel stacked these cells, all of one shape
+        batches[()] = list(range(len(sigs)))
+    for k, sig in enumerate(sigs if not shared else ()):
         batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
     for rows in batches.values():
-        vib = _stack([sigs[k].vibration for k in rows], "groups.vib")
-        dfm = _stack([sigs[k].deformation for k in rows], "groups.dfm")
+        if shared:
+            vib, dfm = stacked["vibration"], stacked["deformation"]
+        else:
+            vib = _stack([sigs[k].vibration for k in rows], "groups.vib")
+            dfm = _stack([sigs[k].deformation for k in rows], "groups.dfm")
         spectrum = None  # the vibration's power spectrum, shared by bands and statistics
         tares = extras = None  # the cells' tares and extra channels, stacked once for the groups that read them
         for g in groups:
@@ -953,7 +971,8 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
     """
     labels = selection_labels(cell_type, groups)
     modes = [KERNEL_GROUPS[g] for g in groups if g in KERNEL_GROUPS] or ["averaged"]
-    base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids) for m in modes}
+    stacked: dict = {}  # the last kernel call's stacks of the cells in contact, for the other groups
+    base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids, stacked) for m in modes}
     first = base[modes[0]]
     if len(groups) == 1 and groups[0] in KERNEL_GROUPS:  # one kernel group: the kernel's values as they are
         return [BodyPartDescriptor(bp.name, bp.cell_type, bp.values, labels, bp.contact, bp.cells_in_contact,
@@ -964,7 +983,7 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
     if others and any(bp.contact for bp in first):
         touching = _touching(part_ids, cells, threshold_n)
         ids = [cid for t in touching for cid in t]
-        rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids)
+        rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids, stacked)
         for p, t in enumerate(touching):
             if len(t) != first[p].cells_in_contact:
                 raise SignalError(f"body part {first[p].name}: contact gate disagreement ({len(t)} vs "

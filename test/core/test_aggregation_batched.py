@@ -191,3 +191,31 @@ def test_chunks_of_cells_change_nothing(monkeypatch, chunk_samples):
     assert np.array_equal(whole.values, chunked.values)
     assert [bp.quality for bp in whole.body_parts] == [bp.quality for bp in chunked.body_parts]
     _assert_same(robot, cells, "concat", "averaged")
+
+
+@pytest.mark.parametrize("chunk_samples", [None, 7 * 3 * 200])
+def test_feature_groups_on_the_kernels_stacks_equal_their_own_stacking(monkeypatch, chunk_samples):
+    """The non-kernel groups read the cells the kernel stacked (one chunk) or stack them themselves: same bits."""
+    from tactile_descriptors_ros.sim.synthetic import skin_window
+
+    robot = load_robot("nao")
+    groups = robot.descriptor.groups
+    cells = skin_window(robot, 0.5, seed=11)
+    for k, cid in enumerate(sorted(cells)):  # some cells out of contact, one invalid
+        if k % 4 == 1:
+            cells[cid].force_n = cells[cid].force_n * 0.0
+    cells[sorted(cells)[0]].valid = False
+    if chunk_samples is not None:
+        monkeypatch.setattr(aggregation, "STACK_CHUNK_SAMPLES", chunk_samples)
+    own_stacks = []
+    real_stack = aggregation._stack
+    monkeypatch.setattr(aggregation, "_stack", lambda arrays, slot=None: (
+        own_stacks.append(slot), real_stack(arrays, slot))[1])
+    shared = describe_window(robot, cells, groups=groups)
+    assert ("groups.vib" in own_stacks) == (chunk_samples is not None), own_stacks
+    real_features = aggregation._type_features
+    monkeypatch.setattr(aggregation, "_type_features", lambda sigs, cell_type, stacked=None:
+                        real_features(sigs, cell_type))
+    alone = describe_window(robot, cells, groups=groups)
+    assert np.array_equal(shared.values, alone.values)
+    assert [bp.quality for bp in shared.body_parts] == [bp.quality for bp in alone.body_parts]
