@@ -863,28 +863,31 @@ def _extra_of(sig: CellSignals, cell_type: CellType, cid: int) -> np.ndarray:
 
 
 def _extras_of(sigs: list[CellSignals], cell_type: CellType, ids: list[int]) -> np.ndarray:
-    """The cells' extra channels stacked, shape (n_cells, n_extra, n_slow) (:func:`_extra_of` per cell).
-
-    Cells that all hold float64 arrays of the expected shape (a window cut
-    by the windower) are copied with one concatenation, without a Python
-    call per cell.
-    """
+    """The cells' extra channels stacked, shape (n_cells, n_extra, n_slow) (:func:`_extra_of` per cell)."""
     n_x, n_slow = len(cell_type.extra_channels), np.shape(sigs[0].deformation)[1]
-    arrays = [s.extra for s in sigs]
-    nd = np.ndarray
-    if all(a.__class__ is nd and a.dtype == np.float64 and a.shape == (n_x, n_slow) for a in arrays):
-        out = np.empty((len(arrays), n_x, n_slow))
-        if n_x:
-            np.concatenate(arrays, out=out.reshape(len(arrays) * n_x, n_slow))
-        return out
-    return _stack([_extra_of(s, cell_type, cid) for s, cid in zip(sigs, ids)])
+    out = _float64_stack([s.extra for s in sigs], (n_x, n_slow))
+    return out if out is not None else _stack([_extra_of(s, cell_type, cid) for s, cid in zip(sigs, ids)])
 
 
 def _tares_of(sigs: list[CellSignals], n_v: int, ids: list[int]) -> np.ndarray:
     """The cells' deformation tares stacked, shape (n_cells, n_v): zeros at once when no cell has one."""
-    if all(s.deformation_tare is None for s in sigs):
+    tares = [s.deformation_tare for s in sigs]
+    if all(t is None for t in tares):
         return np.zeros((len(sigs), n_v))
-    return _stack([_tare_of(s, n_v, cid) for s, cid in zip(sigs, ids)])
+    out = _float64_stack(tares, (n_v,))
+    return out if out is not None else _stack([_tare_of(s, n_v, cid) for s, cid in zip(sigs, ids)])
+
+
+def _float64_stack(arrays: list, shape: tuple[int, ...]) -> np.ndarray | None:
+    """The arrays stacked with one concatenation when all are float64 ndarrays of ``shape`` (a window cut by
+    the windower), else None (the caller then checks and converts cell by cell)."""
+    nd = np.ndarray
+    if not all(a.__class__ is nd and a.dtype == np.float64 and a.shape == shape for a in arrays):
+        return None
+    out = np.empty((len(arrays),) + shape)
+    if out.size:
+        np.concatenate(arrays, out=out.reshape((len(arrays) * shape[0],) + shape[1:]))
+    return out
 
 
 def _tare_of(sig: CellSignals, n_v: int, cid: int) -> np.ndarray:

@@ -213,7 +213,7 @@ def test_descriptor_is_finite_for_flat_and_nan_signals():
 
 
 def test_stacked_extras_and_tares_equal_the_per_cell_path_whatever_the_cells_hold():
-    """The levels group's inputs stacked at once (float64 extras, no tares) or cell by cell (anything else)."""
+    """The levels group's inputs stacked at once (float64 extras and tares, or none) or cell by cell (else)."""
     from tactile_descriptors_ros.core.aggregation import _extra_of, _extras_of, _tare_of, _tares_of
 
     nao = load_robot("nao")
@@ -228,7 +228,8 @@ def test_stacked_extras_and_tares_equal_the_per_cell_path_whatever_the_cells_hol
 
     floats = [cell(rng.normal(size=(n_x, n))) for _ in range(4)]
     mixed = [*floats[:2], cell(None), cell(rng.normal(size=(n_x, n)).astype(np.float32), np.full(n_v, 7.0))]
-    for sigs in (floats, mixed):
+    tared = [cell(rng.normal(size=(n_x, n)), rng.normal(size=n_v)) for _ in range(3)]
+    for sigs in (floats, mixed, tared):
         ids = list(range(len(sigs)))
         want_x = np.stack([_extra_of(s, ct, c) for s, c in zip(sigs, ids)])
         want_t = np.stack([_tare_of(s, n_v, c) for s, c in zip(sigs, ids)])
