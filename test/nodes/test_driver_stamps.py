@@ -25,9 +25,15 @@ def _stamp_ns(stamp) -> int:
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
-def _newest_sample_ns(msg) -> int:
-    offsets = msg.accel_offset_ns if hasattr(msg, "accel_offset_ns") else msg.pac_offset_ns
-    return _stamp_ns(msg.header.stamp) + int(max(offsets))
+#: every sample-time field of the two frames messages (a message may carry one modality only: seen once in
+#: CI on Jazzy, a skin message after the replug with force samples and no accelerometer sample)
+OFFSET_FIELDS = ("accel_offset_ns", "force_offset_ns", "pac_offset_ns", "frame_offset_ns")
+
+
+def _newest_sample_ns(msg) -> int | None:
+    """Stamp of the message's newest sample of any modality (None for a message without samples)."""
+    newest = [int(max(o)) for o in (getattr(msg, f, ()) for f in OFFSET_FIELDS) if len(o)]
+    return _stamp_ns(msg.header.stamp) + max(newest) if newest else None
 
 
 def _spin_for(ex, seconds: float) -> None:
@@ -90,7 +96,7 @@ def _driver(ros_context, kind: str):
     if kind == "skin":  # a read keeps the whole 0.6 s reconfigure backlog below (shedding: test_drain_frames)
         drv.max_read_frames = 1 << 20
     sink = rclpy.create_node("stamp_sink", context=ros_context)
-    got: list[tuple[int, int, int]] = []  # (receive host ns, header stamp ns, newest sample ns)
+    got: list[tuple[int, int, int | None]] = []  # (receive host ns, header stamp ns, newest sample ns)
 
     def on_msg(msg) -> None:
         got.append((time.time_ns(), _stamp_ns(msg.header.stamp), _newest_sample_ns(msg)))
@@ -124,9 +130,11 @@ def test_no_sample_is_stamped_after_its_message_arrived(ros_context, kind):
         assert spin_until(ex, lambda: len(got) >= after_reconfigure + 20, timeout_s=60.0)
     finally:
         drv.close()
-    arr = np.array(got, dtype=np.int64)
-    receive, header, newest = arr[:, 0], arr[:, 1], arr[:, 2]
-    assert np.all(newest <= receive), (receive - newest).min()
+    with_samples = np.array([(r, n) for r, _, n in got if n is not None], dtype=np.int64)
+    assert len(with_samples) >= 60, f"only {len(with_samples)} of {len(got)} messages carried samples"
+    assert np.all(with_samples[:, 1] <= with_samples[:, 0]), (with_samples[:, 0] - with_samples[:, 1]).min()
+    arr = np.array([(r, h) for r, h, _ in got], dtype=np.int64)
+    receive, header = arr[:, 0], arr[:, 1]
     delay_s = (receive - header) / 1e9
     assert np.all(delay_s > 0)
     # the reconfigure's backlog is stamped at its own times: its oldest message is about 0.6 s old
