@@ -332,6 +332,10 @@ def test_scene_end_is_announced_and_diagnostics_say_so(ros_context, tmp_path):
         drv.destroy_node()
 
 
+def _matched_text(count: int) -> str:
+    return "no publisher" if count == 0 else f"{count} publisher{'s' if count > 1 else ''} matched"
+
+
 def test_silent_after_is_set_at_run_time(ros_context):
     """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more;
     the status says whether a publisher is still matched (a stopped sender or a lost delivery) or none is."""
@@ -359,12 +363,17 @@ def test_silent_after_is_set_at_run_time(ros_context):
         assert "no frames from" not in status()
         r = w.set_parameters([Parameter("diagnostics.silent_after_s", value=0.1)])[0]
         assert r.successful, r.reason
-        assert spin_until(ex, lambda: "no frames from index (1 publisher matched)" in status(), 30)
+        assert spin_until(ex, lambda: "no frames from index (" in status(), 30)
+        # at least this test's publisher (the suite's other nodes share the domain: a node of an earlier test
+        # can still count until its participant's lease ends)
         values = {kv.key: kv.value for kv in w.diagnostics.statuses()[0].values}
-        assert values["index_publishers"] == "1" and float(values["index_silent_s"]) >= 0.1
-        # the publisher gone: the same silence now says that nothing publishes the topic
+        matched = int(values["index_publishers"])
+        assert matched >= 1 and float(values["index_silent_s"]) >= 0.1
+        assert f"no frames from index ({_matched_text(matched)})" in status()
+        # this publisher gone: the same silence counts one publisher less
         io.destroy_publisher(pub)
-        assert spin_until(ex, lambda: "no frames from index (no publisher)" in status(), 30)
+        assert spin_until(ex, lambda: f"no frames from index ({_matched_text(matched - 1)})" in status(), 30), \
+            status()
     finally:
         ex.shutdown()
         w.destroy_node()
