@@ -908,18 +908,20 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
     fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
     n_v = len(cell_type.deformation.channels)
     out: dict[str, list | np.ndarray] = {g: [None] * len(sigs) for g in groups}
-    batches: dict[tuple, list[int]] = {}
     shared = bool(stacked) and len(stacked["sigs"]) == len(sigs) and all(a is b for a, b in zip(stacked["sigs"], sigs))
+    batches: dict[tuple, list[int]] = {}
     if shared:  # the kernel stacked these cells, all of one shape
         batches[()] = list(range(len(sigs)))
-    for k, sig in enumerate(sigs if not shared else ()):
-        batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
+    else:
+        for k, sig in enumerate(sigs):
+            batches.setdefault((np.shape(sig.vibration), np.shape(sig.deformation)), []).append(k)
     for rows in batches.values():
+        row_sigs, row_ids = [sigs[k] for k in rows], [ids[k] for k in rows]
         if shared:
             vib, dfm = stacked["vibration"], stacked["deformation"]
         else:
-            vib = _stack([sigs[k].vibration for k in rows], "groups.vib")
-            dfm = _stack([sigs[k].deformation for k in rows], "groups.dfm")
+            vib = _stack([s.vibration for s in row_sigs], "groups.vib")
+            dfm = _stack([s.deformation for s in row_sigs], "groups.dfm")
         spectrum = None  # the vibration's power spectrum, shared by bands and statistics
         tares = extras = None  # the cells' tares and extra channels, stacked once for the groups that read them
         for g in groups:
@@ -934,12 +936,12 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
                     vals = statistics_values(vib, fs_s, dfm, fs_v, spectrum)
                 else:
                     if extras is None:
-                        extras = _extras_of([sigs[k] for k in rows], cell_type, [ids[k] for k in rows])
+                        extras = _extras_of(row_sigs, cell_type, row_ids)
                     if g == "plain":
                         vals = plain_values(vib, dfm, extras)
                     else:
                         if tares is None:
-                            tares = _tares_of([sigs[k] for k in rows], n_v, [ids[k] for k in rows])
+                            tares = _tares_of(row_sigs, n_v, row_ids)
                         vals = (rocket_values(cell_type, vib, dfm, tares, extras) if g == "rocket"
                                 else level_values(cell_type, g, dfm, tares, extras))
             if len(batches) == 1:  # one window shape (the common case): the rows are the cells, in order

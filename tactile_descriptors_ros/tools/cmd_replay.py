@@ -107,7 +107,6 @@ def run(args: argparse.Namespace) -> int:
     if args.info:
         _print_info(args.bag, args.json)
         return 0
-
     import rclpy
 
     from ..bags.replay import PlayOptions, play
