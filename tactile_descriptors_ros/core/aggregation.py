@@ -59,6 +59,7 @@ from .robot import BodyPart, Cell, RobotDescription
 
 __all__ = [
     "CellSignals",
+    "CellStacks",
     "CellFeatures",
     "BodyPartDescriptor",
     "RobotDescriptor",
@@ -126,6 +127,57 @@ class CellSignals:
     invalid_samples: int = 0
     extra: np.ndarray | None = None
     deformation_tare: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class CellStacks:
+    """Cells whose signals are the rows of shared arrays: row ``k`` of each array is ``cells[k]``'s.
+
+    The windower cuts a window so (:class:`.windowing.Window`'s ``stacks``,
+    when every cell of the robot is in it, clean, with as many samples as
+    the others); :func:`describe_window` then reads these arrays instead of
+    stacking the cells' arrays again.  It does so only for cells that are
+    these objects, in this order, each still holding the arrays it was made
+    with (:meth:`holds`): a mapping built otherwise is stacked as usual.
+
+    Attributes
+    ----------
+    cells : tuple of CellSignals
+        The cells, in the order of the arrays' rows.
+    vibration, deformation : numpy.ndarray, shape (n_cells, channels, samples)
+    vibration_t_ns, deformation_t_ns : numpy.ndarray of int64, shape (n_cells, samples)
+    force_n : numpy.ndarray, shape (n_cells, n_force)
+    extra : numpy.ndarray, shape (n_cells, n_extra, n_slow), optional
+    """
+
+    cells: tuple[CellSignals, ...]
+    vibration: np.ndarray
+    vibration_t_ns: np.ndarray
+    deformation: np.ndarray
+    deformation_t_ns: np.ndarray
+    force_n: np.ndarray
+    extra: np.ndarray | None = None
+    #: per cell, the arrays it was made with (identity, in the order of :data:`_STACKED_FIELDS`)
+    _arrays: tuple[tuple, ...] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_arrays", tuple(tuple(getattr(c, f) for f in _STACKED_FIELDS) for c in self.cells))
+
+    def holds(self, sigs: list[CellSignals], *fields: str) -> bool:
+        """Whether ``sigs`` are :attr:`cells` in order, each holding its rows of ``fields`` still."""
+        if len(sigs) != len(self.cells):
+            return False
+        at = [_STACKED_FIELDS.index(f) for f in fields]
+        for sig, own, arrays in zip(sigs, self.cells, self._arrays):
+            if sig is not own:
+                return False
+            for k in at:
+                if getattr(sig, _STACKED_FIELDS[k]) is not arrays[k]:
+                    return False
+        return True
+
+
+_STACKED_FIELDS = ("vibration", "vibration_t_ns", "deformation", "deformation_t_ns", "force_n", "extra")
 
 
 @dataclass
@@ -458,16 +510,20 @@ def _force_means(forces: list) -> np.ndarray:
         shapes = {np.shape(f) for f in forces}
     n = next(iter(shapes))
     if len(shapes) == 1 and len(n) == 1 and n[0]:
-        f2 = np.concatenate(forces).reshape(len(forces), n[0]).astype(np.float64, copy=False)
-        out = np.add.reduce(f2, axis=1)  # the sum of each row, as ndarray.mean takes it
-        out /= n[0]
-        # a finite sum means finite samples; the other rows (NaN or inf samples, or an overflowing
-        # sum) are taken one by one, as _mean_forces takes them
-        redo = np.flatnonzero(~np.isfinite(out))
-        if redo.size:
-            out[redo] = _mean_forces([f2[k] for k in redo.tolist()])
-        return out
+        return _row_means(np.concatenate(forces).reshape(len(forces), n[0]).astype(np.float64, copy=False))
     return _mean_forces(forces)
+
+
+def _row_means(f2: np.ndarray) -> np.ndarray:
+    """:func:`_mean_forces` of the rows of ``f2`` (n_cells, n >= 1), float64."""
+    out = np.add.reduce(f2, axis=1)  # the sum of each row, as ndarray.mean takes it
+    out /= f2.shape[1]
+    # a finite sum means finite samples; the other rows (NaN or inf samples, or an overflowing
+    # sum) are taken one by one, as _mean_forces takes them
+    redo = np.flatnonzero(~np.isfinite(out))
+    if redo.size:
+        out[redo] = _mean_forces([f2[k] for k in redo.tolist()])
+    return out
 
 
 def _segment_sums(y: np.ndarray, starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -576,7 +632,7 @@ def _reduce_parts(feats: CellFeatures, starts: np.ndarray, counts: np.ndarray, c
 def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...], cells: Mapping[int, CellSignals],
                    threshold_n: float, channels: str,
                    part_ids: tuple[tuple[int, ...], ...] | None = None,
-                   stacked: dict | None = None) -> list[BodyPartDescriptor]:
+                   stacked: dict | None = None, stacks: CellStacks | None = None) -> list[BodyPartDescriptor]:
     """The descriptors of every body part of one cell type: one kernel call for all their cells.
 
     Gate, saturation check and per-cell quantities run once on the cells in
@@ -587,6 +643,8 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     for exact moments take that path.  ``part_ids``: each body part's cell
     ids (from the robot's cached plan).  ``stacked``: filled as
     :func:`_type_features` says, for the groups computed after.
+    ``stacks``: the window's cells as rows of shared arrays, read instead of
+    stacking them where they are the cells described (:class:`CellStacks`).
     """
     labels = body_part_layout(cell_type, channels)
     red = _reduction(cell_type, channels)
@@ -621,7 +679,11 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
             quality |= _INVALID
         flags.append(quality)
         n_usable.append(n_valid)
-    means = _force_means([s.force_n for s in sigs])
+    if stacks is not None and stacks.force_n.shape[1] and stacks.force_n.dtype == np.float64 \
+            and stacks.holds(sigs, "force_n"):
+        means = _row_means(stacks.force_n)
+    else:
+        means = _force_means([s.force_n for s in sigs])
     gate = means >= threshold_n
     if gate.all():
         touching_sigs, touching_ids = sigs, usable_ids
@@ -644,7 +706,7 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
     if touching_sigs[0].vibration.shape[0] != red.n_s or touching_sigs[0].deformation.shape[0] != red.n_v:
         _check_channels(touching_sigs[:1], cell_type, touching_ids[:1])  # all have the first one's shape
     out: list[BodyPartDescriptor] = []
-    feats = _type_features(touching_sigs, cell_type, stacked)
+    feats = _type_features(touching_sigs, cell_type, stacked, stacks)
     if feats is None:
         # the kernel would take float paths whose rounding depends on the batch: keep the body-part batches
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
@@ -681,8 +743,8 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
 STACK_CHUNK_SAMPLES = 1 << 20
 
 
-def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict | None = None
-                   ) -> tuple[CellFeatures, np.ndarray] | None:
+def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict | None = None,
+                   stacks: CellStacks | None = None) -> tuple[CellFeatures, np.ndarray] | None:
     """Per-cell quantities and saturation of integer cells of one shape, in chunks of cells.
 
     Returns None when the data are too large for exact integer moments (the
@@ -692,7 +754,9 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict |
     When all cells fit one chunk and ``stacked`` is a dict, it receives
     ``sigs`` and that chunk's ``vibration`` and ``deformation`` stacks
     (valid until this function's next call), which the other feature
-    groups then read instead of stacking the same cells again.
+    groups then read instead of stacking the same cells again.  ``stacks``:
+    when the cells are its cells (:meth:`CellStacks.holds`), its arrays are
+    the stacks (no copy).
     """
     s0, v0 = sigs[0].vibration, sigs[0].deformation
     n_fast, n_slow = s0.shape[1], v0.shape[1]
@@ -702,15 +766,21 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict |
     step = max(1, STACK_CHUNK_SAMPLES // max(1, s0.size))
     parts: list[CellFeatures] = []
     saturated = np.zeros(len(sigs), dtype=bool)
+    own = step >= len(sigs) and stacks is not None and stacks.vibration.dtype == s0.dtype \
+        and stacks.deformation.dtype == v0.dtype and stacks.holds(sigs, *_STACKED_FIELDS[:4])
     for c0 in range(0, len(sigs), step):
         chunk = sigs[c0:c0 + step]
-        # np.stack, without its per-array expand_dims: the rows of all cells concatenated into the buffer
-        vib = scratch("agg.vib", (len(chunk),) + s0.shape, s0.dtype)
-        np.concatenate([s.vibration for s in chunk], out=vib.reshape(len(chunk) * s0.shape[0], n_fast))
-        dfm = scratch("agg.dfm", (len(chunk),) + v0.shape, v0.dtype)
-        np.concatenate([s.deformation for s in chunk], out=dfm.reshape(len(chunk) * v0.shape[0], n_slow))
-        ts = _shared_or_stacked([s.vibration_t_ns for s in chunk])
-        tv = _shared_or_stacked([s.deformation_t_ns for s in chunk])
+        if own:  # the window's own stacks (the cells are their rows)
+            vib, dfm = stacks.vibration, stacks.deformation
+            ts, tv = stacks.vibration_t_ns, stacks.deformation_t_ns
+        else:
+            # np.stack, without its per-array expand_dims: the rows of all cells concatenated into the buffer
+            vib = scratch("agg.vib", (len(chunk),) + s0.shape, s0.dtype)
+            np.concatenate([s.vibration for s in chunk], out=vib.reshape(len(chunk) * s0.shape[0], n_fast))
+            dfm = scratch("agg.dfm", (len(chunk),) + v0.shape, v0.dtype)
+            np.concatenate([s.deformation for s in chunk], out=dfm.reshape(len(chunk) * v0.shape[0], n_slow))
+            ts = _shared_or_stacked([s.vibration_t_ns for s in chunk])
+            tv = _shared_or_stacked([s.deformation_t_ns for s in chunk])
         fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
         # the compiled kernel computes exact quantities (batch-independent) and each cell's bounds in one pass
         if stacked is not None and step >= len(sigs):
@@ -900,10 +970,11 @@ def _tare_of(sig: CellSignals, n_v: int, cid: int) -> np.ndarray:
 
 
 def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals], ids: list[int],
-                stacked: dict | None = None) -> dict[str, np.ndarray]:
+                stacked: dict | None = None, stacks: CellStacks | None = None) -> dict[str, np.ndarray]:
     """Per-cell values of the non-kernel groups, cells of one window shape stacked and computed together.
 
-    ``stacked``: the kernel's stacks of these same cells (:func:`_type_features`), read as they are.
+    ``stacked``: the kernel's stacks of these same cells (:func:`_type_features`), read as they are;
+    ``stacks``: the window's (:class:`CellStacks`), whose extra channels are read when they are these cells'.
     """
     fs_s, fs_v = cell_type.vibration.rate_hz, cell_type.deformation.rate_hz
     n_v = len(cell_type.deformation.channels)
@@ -936,7 +1007,9 @@ def _group_rows(cell_type: CellType, groups: list[str], sigs: list[CellSignals],
                     vals = statistics_values(vib, fs_s, dfm, fs_v, spectrum)
                 else:
                     if extras is None:
-                        extras = _extras_of(row_sigs, cell_type, row_ids)
+                        extras = (stacks.extra if shared and stacks is not None and stacks.extra is not None
+                                  and stacks.extra.dtype == np.float64 and stacks.holds(row_sigs, "extra")
+                                  else _extras_of(row_sigs, cell_type, row_ids))
                     if g == "plain":
                         vals = plain_values(vib, dfm, extras)
                     else:
@@ -964,7 +1037,8 @@ def _cells_mean(rows: np.ndarray) -> tuple[np.ndarray, bool]:
 
 def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
                      cells: Mapping[int, CellSignals], threshold_n: float, groups: tuple[str, ...],
-                     part_ids: tuple[tuple[int, ...], ...]) -> list[BodyPartDescriptor]:
+                     part_ids: tuple[tuple[int, ...], ...], stacks: CellStacks | None = None
+                     ) -> list[BodyPartDescriptor]:
     """The body parts of one cell type described by a group selection (:mod:`.groups`, :mod:`.features`).
 
     The kernel groups (``paper``, ``per_channel``) come from
@@ -977,7 +1051,7 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
     labels = selection_labels(cell_type, groups)
     modes = [KERNEL_GROUPS[g] for g in groups if g in KERNEL_GROUPS] or ["averaged"]
     stacked: dict = {}  # the last kernel call's stacks of the cells in contact, for the other groups
-    base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids, stacked) for m in modes}
+    base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids, stacked, stacks) for m in modes}
     first = base[modes[0]]
     if len(groups) == 1 and groups[0] in KERNEL_GROUPS:  # one kernel group: the kernel's values as they are
         return [BodyPartDescriptor(bp.name, bp.cell_type, bp.values, labels, bp.contact, bp.cells_in_contact,
@@ -988,7 +1062,7 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
     if others and any(bp.contact for bp in first):
         touching = _touching(part_ids, cells, threshold_n)
         ids = [cid for t in touching for cid in t]
-        rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids, stacked)
+        rows = _group_rows(cell_type, others, [cells[cid] for cid in ids], ids, stacked, stacks)
         for p, t in enumerate(touching):
             if len(t) != first[p].cells_in_contact:
                 raise SignalError(f"body part {first[p].name}: contact gate disagreement ({len(t)} vs "
@@ -1030,7 +1104,7 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
 def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *,
                     layout: str | None = None, channels: str | None = None,
                     groups: tuple[str, ...] | None = None,
-                    force_threshold_n: float | None = None) -> RobotDescriptor:
+                    force_threshold_n: float | None = None, stacks: CellStacks | None = None) -> RobotDescriptor:
     """Compute the robot's descriptor of one window.
 
     Parameters
@@ -1051,6 +1125,10 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         description's ``descriptor.groups``.
     force_threshold_n : float, optional
         F_t; defaults to the robot description's contact threshold.
+    stacks : CellStacks, optional
+        The window's cells as rows of shared arrays (a window the windower
+        cut, :class:`.windowing.Window`): read instead of stacking the cells
+        again where they are the cells described; the values are the same.
 
     Returns
     -------
@@ -1078,7 +1156,7 @@ def describe_window(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     by_pos: dict[int, BodyPartDescriptor] = {}
     for (cell_type, parts_of_type), part_ids in zip(plan.types, plan.part_ids):
         check_groups(cell_type, groups)
-        descs = _describe_groups(cell_type, parts_of_type, cells, threshold, groups, part_ids)
+        descs = _describe_groups(cell_type, parts_of_type, cells, threshold, groups, part_ids, stacks)
         by_pos.update(zip((pos for pos, _ in parts_of_type), descs))
     parts = tuple(by_pos[pos] for pos in range(len(robot.body_parts)))
     if layout == "concat":

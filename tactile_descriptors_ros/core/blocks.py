@@ -52,6 +52,7 @@ from ..errors import ConfigError
 from .aggregation import (
     BodyPartDescriptor,
     CellSignals,
+    CellStacks,
     RobotDescriptor,
     describe_window,
     pool_body_parts,
@@ -247,8 +248,8 @@ def block_robot(robot: RobotDescription, n_blocks: int) -> tuple[RobotDescriptio
 
 def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *, block_s: float,
                     block_hop_s: float, layout: str | None = None, channels: str | None = None,
-                    groups: tuple[str, ...] | None = None, force_threshold_n: float | None = None
-                    ) -> RobotDescriptor:
+                    groups: tuple[str, ...] | None = None, force_threshold_n: float | None = None,
+                    stacks: CellStacks | None = None) -> RobotDescriptor:
     """The robot's descriptor of one window as the mean over its blocks (block averaging).
 
     Parameters
@@ -259,6 +260,9 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
         Block length in seconds; 0 describes the whole window at once.
     block_hop_s : float
         Largest step between consecutive blocks, ``0 < block_hop_s <= block_s``.
+    stacks : CellStacks, optional
+        The window's cells as rows of shared arrays (:class:`.windowing.Window`),
+        for :func:`~.aggregation.describe_window` when the window is one block.
 
     Returns
     -------
@@ -274,7 +278,7 @@ def describe_blocks(robot: RobotDescription, cells: Mapping[int, CellSignals], *
     pieces = split_cells(cells, block_s, block_hop_s)
     kw = {"channels": channels, "groups": groups, "force_threshold_n": force_threshold_n}
     if len(pieces) == 1:
-        desc = describe_window(robot, pieces[0], layout=layout, **kw)
+        desc = describe_window(robot, pieces[0], layout=layout, stacks=stacks, **kw)
         desc.extra["blocks"] = 1
         return desc
     layout = layout or robot.descriptor.layout

@@ -343,8 +343,8 @@ def warm_up() -> dict:
                         np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1)), np.zeros(1, dtype=np.int64),
                         np.ones(1, dtype=np.int64), 1, np.zeros(1))
     i64 = np.zeros(1, dtype=np.int64)
-    kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, i64.copy(),
-                    i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
+    kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, 2,
+                    i64.copy(), i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
     for dtype in (np.int32, np.int64, np.float64):
         kernel.append_runs(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1), dtype=dtype),
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),

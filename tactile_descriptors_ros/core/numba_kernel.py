@@ -899,7 +899,7 @@ def _left_of(t, a, b, value):  # pragma: no cover - compiled
 
 
 @_jit
-def cut_rows(t_buf, ok_buf, lo, hi, start, end, first, stop, n_bad, widest):  # pragma: no cover - compiled
+def cut_rows(t_buf, ok_buf, lo, hi, start, end, scan, first, stop, n_bad, widest):  # pragma: no cover - compiled
     """Each row's samples with ``start <= t < end``: where they are, how many are invalid, the widest step.
 
     The compiled form of the cut that :meth:`.windowing.Windower._make_window`
@@ -909,13 +909,26 @@ def cut_rows(t_buf, ok_buf, lo, hi, start, end, first, stop, n_bad, widest):  # 
     left of ``start`` and of ``end``), ``n_bad[r]`` how many of them are not
     valid, and ``widest[r]`` the longest step between the window's valid
     samples with ``start`` and ``end`` as the outer edges (``end - start``
-    when none is valid).
+    when none is valid).  ``scan`` says what is looked at beyond the
+    positions: 2 both, 1 the invalid samples only (``widest`` is 0), 0
+    nothing (``n_bad`` and ``widest`` are 0): a row's samples are read only
+    where the caller uses what they give.
     """
     for r in range(lo.shape[0]):
         i = _left_of(t_buf[r], lo[r], hi[r], start)
         a = _left_of(t_buf[r], i, hi[r], end)
         first[r] = i
         stop[r] = a
+        n_bad[r] = 0
+        widest[r] = 0
+        if scan == 1:
+            bad = 0
+            for k in range(i, a):
+                bad += 1 - np.int64(ok_buf[r, k])
+            n_bad[r] = bad
+            continue
+        if scan != 2:
+            continue
         bad = 0
         prev = start
         step = 0

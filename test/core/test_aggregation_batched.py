@@ -214,7 +214,7 @@ def test_feature_groups_on_the_kernels_stacks_equal_their_own_stacking(monkeypat
     shared = describe_window(robot, cells, groups=groups)
     assert ("groups.vib" in own_stacks) == (chunk_samples is not None), own_stacks
     real_features = aggregation._type_features
-    monkeypatch.setattr(aggregation, "_type_features", lambda sigs, cell_type, stacked=None:
+    monkeypatch.setattr(aggregation, "_type_features", lambda sigs, cell_type, stacked=None, stacks=None:
                         real_features(sigs, cell_type))
     alone = describe_window(robot, cells, groups=groups)
     assert np.array_equal(shared.values, alone.values)
