@@ -40,6 +40,7 @@ __all__ = [
     "default_executor",
     "events_resume_coroutines",
     "take_waiting",
+    "keep_freed_memory",
 ]
 
 #: A stamp further than this from the host clock [ms] is not on it (``stamp_source: device``: a simulator's
@@ -205,6 +206,47 @@ class Diagnostics:
         arr.status = self.statuses()
         self.last = arr.status
         self._pub.publish(arr)
+
+
+#: Environment variables by which a user sets glibc's allocator thresholds: :func:`keep_freed_memory` then
+#: leaves them as set.
+MALLOC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_", "GLIBC_TUNABLES")
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt(3) parameters (malloc.h)
+
+
+def keep_freed_memory(mmap_threshold_bytes: int = 32 << 20, trim_threshold_bytes: int = 128 << 20) -> bool:
+    """Let glibc's allocator keep freed memory for the next allocations of the process (``mallopt(3)``).
+
+    A window node allocates a window's arrays (about 7 MB for the NAO's 116
+    cells) and frees them once the descriptor is out.  glibc serves blocks
+    above a threshold (128 kB, raised up to the largest block freed) with
+    ``mmap`` and gives freed memory at the top of the heap back to the system
+    above another (twice the first): every window then asks the kernel for
+    fresh pages and touches each one (a page fault per 4 kB, about 1,700 a
+    NAO window when nothing else is allocated between two windows).  Fixed
+    thresholds (allocations up to ``mmap_threshold_bytes`` from the heap,
+    freed memory kept up to ``trim_threshold_bytes``) reuse the same pages;
+    the process keeps up to that much memory it freed.  Nothing is changed
+    when one of :data:`MALLOC_ENV` is set (the user's thresholds stand) or
+    where the C library has no ``mallopt`` (not glibc).
+
+    Returns
+    -------
+    bool
+        Whether both thresholds were set.
+    """
+    if any(os.environ.get(name) for name in MALLOC_ENV):
+        return False
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt.restype = ctypes.c_int
+    return bool(mallopt(_M_MMAP_THRESHOLD, int(mmap_threshold_bytes))) \
+        and bool(mallopt(_M_TRIM_THRESHOLD, int(trim_threshold_bytes)))
 
 
 def _process_status() -> Status:

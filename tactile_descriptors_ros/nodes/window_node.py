@@ -60,7 +60,16 @@ from ..core.windowing import CellChunk, PartChunk, Window, Windower
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
-from .common import Diagnostics, RateMeter, Status, host_age_ms, run_node, steady_clock, take_waiting
+from .common import (
+    Diagnostics,
+    RateMeter,
+    Status,
+    host_age_ms,
+    keep_freed_memory,
+    run_node,
+    steady_clock,
+    take_waiting,
+)
 from .conversions import (
     biotac_msg_to_chunk,
     descriptor_layout_to_msg,
@@ -414,7 +423,8 @@ class WindowNode(Node):
         started = time.perf_counter()
         try:
             desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
-                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n)
+                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n,
+                                   stacks=window.stacks)
         except SignalError as exc:
             self.faults["describe_failed"] += 1
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
@@ -514,7 +524,12 @@ def _as_array(values, dtype) -> np.ndarray:
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Entry point of the ``window_node`` executable."""
+    """Entry point of the ``window_node`` executable.
+
+    The process's allocator keeps the memory of a window it freed for the next one
+    (:func:`~.common.keep_freed_memory`): without, every window's arrays came from fresh pages, which took
+    the cut 9 ms in the node instead of 5 (``tactile bench --latency``, the NAO)."""
+    keep_freed_memory()
     return run_node(WindowNode, args)
 
 
