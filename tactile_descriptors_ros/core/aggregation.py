@@ -60,6 +60,7 @@ from .robot import BodyPart, Cell, RobotDescription
 __all__ = [
     "CellSignals",
     "CellStacks",
+    "stack_cells",
     "CellFeatures",
     "BodyPartDescriptor",
     "RobotDescriptor",
@@ -178,6 +179,44 @@ class CellStacks:
 
 
 _STACKED_FIELDS = ("vibration", "vibration_t_ns", "deformation", "deformation_t_ns", "force_n", "extra")
+
+
+def stack_cells(robot: RobotDescription, cells: Mapping[int, CellSignals]
+                ) -> tuple[dict[int, CellSignals], CellStacks] | None:
+    """Copies of a window's cells laid out as the windower cuts a clean window: rows of one :class:`CellStacks`.
+
+    For describing offline windows the way the window node describes its own
+    (``describe_window(robot, copies, stacks=stacks)``; the same values as
+    describing ``cells``).  Rows in the robot's order of body parts and cells.
+
+    Returns
+    -------
+    tuple of (dict, CellStacks) or None
+        None when the windower would not stack them either: a cell of the
+        robot missing, several cell types, or arrays of different shapes or
+        dtypes.
+    """
+    if len({p.cell_type for p in robot.body_parts}) != 1:
+        return None
+    ids = [c.id for p in robot.body_parts for c in p.cells]
+    if not ids or any(cid not in cells for cid in ids):
+        return None
+    sigs = [cells[cid] for cid in ids]
+    arrays = {}
+    for name in _STACKED_FIELDS:
+        values = [getattr(s, name) for s in sigs]
+        if name == "extra" and all(v is None for v in values):
+            arrays[name] = None
+            continue
+        if any(not isinstance(v, np.ndarray) for v in values) or len({(v.shape, v.dtype) for v in values}) != 1:
+            return None
+        arrays[name] = np.stack(values)
+    copies = {}
+    for k, (cid, sig) in enumerate(zip(ids, sigs)):
+        copies[cid] = CellSignals(*(arrays[name][k] if arrays[name] is not None else None for name in _STACKED_FIELDS[:5]),
+                                  sig.valid, sig.gap, sig.invalid_samples,
+                                  arrays["extra"][k] if arrays["extra"] is not None else None, sig.deformation_tare)
+    return copies, CellStacks(tuple(copies[cid] for cid in ids), *(arrays[name] for name in _STACKED_FIELDS))
 
 
 @dataclass

@@ -110,7 +110,8 @@ def batches(draw):
 @st.composite
 def integer_batches(draw):
     """Integer windows: regular runs of 1-30 fast samples per slow sample, or
-    irregular stamps; V starting before, with or after S; shared or own time bases."""
+    irregular stamps; V starting before, with or after S; shared or own time bases (also a cell with slow
+    stamps of its own beside the others' fast stamps)."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     n_cells, n_s, n_v = draw(st.integers(1, 5)), draw(st.integers(1, 3)), draw(st.integers(1, 4))
     ratio = draw(st.integers(1, 30))
@@ -128,6 +129,8 @@ def integer_batches(draw):
         return np.ascontiguousarray(tf, dtype=np.int64), np.ascontiguousarray(tsl, dtype=np.int64)
 
     ts, tv = times()
+    if rows > 1 and draw(st.booleans()):  # a cell on the others' fast stamps but slow stamps of its own
+        tv[-1] += draw(st.integers(1, 10 * ratio - 1))
     hi = draw(st.sampled_from([1, 3, 40, 511, 4095]))
     lo = draw(st.sampled_from([0, -hi]))
     dtype = draw(st.sampled_from([np.int16, np.int32, np.int64, np.uint16] if lo == 0 else

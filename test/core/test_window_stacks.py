@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from tactile_descriptors_ros.core import fast, windowing
-from tactile_descriptors_ros.core.aggregation import describe_window
+from tactile_descriptors_ros.core.aggregation import describe_window, stack_cells
 from tactile_descriptors_ros.core.blocks import describe_blocks
 from tactile_descriptors_ros.core.robot import load_robot
 from tactile_descriptors_ros.core.windowing import PartChunk, Windower
@@ -175,3 +175,25 @@ def test_cells_out_of_contact_or_replaced_after_the_cut_are_described_from_their
         got = describe_window(ROBOT, window.cells, groups=groups, stacks=window.stacks)
         assert _same_descriptors(got, expected), name
     assert not window.stacks.holds(list(window.stacks.cells), "vibration")
+
+
+def test_stack_cells_lays_out_an_offline_window_as_the_windower_does():
+    """``stack_cells``: copies of a window's cells as rows of one set of stacks, described to the same bits;
+    None where the windower would not stack them either."""
+    window = _windows(_chunks(30, 7, first="right_hand"))[0]
+    cells = {cid: dataclasses.replace(c) for cid, c in window.cells.items()}  # not the windower's stacks
+    copies, stacks = stack_cells(ROBOT, cells)
+    assert [c for c in copies] == [cid for ids in PARTS.values() for cid in ids]
+    assert stacks.holds([copies[cid] for cid in copies], "vibration", "vibration_t_ns", "deformation",
+                        "deformation_t_ns", "force_n", "extra")
+    assert not any(np.shares_memory(copies[cid].vibration, cells[cid].vibration) for cid in cells)
+    for groups in SELECTIONS:
+        assert _same_descriptors(describe_window(ROBOT, copies, groups=groups, stacks=stacks),
+                                 describe_window(ROBOT, cells, groups=groups))
+    one = next(iter(cells))
+    assert stack_cells(ROBOT, {cid: c for cid, c in cells.items() if cid != one}) is None  # a cell missing
+    short = dict(cells)
+    short[one] = dataclasses.replace(cells[one], vibration=cells[one].vibration[:, 1:],
+                                     vibration_t_ns=cells[one].vibration_t_ns[1:])
+    assert stack_cells(ROBOT, short) is None  # one cell shorter than the others
+    assert stack_cells(NAO, cells) is None  # not every cell of that robot

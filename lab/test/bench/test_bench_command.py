@@ -58,6 +58,9 @@ def test_bench_command_json_smoke(capsys):
     assert targets["shadow_hand_time"]["met"] == (report["cases"][0]["package"]["cpu_ms"] <= 0.3)
     assert targets["nao_time"]["met"] == (report["cases"][1]["package"]["cpu_ms"] <= 2.0)
     assert targets["nao_speedup"]["speedup_cpu"] == pytest.approx(report["cases"][1]["speedup_cpu"])
+    # the same windows described as the window node describes its own (from the window's stacks), beside
+    for key, case in (("shadow_hand_time", report["cases"][0]), ("nao_time", report["cases"][1])):
+        assert case["package_node"]["cpu_ms"] > 0 and targets[key]["node_path_cpu_ms"] == case["package_node"]["cpu_ms"]
     assert targets["skin_10000_time"]["met"] is None and targets["latency"]["met"] is None  # not measured
     assert targets["latency_exploration"]["met"] is None and targets["latency_design_wait"]["met"] is None
     assert targets["skin_10000_graph"]["met"] is None  # measured by tactile bench --scale-graph
