@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import itertools
 import json
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -174,8 +175,11 @@ def fit_dilations(n_samples: int, n_features: int, max_dilations_per_kernel: int
     true_max = min(per_kernel, max_dilations_per_kernel)
     multiplier = per_kernel / true_max
     max_exponent = np.log2((n_samples - 1) / (9 - 1))
-    dilations, counts = np.unique(np.logspace(0, max_exponent, true_max, base=2).astype(np.int32),
-                                  return_counts=True)
+    # 2^e by the C library's pow, one value at a time, floored 1e-9 above: numpy's vectorised power rounds
+    # the last bit by the CPU's instruction set, and where 2^e is an integer (e = log2 of an integer) one
+    # machine floored 11.999999999999998 to 11 where another got 12 (aeon's reference was taken on the first)
+    powers = np.array([math.pow(2.0, float(e)) for e in np.linspace(0.0, max_exponent, true_max)])
+    dilations, counts = np.unique(np.floor(powers + 1e-9).astype(np.int32), return_counts=True)
     counts = (counts * multiplier).astype(np.int32)
     remainder = per_kernel - int(counts.sum())
     i = 0
