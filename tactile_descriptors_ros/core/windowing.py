@@ -1507,7 +1507,7 @@ class Windower:
         else:
             for part, vc, dc, fc, xc, held, clean, aligned in cuts:
                 if aligned:  # every cell clean, its window at the same positions as the others' (the common case)
-                    self._gather_part(made, part, vc, dc, fc, xc)
+                    self._stack_parts(made, [(part, vc, dc, fc, xc)])
                 else:
                     self._cut_part(made, part, start, end, vc, dc, fc, xc, held, clean)
         for cid in self._cells:  # the cells in the order they first sent, as the per-cell path gives them
@@ -1518,7 +1518,7 @@ class Windower:
     def _stack_order(self, cuts: list) -> list | None:
         """The cuts of :meth:`_make_window` in the robot's order of body parts when the window can be one set of
         stacks: every body part of the robot in it, of one cell type, and every cell with as many samples of
-        each stream as the others (:meth:`_stack_parts`); else None."""
+        each stream as the others; else None."""
         if len(cuts) != len(self.robot.body_parts) or len({p.cell_type for p in self.robot.body_parts}) != 1:
             return None
         by_name = dict(zip(self._parts, cuts))  # the body parts' names, in the order of ``cuts``
@@ -1535,8 +1535,11 @@ class Windower:
         return order
 
     def _stack_parts(self, made: dict[int, CellSignals], order: list) -> CellStacks:
-        """:meth:`_gather_part` of every body part (``order``, :meth:`_stack_order`) into one set of arrays for
-        the whole window, each cell's arrays views of its row: the window's :class:`~.aggregation.CellStacks`."""
+        """The body parts of ``order`` (:meth:`_make_window`'s cuts, each part's cells clean and at the same
+        positions of its buffers, :func:`_aligned`; several parts: :meth:`_stack_order`) copied into one set of
+        arrays, one copy per buffer and stream instead of one per cell, each cell's arrays views of its row;
+        the same values, dtypes and C-contiguous layouts as the cell-by-cell copies.  Returns the
+        :class:`~.aggregation.CellStacks` of those arrays."""
         n = sum(len(c[0].cell_ids) for c in order)
         p0, vc0, dc0, fc0, xc0 = order[0][:5]
         nv, nd, nf = (int(x[1, 0] - x[0, 0]) for x in (vc0, dc0, fc0))
@@ -1594,27 +1597,6 @@ class Windower:
             made[cid] = CellSignals(vib.v[:, r, i:j].copy(), vib.t[r, i:j].copy(), dfm.v[:, r, a:b].copy(),
                                     dfm.t[r, a:b].copy(), part.force.v[0, r, f0[r]:f1[r]].copy(), True, gap, 0,
                                     x, st.tare)
-
-    def _gather_part(self, made: dict[int, CellSignals], part: _Part, vc: np.ndarray, dc: np.ndarray,
-                     fc: np.ndarray, xc: np.ndarray | None) -> None:
-        """:meth:`_cut_part` of a body part whose cells are all clean and hold their window at the same
-        positions of its buffers (:func:`_aligned`): each buffer's window copied for every cell at once,
-        each cell's arrays views of that copy.
-
-        The same values, dtypes and C-contiguous layouts as the cell-by-cell copies; a copy per buffer
-        and stream instead of one per cell (17 cells: 6 copies instead of 102)."""
-        vib_t, vib_v = _rows_window(part.vib, vc)
-        dfm_t, dfm_v = _rows_window(part.dfm, dc)
-        force = _rows_window(part.force, fc, stamps=False)[1]
-        extra = _rows_window(part.extra, xc, stamps=False)[1] if xc is not None else None
-        gaps = (vc[3] > self._gap_limit_ns(part.cell_ids[0])).tolist()
-        cells = self._cells
-        for r, cid in enumerate(part.cell_ids):
-            gap = gaps[r]
-            if gap:
-                self.faults["gap"] += 1
-            made[cid] = CellSignals(vib_v[r], vib_t[r], dfm_v[r], dfm_t[r], force[r, 0], True, gap, 0,
-                                    extra[r] if extra is not None else None, cells[cid].tare)
 
     def _cell_window(self, cid: int, st: _CellState, start: int, end: int) -> CellSignals | None:
         """One cell's samples in ``[start, end)``, invalid ones removed; None if it has no valid vibration sample."""
@@ -1723,14 +1705,6 @@ def _aligned(*cuts: np.ndarray | None) -> bool:
         if c is not None and c.shape[1] and not ((c[0] == c[0, 0]).all() and (c[1] == c[1, 0]).all()):
             return False
     return True
-
-
-def _rows_window(buf: _RowBuffer, cut: np.ndarray, stamps: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
-    """The samples at positions ``cut[0, 0]:cut[1, 0]`` of every row of ``buf`` (:func:`_aligned`): stamps
-    (rows, n), unless ``stamps`` is false, and values (rows, channels, n), C-contiguous copies."""
-    i, j = int(cut[0, 0]), int(cut[1, 0])
-    t = buf.t[:, i:j].copy() if stamps else None
-    return t, buf.v[:, :, i:j].transpose(1, 0, 2).copy()
 
 
 def _intake_kernel():
