@@ -8,13 +8,14 @@ is still there :data:`STOP_S` later.
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["ROS2", "STOP_S", "CliRun", "finish", "run_ros2"]
+__all__ = ["ROS2", "STOP_S", "CliRun", "finish", "run_ros2", "without_launchs_ignored_interrupt"]
 
 #: The venv's ``ros2`` (the real CLI, built from upstream sources by the Makefile).
 ROS2 = Path(sys.prefix) / "bin" / "ros2"
@@ -62,3 +63,20 @@ def run_ros2(*args: str, env: dict[str, str], timeout_s: float) -> CliRun:
     """Run ``ros2 ARGS`` for at most ``timeout_s`` (then Ctrl-C, see :func:`finish`)."""
     proc = subprocess.Popen([str(ROS2), *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     return finish(proc, timeout_s)
+
+
+#: ``ros2 launch`` takes Ctrl-C as a ``KeyboardInterrupt`` that its run loop catches and ignores (its own
+#: handler then stops the nodes).  When the signal lands while Python runs a callback it cannot raise
+#: from (a weak reference's, during garbage collection), Python prints the interrupt as "Exception
+#: ignored in: ..." with its traceback and goes on; the launch then stops as always.  Such a block is
+#: the launch process's own: it is not prefixed with a node's ``[name-N]`` as everything a node prints
+#: is, and its exception is ``KeyboardInterrupt`` and nothing else.
+_LAUNCHS_IGNORED_INTERRUPT = re.compile(
+    r"^Exception ignored in: [^\n]*\nTraceback \(most recent call last\):\n(?:(?: [^\n]*)?\n)*?KeyboardInterrupt: ?\n",
+    re.M)
+
+
+def without_launchs_ignored_interrupt(text: str) -> str:
+    """``ros2 launch``'s output without the launch process's own ignored ``KeyboardInterrupt`` after a Ctrl-C
+    (:data:`_LAUNCHS_IGNORED_INTERRUPT`): what is left shows every traceback a node printed."""
+    return _LAUNCHS_IGNORED_INTERRUPT.sub("", text)
