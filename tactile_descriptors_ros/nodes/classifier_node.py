@@ -65,7 +65,7 @@ from ..core.robot import load_robot
 from ..errors import ModelError, SignalError
 from ..params.classifier_node import CLASSIFIER_NODE
 from ..topics import DESCRIPTOR_TOPIC, LABEL_TOPIC, PREDICTION_TOPIC, layout_topic
-from .common import Diagnostics, Status, run_node
+from .common import Diagnostics, Status, StopsQuietly, run_node
 from .conversions import DescriptorLayouts, DescriptorSample, descriptor_from_msg, prediction_to_msg, stamp_to_ns
 from .parameters import NodeParameters
 from .qos import qos_of
@@ -115,7 +115,7 @@ def layout_mismatch(sample: DescriptorSample, model_labels: Sequence[str], advic
             f"values){'; ' + advice if advice else ''}")
 
 
-class ClassifierNode(Node):
+class ClassifierNode(StopsQuietly, Node):
     """The classifier node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
 
     #: ``~/label`` is a coroutine that awaits the learning (:func:`~.common.spin` refuses an executor that

@@ -41,6 +41,8 @@ __all__ = [
     "events_resume_coroutines",
     "take_waiting",
     "keep_freed_memory",
+    "StopsQuietly",
+    "quiet_after_shutdown",
 ]
 
 #: A stamp further than this from the host clock [ms] is not on it (``stamp_source: device``: a simulator's
@@ -55,6 +57,45 @@ def host_age_ms(now_ns: int, stamp_ns: int) -> float | None:
     return age_ms if abs(age_ms) < HOST_TIME_LIMIT_MS else None
 
 _LEVELS = {"ok": 0, "warn": 1, "error": 2, "stale": 3}
+
+
+def quiet_after_shutdown(context: Any, callback: Callable) -> Callable:
+    """``callback``, made to return quietly when it fails because ``context`` was shut down under it.
+
+    Ctrl-C shuts a node's context down from rclpy's signal thread, so a callback running at that moment
+    fails in its next ``publish`` ("publisher's context is invalid").  The node is stopping cleanly
+    (:func:`run_node` treats it so), but the events executor first logs the exception as fatal with where
+    it was raised, a stack in the terminal of a user who pressed Ctrl-C.  Failures while the context is
+    still valid are raised as before.  Coroutine functions are returned unchanged (the executor awaits them).
+    """
+    import inspect
+
+    if inspect.iscoroutinefunction(callback):
+        return callback
+
+    @functools.wraps(callback)
+    def call(*args: Any) -> Any:
+        try:
+            return callback(*args)
+        except Exception:
+            if context.ok():
+                raise
+            return None  # the node is stopping: the executor looks at the context and returns
+
+    return call
+
+
+class StopsQuietly:
+    """A node mixin (before ``Node`` or ``LifecycleNode`` in the bases) whose subscription and timer
+    callbacks end quietly when Ctrl-C shuts the context down under them (:func:`quiet_after_shutdown`)."""
+
+    def create_subscription(self, msg_type: Any, topic: str, callback: Callable, *args: Any, **kwargs: Any) -> Any:
+        return super().create_subscription(msg_type, topic, quiet_after_shutdown(self.context, callback),  # type: ignore[misc]
+                                           *args, **kwargs)
+
+    def create_timer(self, timer_period_sec: float, callback: Callable, *args: Any, **kwargs: Any) -> Any:
+        return super().create_timer(timer_period_sec, quiet_after_shutdown(self.context, callback),  # type: ignore[misc]
+                                    *args, **kwargs)
 
 
 def take_waiting(subs: Sequence[Any], handlers: dict[Any, Callable], budget: int) -> list[tuple[object, Callable]]:

@@ -57,7 +57,7 @@ from ..topics import (
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import Diagnostics, Status, host_age_ms, run_node, steady_clock, take_waiting
+from .common import Diagnostics, Status, StopsQuietly, host_age_ms, run_node, steady_clock, take_waiting
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .parameters import NodeParameters
@@ -87,7 +87,7 @@ class _Part:
     image_rgb: np.ndarray | None = None  # the taxel colours of the last image published
 
 
-class ContactNode(Node):
+class ContactNode(StopsQuietly, Node):
     """The contact node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
 
     def __init__(self, node_name: str = "contact_node", **kwargs) -> None:

@@ -40,7 +40,7 @@ from ..errors import ConfigError, TactileError, TransportError
 from ..params.schema import NodeSchema
 from ..streams.link import DeviceLink
 from ..transports import create_transport
-from .common import Diagnostics, Status
+from .common import Diagnostics, Status, StopsQuietly
 from .conversions import message_kind
 from .parameters import NodeParameters
 from .qos import qos_of
@@ -51,7 +51,7 @@ __all__ = ["DriverBase", "READ_GAP_LONG_S"]
 READ_GAP_LONG_S = 0.1
 
 
-class DriverBase(LifecycleNode):
+class DriverBase(StopsQuietly, LifecycleNode):
     """Base of the device drivers; ``kwargs`` go to :class:`rclpy.lifecycle.LifecycleNode`.
 
     Parameters

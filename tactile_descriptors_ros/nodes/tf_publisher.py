@@ -22,7 +22,7 @@ from ..core.robot import load_robot
 from ..errors import ConfigError
 from ..params.tf_publisher import TF_PUBLISHER
 from ..topics import TF_STATIC_TOPIC
-from .common import Diagnostics, Status, run_node
+from .common import Diagnostics, Status, StopsQuietly, run_node
 from .contact_msgs import frames_to_tf_message
 from .parameters import NodeParameters
 
@@ -37,7 +37,7 @@ def static_tf_qos():
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-class TfPublisher(Node):
+class TfPublisher(StopsQuietly, Node):
     """Publish the robot's static TF tree; ``kwargs`` go to :class:`rclpy.node.Node`."""
 
     def __init__(self, node_name: str = "tf_publisher", **kwargs) -> None:

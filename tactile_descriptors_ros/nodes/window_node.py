@@ -64,6 +64,7 @@ from .common import (
     Diagnostics,
     RateMeter,
     Status,
+    StopsQuietly,
     host_age_ms,
     keep_freed_memory,
     run_node,
@@ -85,7 +86,7 @@ __all__ = ["WindowNode", "main"]
 
 
 
-class WindowNode(Node):
+class WindowNode(StopsQuietly, Node):
     """The window node; ``kwargs`` go to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``)."""
 
     def __init__(self, node_name: str = "window_node", **kwargs) -> None:

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 from stacks import native_stacks
 
+from tactile_descriptors_ros.nodes.common import EXECUTOR_ENV, EXECUTORS
+
 pytestmark = pytest.mark.ros
 
 HERE = Path(__file__).parent
@@ -91,6 +93,21 @@ def test_ctrl_c_while_the_node_module_imports_ends_the_process_cleanly_without_s
     err = _signal_when_ready(proc, "importing", signal.SIGINT)
     assert proc.returncode == 0, err
     assert "KeyboardInterrupt" not in err and "Traceback" not in err and "main ran" not in err, err
+
+
+@pytest.mark.parametrize("kind", EXECUTORS)
+def test_ctrl_c_while_a_callback_publishes_ends_the_node_quietly(kind):
+    """Ctrl-C shuts the context down while a callback is about to publish: the publish fails, and the node
+    ends with code 0 and ``close()`` run, with no fatal line and no stack (the events executor logs a
+    callback's exception as fatal with where it was raised unless the node stops quietly)."""
+    env = {**os.environ, EXECUTOR_ENV: kind}
+    proc = subprocess.Popen([sys.executable, str(HERE / "publish_probe.py")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    err = _signal_when_ready(proc, "in callback", signal.SIGINT)
+    assert proc.returncode == 0, err
+    assert "publish failed" in err, err  # the callback did fail under the shut-down context
+    assert "FATAL" not in err and "Error occurred" not in err and "Traceback" not in err, err
+    assert err.splitlines()[-1] == "closed", err
 
 
 HUNG_NODE = """
