@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from ros_cli import without_launchs_ignored_interrupt
+from ros_cli import start_at_a_terminal, without_launchs_ignored_interrupt
 
 REPO = Path(__file__).resolve().parents[1]
 COMMAND_LANGS = {"bash", "sh", "shell", "console"}
@@ -117,9 +117,7 @@ class Terminal:
 
     def __init__(self, block: Block, env: dict[str, str], log: Path) -> None:
         self.block, self.log = block, log
-        with open(log, "w") as fh:
-            self.proc = subprocess.Popen(["bash", "-e", "-c", block.text], cwd=REPO, env=env, stdout=fh,
-                                         stderr=subprocess.STDOUT, start_new_session=True)
+        self.proc = start_at_a_terminal(["bash", "-e", "-c", block.text], log, cwd=REPO, env=env)
         self.env = env
         try:
             self._wait_ready()
@@ -134,7 +132,8 @@ class Terminal:
             self.proc.wait()
 
     def _wait_ready(self) -> None:
-        """Until ``ros2 node list`` shows a node (the block has started its graph)."""
+        """Until ``ros2 node list`` shows a node (the block has started its graph), and the ``ros2`` daemon,
+        which the page's next commands ask (they give one second to find a node), lists it too."""
         ros2 = Path(sys.prefix) / "bin" / "ros2"
         deadline = time.monotonic() + READY_S
         while time.monotonic() < deadline:
@@ -142,7 +141,10 @@ class Terminal:
             nodes = subprocess.run([str(ros2), "node", "list", "--no-daemon", "--spin-time", "2"], env=self.env,
                                    capture_output=True, text=True, timeout=60).stdout.split()
             if nodes:
-                return
+                daemons = subprocess.run([str(ros2), "node", "list"], env=self.env, capture_output=True, text=True,
+                                         timeout=60).stdout.split()
+                if set(nodes) <= set(daemons):
+                    return
         raise AssertionError(f"{self.block}: {self.what}:\n{self.log.read_text()[-3000:]}")
 
     def stop(self) -> None:

@@ -8,14 +8,17 @@ is still there :data:`STOP_S` later.
 
 from __future__ import annotations
 
+import os
+import pty
 import re
 import signal
 import subprocess
 import sys
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["ROS2", "STOP_S", "CliRun", "finish", "run_ros2", "without_launchs_ignored_interrupt"]
+__all__ = ["ROS2", "STOP_S", "CliRun", "finish", "run_ros2", "start_at_a_terminal", "without_launchs_ignored_interrupt"]
 
 #: The venv's ``ros2`` (the real CLI, built from upstream sources by the Makefile).
 ROS2 = Path(sys.prefix) / "bin" / "ros2"
@@ -80,3 +83,28 @@ def without_launchs_ignored_interrupt(text: str) -> str:
     """``ros2 launch``'s output without the launch process's own ignored ``KeyboardInterrupt`` after a Ctrl-C
     (:data:`_LAUNCHS_IGNORED_INTERRUPT`): what is left shows every traceback a node printed."""
     return _LAUNCHS_IGNORED_INTERRUPT.sub("", text)
+
+
+def start_at_a_terminal(cmd: list[str], log: Path, **kwargs) -> subprocess.Popen:
+    """Start ``cmd`` as a user does at a terminal: a process group of its own (a Ctrl-C is SIGINT to the
+    group, ``os.killpg``), a terminal on stdin, its output in ``log``; ``kwargs`` go to ``subprocess.Popen``.
+
+    ``ros2 launch`` looks at stdin: when it is not a terminal it runs "noninteractive" and on SIGINT also
+    signals every node itself.  After a Ctrl-C to the group a node then gets a second SIGINT from launch,
+    and if it has ended already, asyncio's ``send_signal`` (``subprocess.Popen.send_signal`` polls first)
+    reaps it under launch's child watcher, which then reports "Unknown child process" and launch "process
+    has died [... exit code 255]" for a node that ended cleanly.  At a terminal launch leaves the SIGINT to
+    the terminal, as it does here.
+    """
+    master, slave = pty.openpty()
+    try:
+        with open(log, "w") as fh:
+            proc = subprocess.Popen(cmd, stdin=slave, stdout=fh, stderr=subprocess.STDOUT, start_new_session=True,
+                                    **kwargs)
+    except BaseException:
+        os.close(master)
+        raise
+    finally:
+        os.close(slave)
+    weakref.finalize(proc, os.close, master)  # the terminal stays open while anything holds the process
+    return proc

@@ -8,9 +8,10 @@ traceback); also Ctrl-C with one window node per body part.
 
 ``ros2 launch`` is started the way a terminal starts it: in its own process
 group with SIGINT at its default (a background job of a non-interactive shell
-would ignore it), and Ctrl-C is SIGINT to the whole group, so each node gets it
-from the "terminal" and once more from ``ros2 launch``.  Every ``ros2`` verb
-runs with ``--no-daemon``.
+would ignore it) and a terminal on stdin (``ros_cli.start_at_a_terminal``), and
+Ctrl-C is SIGINT to the whole group: each node gets it from the "terminal",
+and ``ros2 launch`` leaves it at that.  Every ``ros2`` verb runs with
+``--no-daemon``.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from ros_cli import CliRun, finish, run_ros2, without_launchs_ignored_interrupt
+from ros_cli import CliRun, finish, run_ros2, start_at_a_terminal, without_launchs_ignored_interrupt
 from stacks import native_stacks
 
 from tactile_descriptors_ros.core.robot import load_robot
@@ -176,10 +177,8 @@ def start_launch(robot: str, tmp: Path, *extra: str) -> tuple[subprocess.Popen, 
     env = _ros_env(tmp / "ros_home")
     log = tmp / "launch.log"
     scene = long_scene(robot, tmp)
-    with open(log, "w") as fh:
-        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, f"{robot}.launch.py", f"sim:={scene}",
-                                 *extra], stdout=fh, stderr=subprocess.STDOUT, env=env,
-                                start_new_session=True)
+    proc = start_at_a_terminal([str(BIN / "ros2"), "launch", PKG, f"{robot}.launch.py", f"sim:={scene}", *extra],
+                               log, env=env)
     return proc, log, env
 
 
@@ -215,8 +214,11 @@ def assert_clean_shutdown(alive: list, text: str, executables: list[str]) -> Non
     assert not alive, f"still running after Ctrl-C: {alive}\n{text[-3000:]}"
     # A node that did not end on SIGINT within SIGTERM_AFTER_S is escalated and logged so.
     assert "escalating to 'SIGTERM'" not in text and "escalating to 'SIGKILL'" not in text, text[-20000:]
+    # At a terminal ros2 launch signals no node itself: the terminal's SIGINT reached them all.
+    assert "sending signal 'SIGINT'" not in text, text[-4000:]
     nodes_text = without_launchs_ignored_interrupt(text)
-    for bad in ("Traceback", "RCLError", "KeyboardInterrupt", "process has died"):
+    # "Exception in '...' callback": the events executor's log of a callback that raised
+    for bad in ("Traceback", "RCLError", "KeyboardInterrupt", "process has died", "Exception in '"):
         assert bad not in nodes_text, f"{bad!r} in the launch output:\n{text[-4000:]}"
     # ros2 launch names a process <executable>-<n>
     finished = sorted(re.findall(r"\[INFO\] \[(\w+)-\d+\]: process has finished cleanly", text))
@@ -524,9 +526,7 @@ def test_ctrl_c_with_split_window_nodes(tmp_path):
 def _launch_until_it_ends(*args: str, env: dict[str, str], log: Path, timeout_s: float) -> tuple[int, str]:
     """``ros2 launch ARGS`` run until it ends on its own (a bound, not a wait: a launch still running at the
     bound is killed and fails the test); return its exit code and output."""
-    with open(log, "w") as fh:
-        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, *args], stdout=fh, stderr=subprocess.STDOUT,
-                                env=env, start_new_session=True)
+    proc = start_at_a_terminal([str(BIN / "ros2"), "launch", PKG, *args], log, env=env)
     try:
         code = proc.wait(timeout=timeout_s)
     except subprocess.TimeoutExpired:
@@ -597,10 +597,8 @@ def test_without_drivers_a_replayed_bag_is_windowed_and_predicted(tmp_path):
     }))
     env = _ros_env(tmp_path / "ros_home")
     log = tmp_path / "launch.log"
-    with open(log, "w") as fh:
-        proc = subprocess.Popen([str(BIN / "ros2"), "launch", PKG, "shadow_hand.launch.py", "drivers:=false",
-                                 f"params_file:={params}", "log_level:=debug"], stdout=fh, stderr=subprocess.STDOUT,
-                                env=env, start_new_session=True)
+    proc = start_at_a_terminal([str(BIN / "ros2"), "launch", PKG, "shadow_hand.launch.py", "drivers:=false",
+                                f"params_file:={params}", "log_level:=debug"], log, env=env)
     g = Graph("shadow_hand", proc, log, env, tmp_path / "ros_home", "")
     replay = None
     try:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from ros_cli import start_at_a_terminal
 
 pytestmark = [pytest.mark.ros, pytest.mark.ros2cli, pytest.mark.slow, pytest.mark.timeout(1800)]
 
@@ -72,10 +73,8 @@ def test_colcon_workspace_builds_two_packages_and_launches_from_install(repo_dir
     assert Path(msg_module).is_relative_to(ws / "install")
 
     log = tmp_path / "launch.log"
-    with open(log, "w") as fh:
-        launch = subprocess.Popen(["bash", "-c", sourced + "exec ros2 launch tactile_descriptors_ros nao.launch.py "
-                                   f"sim:=demo_nao namespace:={NAMESPACE}"], cwd=ws, env=env, stdout=fh, stderr=subprocess.STDOUT,
-                                  start_new_session=True)
+    launch = start_at_a_terminal(["bash", "-c", sourced + "exec ros2 launch tactile_descriptors_ros nao.launch.py "
+                                  f"sim:=demo_nao namespace:={NAMESPACE}"], log, cwd=ws, env=env)
     lib = ws / "install" / "tactile_descriptors_ros" / "lib" / "tactile_descriptors_ros"
     try:
         echo = subprocess.run(["bash", "-c", sourced + "ros2 topic echo --once --no-daemon --no-arr "
