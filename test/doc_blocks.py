@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from ros_cli import start_at_a_terminal, without_launchs_ignored_interrupt
+from ros_cli import run_ros2, start_at_a_terminal, without_launchs_ignored_interrupt
 
 REPO = Path(__file__).resolve().parents[1]
 COMMAND_LANGS = {"bash", "sh", "shell", "console"}
@@ -134,16 +134,13 @@ class Terminal:
     def _wait_ready(self) -> None:
         """Until ``ros2 node list`` shows a node (the block has started its graph), and the ``ros2`` daemon,
         which the page's next commands ask (they give one second to find a node), lists it too."""
-        ros2 = Path(sys.prefix) / "bin" / "ros2"
         deadline = time.monotonic() + READY_S
         while time.monotonic() < deadline:
             assert self.proc.poll() is None, f"{self.block} ended early:\n{self.log.read_text()[-3000:]}"
-            nodes = subprocess.run([str(ros2), "node", "list", "--no-daemon", "--spin-time", "2"], env=self.env,
-                                   capture_output=True, text=True, timeout=60).stdout.split()
-            if nodes:
-                daemons = subprocess.run([str(ros2), "node", "list"], env=self.env, capture_output=True, text=True,
-                                         timeout=60).stdout.split()
-                if set(nodes) <= set(daemons):
+            nodes = run_ros2("node", "list", "--no-daemon", "--spin-time", "2", env=self.env, timeout_s=60).stdout
+            if nodes.split():
+                daemons = run_ros2("node", "list", env=self.env, timeout_s=60).stdout
+                if set(nodes.split()) <= set(daemons.split()):
                     return
         raise AssertionError(f"{self.block}: {self.what}:\n{self.log.read_text()[-3000:]}")
 

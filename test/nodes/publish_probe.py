@@ -28,7 +28,9 @@ class Probe(StopsQuietly, Node):
         self.timer.cancel()
         print("in callback", flush=True)
         deadline = time.monotonic() + WAIT_S
-        while self.context.ok() and time.monotonic() < deadline:  # until Ctrl-C has shut the context down
+        # until Ctrl-C has shut the context down; polled: rclpy's SIGINT handler runs no on_shutdown
+        # callback (an event set by one waited the whole WAIT_S)
+        while self.context.ok() and time.monotonic() < deadline:
             time.sleep(0.005)
         try:
             self.pub.publish(Empty())
