@@ -238,28 +238,56 @@ def _sorted(t):  # pragma: no cover - compiled
 
 
 @_jit
+def _same_rows(a, b):  # pragma: no cover - compiled
+    """Whether two stamp rows of equal length are equal, element by element (one pass without a branch,
+    which vectorises; equal rows are the common case)."""
+    d = np.int64(0)
+    for i in range(a.shape[0]):
+        d |= a[i] ^ b[i]
+    return d == 0
+
+
+@_jit
 def _hold_runs(t_slow, t_fast, starts, slow_index, weights):  # pragma: no cover - compiled
-    """:func:`~.fast.hold_runs` by one merge of the sorted stamps; returns (first, n_runs)."""
+    """The zero-order hold of slow samples on sorted fast stamps as runs; returns (first, n_runs).
+
+    Fast sample ``p`` holds slow sample ``j``, the last with ``t_slow[j] <= t_fast[p]``
+    (as :func:`.alignment.zero_order_hold`); ``first`` is the first fast sample that holds one.
+    Run ``k`` is the fast samples ``first + starts[k]`` onwards, ``weights[k]`` of them, holding
+    ``slow_index[k]``; slow samples that no fast sample holds have no run.  One step per slow
+    sample: a run's end is first guessed to be as long as the run before (regular stamps) and
+    checked by two comparisons; a wrong guess is found by scanning, as a merge would.
+    """
     n_fast = t_fast.shape[0]
     n_slow = t_slow.shape[0]
-    j = -1
-    first = n_fast
+    p = 0
+    while p < n_fast and t_fast[p] < t_slow[0]:
+        p += 1
+    first = p
     n_runs = 0
-    prev = -1
-    for p in range(n_fast):
-        while j + 1 < n_slow and t_slow[j + 1] <= t_fast[p]:
-            j += 1
-        if j < 0:
-            continue
-        if first == n_fast:
-            first = p
-        if j != prev:
+    last = 0
+    for j in range(n_slow):
+        if p >= n_fast:
+            break
+        if j + 1 == n_slow:
+            e = n_fast
+        else:
+            nxt = t_slow[j + 1]
+            e = p + last
+            # the guess holds when every fast sample before it is earlier than the next slow sample
+            # and the one at it (if any) is not
+            if not (e <= n_fast and (e == p or t_fast[np.uint64(e - 1)] < nxt)
+                    and (e == n_fast or t_fast[np.uint64(e)] >= nxt)):
+                e = p
+                while e < n_fast and t_fast[e] < nxt:
+                    e += 1
+        if e > p:
             starts[n_runs] = p - first
             slow_index[n_runs] = j
-            weights[n_runs] = 0
+            weights[n_runs] = e - p
             n_runs += 1
-            prev = j
-        weights[n_runs - 1] += 1
+            last = e - p
+            p = e
     return first, n_runs
 
 
@@ -419,7 +447,10 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     uniform = False
     contiguous = False
     for c in range(n_cells):
-        if c == 0 or ts.shape[0] > 1 or tv.shape[0] > 1:
+        # the hold runs of the previous cell serve while its stamp rows are this cell's too (a window's
+        # stacks hold a stamp row per cell, mostly equal ones: comparing costs a tenth of the merge)
+        if c == 0 or (ts.shape[0] > 1 and not _same_rows(ts[c], ts[c - 1])) \
+                or (tv.shape[0] > 1 and not _same_rows(tv[c], tv[c - 1])):
             first, n_runs = _hold_runs(tv[min(c, tv.shape[0] - 1)], ts[min(c, ts.shape[0] - 1)],
                                        starts, slow_index, weights)
             n = n_fast - first

@@ -196,6 +196,50 @@ def test_bench_windows_equal_reference(length_s):
                      descriptors.cell_quantities(s, ts, v, tv, fs_s, fs_v))
 
 
+@needs_compiled
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 80), st.integers(1, 25), st.booleans(), st.booleans(), st.data())
+def test_compiled_hold_runs_are_the_zero_order_hold(n_fast, n_slow, fast_ties, slow_ties, data):
+    """The kernel's runs of held slow samples: which slow sample every fast sample holds, as
+    :func:`zero_order_hold` says, for regular stamps (its guess of a run's end) and irregular ones, ties,
+    slow samples before, among and after the fast ones, and slow samples that no fast sample holds."""
+    kernel = fast.kernel_module()
+    t_fast = data.draw(stamps(n_fast, step_max=4, strictly=not fast_ties))
+    t_slow = data.draw(stamps(n_slow, start_max=120, step_max=25, strictly=not slow_ties)) - data.draw(
+        st.integers(0, 60))
+    starts, slow_index, weights = (np.full(n_slow, -1, dtype=np.int64) for _ in range(3))
+    first, n_runs = kernel._hold_runs(t_slow, t_fast, starts, slow_index, weights)
+    held = np.repeat(slow_index[:n_runs], weights[:n_runs])
+    _, valid = zero_order_hold(t_slow, np.zeros(n_slow), t_fast)
+    want = np.searchsorted(t_slow, t_fast, side="right") - 1  # the last slow sample at or before each fast one
+    assert first == (int(np.argmax(valid)) if valid.any() else n_fast)
+    np.testing.assert_array_equal(held, want[first:])
+    np.testing.assert_array_equal(starts[:n_runs], np.r_[0, np.cumsum(weights[:n_runs - 1])] if n_runs else [])
+    assert (weights[:n_runs] > 0).all() and (np.diff(slow_index[:n_runs]) > 0).all()
+
+
+@needs_compiled
+def test_cells_with_equal_and_different_stamp_rows_are_each_computed_on_their_own_stamps():
+    """Stamp rows per cell (a window's stacks), equal to the previous cell's or not: every cell's quantities
+    are those of the cell alone (the kernel reuses the previous cell's runs only for equal rows)."""
+    rng = np.random.default_rng(3)
+    n_cells, n_fast, n_slow = 7, 400, 100
+    s = rng.integers(0, 300, (n_cells, 3, n_fast))
+    v = rng.integers(0, 300, (n_cells, 2, n_slow))
+    regular = np.arange(n_fast, dtype=np.int64) * 1_000_000, np.arange(n_slow, dtype=np.int64) * 4_000_000
+    shifted = regular[0], regular[1] + 1_500_000  # other runs: V a sample and a half later
+    irregular = np.cumsum(rng.integers(1, 3, n_fast)) * 1_000_000, regular[1]
+    rows = [regular, regular, shifted, shifted, regular, irregular, irregular]
+    ts = np.stack([r[0] for r in rows])
+    tv = np.stack([r[1] for r in rows])
+    together = fast.cell_quantities(s, ts, v, tv, 1000.0, 250.0)
+    for c in range(n_cells):
+        alone = fast.cell_quantities(s[c:c + 1], ts[c], v[c:c + 1], tv[c], 1000.0, 250.0)
+        for name, a, b in zip((*FIELDS, "quality"), together, alone):
+            np.testing.assert_array_equal(a[c:c + 1], b, err_msg=f"cell {c}: {name}")
+    assert not np.array_equal(together[6][1], together[6][2])  # the shifted runs do change the correlations
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(1, 3), st.integers(1, 3), st.integers(3, 200), st.integers(2, 30),
        st.sampled_from([1, 7, 4095]), st.data())
