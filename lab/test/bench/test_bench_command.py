@@ -186,3 +186,27 @@ def test_latency_targets_are_judged_on_the_p95_and_the_design_wait():
     assert t["latency_design_wait"] == {**t["latency_design_wait"], "design_wait_ms": 10.0, "met": True}
     slow = bench.targets(bench.BenchReport([], [], None, env, latency=run(15.0, 60.0)))
     assert slow["latency_design_wait"]["met"] is False and slow["latency_exploration"]["met"] is None
+
+
+def test_the_node_path_is_timed_with_a_clock_per_cell_and_the_same_values():
+    """The bench's window as the node holds it: no two cells share a stamp row (the kernel cannot reuse a
+    cell's hold runs for the next), every cell's fast and slow stamps moved alike, so the descriptor is the
+    simulator window's, bit for bit."""
+    from tactile_descriptors_ros.core.aggregation import describe_window, stack_cells
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    robot = load_robot("nao")
+    cells = bench.skin_window(robot, 0.5)
+    moved = bench.own_clocks(cells)
+    assert moved.keys() == cells.keys()
+    node_cells, stacks = stack_cells(robot, moved)
+    for rows in (stacks.vibration_t_ns, stacks.deformation_t_ns):
+        assert rows.ndim == 2 and (rows[1:] != rows[:-1]).all(axis=1).all()
+    for cid, sig in cells.items():  # the samples untouched, the stamps of both modalities moved by one offset
+        np.testing.assert_array_equal(moved[cid].vibration, sig.vibration)
+        offset = moved[cid].vibration_t_ns - sig.vibration_t_ns
+        assert (offset == offset[0]).all() and (moved[cid].deformation_t_ns - sig.deformation_t_ns == offset[0]).all()
+    want = describe_window(robot, cells, channels="averaged")
+    got = describe_window(robot, node_cells, channels="averaged", stacks=stacks)
+    np.testing.assert_array_equal(got.values, want.values)
+    assert [p.quality for p in got.body_parts] == [p.quality for p in want.body_parts]
