@@ -324,6 +324,21 @@ def _short_runs(row, lo, table, length, n_runs, run_x, run_r):  # pragma: no cov
 
 
 @_jit
+def _long_runs(row, lo, table, starts, weights, k0, k1, run_x, run_r):  # pragma: no cover - compiled
+    """Run sums of samples and of their ranks for runs ``k0`` to ``k1 - 1`` of any length."""
+    for k in range(k0, k1):
+        p0 = starts[k]
+        acc = 0
+        accr = 0
+        for p in range(p0, p0 + weights[k]):
+            a = row[p]
+            acc += a
+            accr += table[np.uint64(a - lo)]
+        run_x[k] = acc
+        run_r[k] = accr
+
+
+@_jit
 def _hjorth_row(n, fs, mom):  # pragma: no cover - compiled
     """Hjorth parameters (eq. 1-3) from exact row moments; returns (A, M, C, flat).
 
@@ -444,6 +459,8 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     n = 0
     length = 0
     regular = False
+    mid_regular = False
+    mid = 0
     uniform = False
     contiguous = False
     for c in range(n_cells):
@@ -466,6 +483,13 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 if slow_index[k] != slow_index[0] + k:
                     contiguous = False
             regular = uniform and length <= 4
+            # runs of one length but the first and the last (a cell whose slow stamps are not on its fast
+            # grid: the window cuts a run at each end), the inner ones unrolled as the regular runs
+            mid = weights[1] if n_runs > 2 else 0
+            mid_regular = not regular and 1 <= mid <= 4
+            for k in range(1, n_runs - 1):
+                if weights[k] != mid:
+                    mid_regular = False
         for i in range(n_s):
             _moments_row(s[c, i], mom_s[c, i])
             peak_s = max(peak_s, abs(mom_s[c, i, 8]), abs(mom_s[c, i, 9]))
@@ -555,7 +579,9 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
         # S rows: counting ranks, run sums of samples and of ranks, cross sums
         for i in range(n_s):
             row = s[c, i, first:]
-            if first == 0:
+            # the whole row's bounds serve for its samples from ``first`` on too (values absent from them
+            # count 0 and are never looked up); only a span too wide for them takes the samples' own
+            if first == 0 or np.int64(mom_s[c, i, 9]) - np.int64(mom_s[c, i, 8]) < max_span:
                 lo = np.int64(mom_s[c, i, 8])
                 hi = np.int64(mom_s[c, i, 9])
             else:
@@ -594,20 +620,19 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
                 rss += float(cnt * t * t)
             if regular:
                 _short_runs(row, lo, table, length, n_runs, run_x, run_r)
+            elif mid_regular:
+                _long_runs(row, lo, table, starts, weights, 0, 1, run_x, run_r)
+                _short_runs(row[weights[0]:], lo, table, mid, n_runs - 2, run_x[1:], run_r[1:])
+                _long_runs(row, lo, table, starts, weights, n_runs - 1, n_runs, run_x, run_r)
             else:
-                for k in range(n_runs):
-                    p0 = starts[k]
-                    acc = 0
-                    accr = 0
-                    for p in range(p0, p0 + weights[k]):
-                        a = row[p]
-                        acc += a
-                        accr += table[np.uint64(a - lo)]
-                    run_x[k] = acc
-                    run_r[k] = accr
+                _long_runs(row, lo, table, starts, weights, 0, n_runs, run_x, run_r)
             if first == 0:
                 s1 = np.int64(mom_s[c, i, 0])
                 q = np.int64(mom_s[c, i, 1])
+            elif first < n:  # the whole row's sums less those of the samples before ``first`` (exact integers)
+                hs1, hq = _sums(s[c, i, :first])
+                s1 = np.int64(mom_s[c, i, 0]) - np.int64(hs1)
+                q = np.int64(mom_s[c, i, 1]) - np.int64(hq)
             else:
                 fs1, fq = _sums(row)
                 s1 = np.int64(fs1)

@@ -131,6 +131,8 @@ def integer_batches(draw):
     ts, tv = times()
     if rows > 1 and draw(st.booleans()):  # a cell on the others' fast stamps but slow stamps of its own
         tv[-1] += draw(st.integers(1, 10 * ratio - 1))
+    elif draw(st.booleans()):  # slow stamps off the fast grid (a clock offset per cell and stream): runs cut at both ends
+        tv = tv + rng.integers(1, 10 * ratio, (rows, 1))
     hi = draw(st.sampled_from([1, 3, 40, 511, 4095]))
     lo = draw(st.sampled_from([0, -hi]))
     dtype = draw(st.sampled_from([np.int16, np.int32, np.int64, np.uint16] if lo == 0 else
@@ -238,6 +240,28 @@ def test_cells_with_equal_and_different_stamp_rows_are_each_computed_on_their_ow
         for name, a, b in zip((*FIELDS, "quality"), together, alone):
             np.testing.assert_array_equal(a[c:c + 1], b, err_msg=f"cell {c}: {name}")
     assert not np.array_equal(together[6][1], together[6][2])  # the shifted runs do change the correlations
+
+
+@needs_compiled
+@pytest.mark.parametrize("robot_name", ["nao", "shadow_hand"])
+def test_cells_with_a_clock_per_stream_equal_reference(robot_name):
+    """The bench's window with every cell's fast and slow stamps moved by offsets of their own, as the node
+    stamps them (a clock per cell and stream): the slow samples fall between the fast ones, so each cell's
+    first and last runs are shorter than the others, and the window starts with fast samples that hold none."""
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.sim.synthetic import biotac_window, skin_window
+
+    robot = load_robot(robot_name)
+    cells = biotac_window(robot, 2.0) if robot_name == "shadow_hand" else skin_window(robot, 2.0)
+    ids = sorted(cells)
+    rng = np.random.default_rng(5)
+    s, v = np.stack([cells[i].vibration for i in ids]), np.stack([cells[i].deformation for i in ids])
+    ts = cells[ids[0]].vibration_t_ns[None, :] + rng.integers(-400_000, 400_000, (len(ids), 1))
+    tv = cells[ids[0]].deformation_t_ns[None, :] + rng.integers(-400_000, 400_000, (len(ids), 1))
+    ct = next(iter(robot.cell_types.values()))
+    fs_s, fs_v = ct.vibration.rate_hz, ct.deformation.rate_hz
+    _assert_same(fast.cell_quantities(s, ts, v, tv, fs_s, fs_v), descriptors.cell_quantities(s, ts, v, tv, fs_s, fs_v),
+                 rtol=1e-12, atol=1e-12)
 
 
 @settings(max_examples=60, deadline=None)
