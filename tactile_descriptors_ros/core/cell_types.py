@@ -106,6 +106,19 @@ class CellType:
     correlate: str  # "each_with_all" (S axis with every V axis) or "pairwise" (axis i with i)
     extra_channels: tuple[str, ...] = ()  # slow channels sampled with V (levels only)
 
+    def __hash__(self) -> int:
+        # The hash of the fields, as the dataclass's own, computed once: a cell type keys the caches that
+        # every window's description reads (3 us a hash, two Modality and a ForceSpec hashed again each time).
+        h = self.__dict__.get("_hash")
+        if h is None:
+            h = hash((self.name, self.vibration, self.deformation, self.force, self.correlate, self.extra_channels))
+            object.__setattr__(self, "_hash", h)
+        return h
+
+    def __getstate__(self) -> dict:
+        # without the cached hash: strings hash differently in another process
+        return {k: v for k, v in self.__dict__.items() if k != "_hash"}
+
     @property
     def has_vibration(self) -> bool:
         """False for a cell type declared without a vibration modality (pressure only)."""

@@ -121,3 +121,29 @@ def test_reduction_matches_reduce_body_part_on_one_cell_type():
             want = aggregation.reduce_body_part(feats, np.ones(len(sigs), bool), ct, channels)
             got = aggregation._reduce_parts(feats, np.array([0]), np.array([len(sigs)]), ct, channels)
             assert np.array_equal(_bits(got[0]), _bits(want))
+
+
+def test_a_cell_types_cached_hash_stays_in_its_process():
+    """A cell type keys the per-type caches by a hash computed once: equal cell types hash equal, a changed
+    one does not meet the cached hash, and a copy sent to another process (whose strings hash differently)
+    hashes there as that process's own cell type, or its cache lookups would miss or collide."""
+    import dataclasses
+    import os
+    import pickle
+    import subprocess
+    import sys
+
+    ct = next(iter(load_robot("shadow_hand").cell_types.values()))
+    fresh = next(iter(load_robot("shadow_hand").cell_types.values()))
+    assert ct is not fresh and hash(ct) == hash(fresh) == hash(copy.deepcopy(ct))
+    assert hash(dataclasses.replace(ct, name="other")) != hash(ct)
+    sent = pickle.dumps(ct)
+    code = ("import pickle, sys\nfrom tactile_descriptors_ros.core.robot import load_robot\n"
+            "ct = pickle.loads(sys.stdin.buffer.read())\n"
+            "own = next(iter(load_robot('shadow_hand').cell_types.values()))\n"
+            "print(ct == own, hash(ct) == hash(own), hash(ct))")
+    out = [subprocess.run([sys.executable, "-c", code], input=sent, capture_output=True, check=True,
+                          env={**os.environ, "PYTHONHASHSEED": seed}).stdout.split()
+           for seed in ("1", "2")]
+    assert [o[:2] for o in out] == [[b"True", b"True"]] * 2
+    assert out[0][2] != out[1][2]  # the seeds give other hashes: a hash carried over would be wrong in one
