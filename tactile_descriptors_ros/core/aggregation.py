@@ -559,8 +559,9 @@ def _row_means(f2: np.ndarray) -> np.ndarray:
     out /= f2.shape[1]
     # a finite sum means finite samples; the other rows (NaN or inf samples, or an overflowing
     # sum) are taken one by one, as _mean_forces takes them
-    redo = np.flatnonzero(~np.isfinite(out))
-    if redo.size:
+    finite = np.isfinite(out)
+    if not finite.all():
+        redo = (~finite).nonzero()[0]
         out[redo] = _mean_forces([f2[k] for k in redo.tolist()])
     return out
 
@@ -751,12 +752,13 @@ def _describe_type(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...],
         return [_body_part_descriptor(part, cell_type, cells, threshold_n, channels) for _, part in parts]
     feats, saturated = feats
     counts_l = counts.tolist()
-    on = np.flatnonzero(counts)
+    on = counts.nonzero()[0]
     starts_all = np.zeros(len(counts_l), dtype=np.intp)
-    np.cumsum(counts[:-1], out=starts_all[1:])
+    counts[:-1].cumsum(out=starts_all[1:])
     starts_on = starts_all[on]
     values = _reduce_parts(feats, starts_on, counts[on], cell_type, channels, red)
-    cell_q = feats.quality | np.where(saturated, np.uint32(_SATURATED), np.uint32(0))
+    cell_q = feats.quality | np.where(saturated, np.uint32(_SATURATED), np.uint32(0)) if saturated.any() \
+        else feats.quality
     part_q = np.bitwise_or.reduceat(cell_q, starts_on).tolist()
     starts_l = starts_all.tolist()
     single = touching_means.tolist()
@@ -827,8 +829,11 @@ def _type_features(sigs: list[CellSignals], cell_type: CellType, stacked: dict |
         done = cell_quantities_bounded(vib, ts, dfm, tv, fs_s, fs_v)
         if done is not None:
             quantities, bounds = done
-            saturated[c0:c0 + len(chunk)] = (_saturated(vib, bounds[:, 0], bounds[:, 1], cell_type.vibration)
-                                             | _saturated(dfm, bounds[:, 2], bounds[:, 3], cell_type.deformation))
+            lo, hi = bounds.min(axis=0).tolist(), bounds.max(axis=0).tolist()
+            (lo_s, hi_s), (lo_v, hi_v) = cell_type.vibration.adc_range, cell_type.deformation.adc_range
+            if lo[0] <= lo_s or hi[1] >= hi_s or lo[2] <= lo_v or hi[3] >= hi_v:  # a cell reaches a limit
+                saturated[c0:c0 + len(chunk)] = (_saturated(vib, bounds[:, 0], bounds[:, 1], cell_type.vibration)
+                                                 | _saturated(dfm, bounds[:, 2], bounds[:, 3], cell_type.deformation))
             parts.append(CellFeatures(*quantities))
             continue
         peaks, sat = _peaks_and_saturation(vib, dfm, cell_type)
@@ -1093,8 +1098,9 @@ def _describe_groups(cell_type: CellType, parts: tuple[tuple[int, BodyPart], ...
     base = {m: _describe_type(cell_type, parts, cells, threshold_n, m, part_ids, stacked, stacks) for m in modes}
     first = base[modes[0]]
     if len(groups) == 1 and groups[0] in KERNEL_GROUPS:  # one kernel group: the kernel's values as they are
-        return [BodyPartDescriptor(bp.name, bp.cell_type, bp.values, labels, bp.contact, bp.cells_in_contact,
-                                   bp.cells_total, bp.mean_force_n, bp.quality) for bp in first]
+        for bp in first:  # made by this call: relabelled in place
+            bp.labels = labels
+        return first
     others = [g for g in groups if g not in KERNEL_GROUPS]
     per_part: list[dict[str, np.ndarray]] = [{} for _ in parts]
     flags = [0] * len(parts)

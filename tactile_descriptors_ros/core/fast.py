@@ -208,7 +208,7 @@ def _compiled_int(x: np.ndarray) -> np.ndarray | None:
 
 def _check_rate(fs_hz: float) -> float:
     fs = float(fs_hz)
-    if not np.isfinite(fs) or fs <= 0:
+    if not math.isfinite(fs) or fs <= 0:
         raise SignalError(f"fs_hz must be a positive finite rate, got {fs_hz!r}")
     return fs
 
