@@ -19,7 +19,7 @@ description (:mod:`.robot`) is made of cell types and body parts.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from ..errors import ConfigError
 from .yamlreader import YamlReader
@@ -111,7 +111,7 @@ class CellType:
         # every window's description reads (3 us a hash, two Modality and a ForceSpec hashed again each time).
         h = self.__dict__.get("_hash")
         if h is None:
-            h = hash((self.name, self.vibration, self.deformation, self.force, self.correlate, self.extra_channels))
+            h = hash(tuple(getattr(self, f.name) for f in fields(self)))
             object.__setattr__(self, "_hash", h)
         return h
 
