@@ -202,7 +202,7 @@ def test_a_5_s_window_node_stop_is_counted_and_fresh_windows_resume_within_a_win
             if len(taken) == 1 and len(after_stop()) >= 20 and [f for f in g.frames if f[0] > resumed + 20.0]:
                 # the node runs (its diagnostics every second) but takes no frames message for 20 s after the stop
                 # while the driver publishes them: nothing reaches its subscriptions any more (docs/nodes.md: seen
-                # in two CI runs, not reproduced in 24 runs here); not the windowing this test is about
+                # three times, not reproduced in 24 runs here); not the windowing this test is about
                 pytest.xfail(f"no frames delivered to the window node after its stop (frames messages taken "
                              f"stayed {taken}; publishers it matched on left_hand: "
                              f"{g.diags[-1][1].get('left_hand_publishers')}); docs/nodes.md, a node stopped for seconds")
