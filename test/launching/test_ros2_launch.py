@@ -48,6 +48,11 @@ SIGTERM_AFTER_S = 5
 #: What a ``ros2`` verb says when its own discovery has not yet seen the node or its services: the node
 #: lookup (``--timeout``, ``--spin-time``) or the parameter client's fixed 5 s wait for the services.
 NOT_YET_DISCOVERED = ("Node not found", "Wait for service timed out")
+#: ``ros2 param`` options: a short fixed spin, then a wait for the node (``--timeout``) and for its parameter
+#: services (the client's 5 s), each ending when discovery has seen them.  A verb spins ``--spin-time`` twice
+#: whatever it finds (its node lookup, then its service call each make a node of their own): against the
+#: running NAO graph on an idle machine, a ``param get`` took 8.1-8.9 s at 3 s and 3.1-5.1 s at 0.5 s.
+PARAM_CLI = ("--no-daemon", "--spin-time", "0.5", "--timeout", "20")
 MSG_TYPES = {"biotac": "tactile_descriptors_msgs/msg/BioTacFrameBatch",
              "skin": "tactile_descriptors_msgs/msg/SkinPartFrames"}
 
@@ -388,7 +393,7 @@ def _echo_once(graph: Graph, topics: dict[str, str], failed: dict, stopped: list
 
 
 def test_param_set_validated(graph):
-    args = ("--no-daemon", "--spin-time", "3", "--timeout", "20")
+    args = PARAM_CLI
     assert "Set parameter successful" in graph.ros2_node("param", "set", *args, "/classifier_node", "eta", "0.5")
     assert graph.ros2_node("param", "get", *args, "/classifier_node", "eta").strip() == "Double value is: 0.5"
     refused = graph.ros2_node("param", "set", *args, "/classifier_node", "eta", "-1.0", check=False)
@@ -398,20 +403,16 @@ def test_param_set_validated(graph):
 
 def test_param_describe_get(graph):
     window = "/window_node"
-    text = graph.ros2_node("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
-                           window, "window.length_s")
+    text = graph.ros2_node("param", "describe", *PARAM_CLI, window, "window.length_s")
     assert "Type: double" in text, text
     # the range travels in the ParameterDescriptor, so the CLI shows it; a tunable value says no "Read only"
     assert re.search(r"^ +Min value: 0\.001$", text, re.M), text
     assert "Read only" not in text, text
-    mode = graph.ros2_node("param", "describe", "--no-daemon", "--spin-time", "3", "--timeout", "20",
-                           window, "window.mode")
+    mode = graph.ros2_node("param", "describe", *PARAM_CLI, window, "window.mode")
     assert "Read only: true" in mode and "Additional constraints: one of: fixed, exploration" in mode, mode
-    value = graph.ros2_node("param", "get", "--no-daemon", "--spin-time", "3", "--timeout", "20",
-                            "/classifier_node", "eta")
+    value = graph.ros2_node("param", "get", *PARAM_CLI, "/classifier_node", "eta")
     assert re.match(r"Double value is: \d", value), value
-    robot = graph.ros2_node("param", "get", "--no-daemon", "--spin-time", "3", "--timeout", "20", window,
-                            "robot")
+    robot = graph.ros2_node("param", "get", *PARAM_CLI, window, "robot")
     assert re.match(rf"String value is: \S*\b{graph.robot}(\.yaml)?$", robot.strip()), robot
 
 
@@ -611,7 +612,7 @@ def test_without_drivers_a_replayed_bag_is_windowed_and_predicted(tmp_path):
         prediction = g.ros2("topic", "echo", "--once", "--no-daemon", "/tactile/prediction",
                             "tactile_descriptors_msgs/msg/Prediction", timeout=FIRST_PREDICTION_S)
         assert re.search(r"^exploration_id: [1-9]\d*$", prediction, re.M), prediction
-        eta = g.ros2_node("param", "get", "--no-daemon", "--spin-time", "3", "/classifier_node", "eta")
+        eta = g.ros2_node("param", "get", *PARAM_CLI, "/classifier_node", "eta")
         assert eta.strip() == "Double value is: 0.25", eta
         assert re.search(r"^\[window_node-\d+\] \[DEBUG\] ", g.output(), re.M), g.output()[-3000:]
         alive, text = ctrl_c(proc, log)
