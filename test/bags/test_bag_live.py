@@ -199,3 +199,41 @@ def test_record_command_stops_cleanly_on_sigint(ros_context, tmp_path):
     info = bag_info(bag)
     assert info.topics["/sigint_topic"].message_count == 5
     assert Path(bag, "metadata.yaml").is_file() and "wrote" in out
+
+
+def test_a_stop_writes_every_held_message_even_when_a_timer_is_ready_first(ros_context, tmp_path):
+    """The recorder's stop takes what its subscriptions hold: a spin that serves its discovery timer brings no
+    message, and stopping there lost the acknowledged ones (two of five under two CPU hogs)."""
+    import rclpy
+    from rclpy.duration import Duration
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from tactile_descriptors_ros.bags.live import TopicSelector
+    from tactile_descriptors_ros.bags.record import Recorder
+
+    node = rclpy.create_node("held_source", context=ros_context)
+    pub = node.create_publisher(String, "/held_topic", 10)
+    bag = tmp_path / "held"
+    try:
+        with BagWriter(bag) as writer:
+            # a discovery timer due at every wait: it is ready whenever the executor looks
+            recorder = Recorder(writer, TopicSelector(topics=["/held_topic"]), context=ros_context,
+                                discovery_period_s=1e-6)
+            try:
+                assert _wait(lambda: recorder.discover() or recorder.topics), "the recorder did not subscribe"
+                assert _wait(lambda: pub.get_subscription_count() > 0), "the recorder was not discovered"
+                for k in range(5):
+                    pub.publish(String(data=f"m{k}"))
+                assert pub.wait_for_all_acked(Duration(seconds=WAIT_S)), "the recorder did not acknowledge"
+                stop = threading.Event()
+                stop.set()  # stopped before any spin: everything acknowledged is held by the subscription
+                report = recorder.spin(stop=stop)
+            finally:
+                recorder.destroy()
+    finally:
+        node.destroy_node()
+    assert report.messages["/held_topic"] == 5, report
+    with BagReader(bag) as reader:
+        assert [bytes(m.data) for m in reader.messages()] == [serialize_message(String(data=f"m{k}"))
+                                                               for k in range(5)]
