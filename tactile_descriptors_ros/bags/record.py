@@ -182,8 +182,8 @@ class Recorder:
         """On stop: write every message the subscriptions already hold, taken from them directly.
 
         A spin is not enough: ``spin_once`` serves one ready entity, which may be another than a
-        subscription (a guard condition, the graph's events), so a spin that brings no message does not
-        mean that none waits.  Under two CPU hogs a Ctrl-C after five acknowledged messages wrote two.
+        subscription (the recorder's own discovery timer, a guard condition), so a spin that brings no
+        message does not mean that none waits.  Under two CPU hogs a Ctrl-C after five acknowledged messages wrote two.
         """
         from ..nodes.common import take_waiting
 
