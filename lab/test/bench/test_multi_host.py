@@ -127,6 +127,16 @@ def _netns() -> set[str]:
     return {d["name"] for d in json.loads(out or "[]")}
 
 
+def _netns_without_stale() -> set[str]:
+    """The namespaces there are once those a killed bench left are gone.
+
+    Making hosts removes such leftovers first (``remove_stale_namespaces``), so a snapshot taken before hosts are
+    made must not count them: a run killed earlier on the same machine would otherwise fail the comparison after.
+    """
+    remove_stale_namespaces()
+    return _netns()
+
+
 def _own_links() -> list[tuple[str, str | None]]:
     out = subprocess.run(["ip", "-j", "addr"], capture_output=True, text=True, check=True).stdout
     return sorted((d["ifname"], a.get("local")) for d in json.loads(out) for a in d.get("addr_info", []) or [{}])
@@ -162,7 +172,7 @@ def _udp(net: VirtualHosts, src: str, dst: str, count: int, idle_s: float = 10.0
 
 @needs_namespaces
 def test_hosts_talk_over_their_links_only_and_are_removed_with_everything_on_them():
-    before_ns, before_links = _netns(), _own_links()
+    before_ns, before_links = _netns_without_stale(), _own_links()
     with VirtualHosts(["a", "b"], tag=f"t{id(object()) % 10**6}") as net:
         made = set(net.namespaces)
         assert made <= _netns() and len(made) == 3  # two hosts and the switch
@@ -184,7 +194,7 @@ def test_hosts_talk_over_their_links_only_and_are_removed_with_everything_on_the
 
 @needs_namespaces
 def test_hosts_are_removed_when_the_block_fails():
-    before = _netns()
+    before = _netns_without_stale()
     with pytest.raises(RuntimeError, match="a step failed"):
         with VirtualHosts(["a"], tag=f"f{id(object()) % 10**6}"):
             raise RuntimeError("a step failed")
@@ -247,7 +257,7 @@ def _bench(*args: str, timeout_s: float = 600.0) -> dict:
 @needs_namespaces
 @pytest.mark.parametrize("discovery", ["subnet", "server"])
 def test_a_two_host_graph_brings_every_body_parts_descriptors_to_the_classifier_and_predictions_back(discovery):
-    before = _netns()
+    before = _netns_without_stale()
     d = _bench("--cells", "20", "--parts", "2", "--hosts", "2", "--seconds", "6", "--discovery", discovery)
     mh = d["multi_host"]
     assert mh["discovery"] == discovery
