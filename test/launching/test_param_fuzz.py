@@ -246,7 +246,9 @@ def test_every_writable_parameter_survives_hostile_sets_through_the_cli(graph):
         for p in SCHEMAS[exe].tunable():
             groups.setdefault((node, p.apply or p.name), []).append(p.name)
     jobs = [(node, names) for (node, _), names in groups.items()]
-    assert sum(len(names) for _, names in jobs) * PER_PARAMETER >= len(VALUES)  # together: every value
+    n_parameters = sum(len(names) for _, names in jobs)
+    assert n_parameters >= 20
+    assert n_parameters * PER_PARAMETER >= len(VALUES)  # together: every value
     order = {(node, name): i for i, (node, name) in enumerate((n, m) for n, names in jobs for m in names)}
     started = time.monotonic()
     problems, unreachable = run(jobs)
