@@ -53,6 +53,39 @@ def test_compiled_hands_over_what_it_cannot_do_exactly():
         fast.set_backend(None if previous == "numba" else previous)
 
 
+@pytest.mark.parametrize("stream, cell, same_first, other_equal", [
+    ("fast", 1, True, True), ("fast", 1, False, True), ("fast", 2, True, False),
+    ("slow", 1, True, True), ("slow", 1, False, False), ("slow", 2, True, False), ("slow", 2, False, True)])
+def test_a_cell_stamp_row_that_steps_back_is_handed_to_the_reference(stream, cell, same_first, other_equal):
+    """Stamp rows per cell (a window's stacks) are checked as the kernel reaches each new row: a row that steps
+    back is found whether its first stamp is the previous cell's or not, and whether the cell's other stream
+    is the previous cell's row (its runs then made again for the other stream) or not."""
+    rng = np.random.default_rng(1)
+    n_cells, n_fast, n_slow = 3, 40, 10
+    s = rng.integers(0, 50, (n_cells, 2, n_fast))
+    v = rng.integers(0, 50, (n_cells, 3, n_slow))
+    ts = np.tile(np.arange(n_fast, dtype=np.int64) * 1_000, (n_cells, 1))
+    tv = np.tile(np.arange(n_slow, dtype=np.int64) * 4_000, (n_cells, 1))
+    bad, other = (ts, tv) if stream == "fast" else (tv, ts)
+    if not other_equal:
+        other[cell] += 500  # the cell's other stream on a clock of its own
+    shift = 0 if same_first else 100
+    bad[cell, 1:] += shift
+    bad[cell, [4, 5]] = bad[cell, [5, 4]]  # one step back, after an equal first stamp (or a moved one)
+    bad[cell, 0] += 0 if same_first else 50
+    assert (bad[cell, 0] == bad[cell - 1, 0]) == same_first and (np.diff(bad[cell]) < 0).sum() == 1
+    previous = fast.set_backend("numba")
+    try:
+        kernel = fast.kernel_module()
+        bounds = np.empty((n_cells, 4), dtype=np.int64)
+        status = kernel.quantities(s, ts, v, tv, 1.0, 1.0, FLAT, 1 << 16, bounds)[0]
+        assert status == kernel.UNSORTED
+        bad[cell] = np.sort(bad[cell])  # the control: the same rows in order are the kernel's
+        assert kernel.quantities(s, ts, v, tv, 1.0, 1.0, FLAT, 1 << 16, bounds)[0] == kernel.OK
+    finally:
+        fast.set_backend(None if previous == "numba" else previous)
+
+
 def test_backends_are_chosen_by_name():
     assert "numba" in fast.BACKENDS
     previous = fast.set_backend(fast.REFERENCE)
