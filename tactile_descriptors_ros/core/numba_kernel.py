@@ -247,7 +247,10 @@ def _sorted(t):  # pragma: no cover - compiled
 @_jit
 def _same_rows(a, b):  # pragma: no cover - compiled
     """Whether two stamp rows of equal length are equal, element by element (one pass without a branch,
-    which vectorises; equal rows are the common case)."""
+    which vectorises; equal rows are the common case).  Rows whose first stamps differ (each cell on its
+    own clock) are told apart without the pass."""
+    if a.shape[0] and a[0] != b[0]:
+        return False
     d = np.int64(0)
     for i in range(a.shape[0]):
         d |= a[i] ^ b[i]
@@ -471,9 +474,8 @@ def quantities(s, ts, v, tv, fs_s, fs_v, flat_flag, max_span, bounds):  # pragma
     for c in range(n_cells):
         # the hold runs of the previous cell serve while its stamp rows are this cell's too (a window's
         # stacks hold a stamp row per cell, mostly equal ones: comparing costs a tenth of the merge)
-        # (rows whose first stamps differ differ: no pass to compare them, as each cell's own clock gives)
-        if c == 0 or (ts.shape[0] > 1 and (ts[c, 0] != ts[c - 1, 0] or not _same_rows(ts[c], ts[c - 1]))) \
-                or (tv.shape[0] > 1 and (tv[c, 0] != tv[c - 1, 0] or not _same_rows(tv[c], tv[c - 1]))):
+        if c == 0 or (ts.shape[0] > 1 and not _same_rows(ts[c], ts[c - 1])) \
+                or (tv.shape[0] > 1 and not _same_rows(tv[c], tv[c - 1])):
             t_fast = ts[min(c, ts.shape[0] - 1)]
             t_slow = tv[min(c, tv.shape[0] - 1)]
             if (ts.shape[0] > 1 and not _sorted(t_fast)) or (tv.shape[0] > 1 and not _sorted(t_slow)):
