@@ -5,12 +5,14 @@ per received message) and asks it for finished windows.  Everything runs on
 the *sensor time stamps*, never the wall clock, so live data, simulated time
 and replayed bags give the same windows.
 
-* Fixed mode: windows ``[t0 + k hop, t0 + k hop + length)``; a window is
-  emitted once every live cell has sent vibration data of a later time
-  (plus ``lateness_s``): cells whose messages travel separately (one per
-  body part) are all in before it is cut, whatever order they arrive in.
-  A cell more than :data:`WATERMARK_STALL_S` behind the most recent one is
-  not waited for.
+* Fixed mode: windows ``[end - length, end)`` whose ends lie on one grid of
+  stamp time, :data:`GRID_MARGIN_PERIODS` vibration sample periods before a
+  whole multiple of ``hop`` (:func:`first_fixed_start`); the first is the
+  first window after the first sample.  A window is emitted once every live
+  cell has sent vibration data of a later time (plus ``lateness_s``): cells
+  whose messages travel separately (one per body part) are all in before it
+  is cut, whatever order they arrive in.  A cell more than
+  :data:`WATERMARK_STALL_S` behind the most recent one is not waited for.
 * Exploration mode (what the paper evaluates): an exploration starts when
   any cell's normal force reaches F_t (contact onset) and ends when every
   cell has stayed below the release threshold for ``release_s`` (release) or
@@ -39,7 +41,7 @@ from .aggregation import CellSignals, CellStacks
 from .robot import RobotDescription
 
 __all__ = ["CellChunk", "PartChunk", "Window", "Windower", "SampleStream", "GAP_PERIODS", "WATERMARK_STALL_S", "BUFFER_HEADROOM",
-           "BUFFER_SLACK_S"]
+           "BUFFER_SLACK_S", "GRID_MARGIN_PERIODS", "first_fixed_start", "grid_margin_ns"]
 
 #: Exploration mode judges contact only up to the time every cell has sent
 #: force data for (the watermark), so the order in which cells' messages
@@ -67,9 +69,38 @@ BUFFER_SLACK_S = 2.0
 #: every poll: a poll then costs nothing per cell).
 TRIM_STEP_NS = 100_000_000
 
+#: Fixed windows end this many vibration sample periods (of the robot's slowest vibration stream) before a
+#: whole multiple of the hop in stamp time.  The skin driver cuts its messages on a grid of ``batch_s`` in
+#: stamp time (:mod:`..streams.skin`), and a hop is a whole number of batches, so every window then ends
+#: just before a batch ends: the batch that holds the window's last samples also holds a vibration sample
+#: after its end, and the window is cut as soon as that batch arrives.  A window ending on a batch boundary
+#: waited a whole batch more (10 ms in the NAO graph) for the next batch's first sample.  One and a half
+#: periods, not one: with one, a cell whose samples fall on the grid has a sample right at a window's end,
+#: and a stamp a few microseconds early (its clock estimate moves, :mod:`..streams.clock`) puts that sample
+#: inside the window, which then waits for the next batch again.
+GRID_MARGIN_PERIODS = 1.5
+
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
 GAP_PERIODS = 3.0
+
+
+def first_fixed_start(first_ns: int, length_ns: int, hop_ns: int, margin_ns: int) -> int:
+    """The start of the first fixed window wholly at or after ``first_ns`` [ns].
+
+    Fixed windows end ``margin_ns`` before a whole multiple of ``hop_ns``
+    (:data:`GRID_MARGIN_PERIODS`), so the same stamps give the same windows in
+    every window node and every replay, whenever each one started.
+    """
+    n = -(-(int(first_ns) + length_ns + margin_ns) // hop_ns)  # ceil
+    return n * hop_ns - margin_ns - length_ns
+
+
+def grid_margin_ns(robot: RobotDescription) -> int:
+    """How long before a whole multiple of the hop a robot's fixed windows end [ns]: :data:`GRID_MARGIN_PERIODS`
+    sample periods of its slowest vibration stream."""
+    slowest_hz = min((robot.cell_types[p.cell_type].vibration.rate_hz for p in robot.body_parts), default=1e3)
+    return int(round(GRID_MARGIN_PERIODS * 1e9 / slowest_hz))
 
 
 @dataclass
@@ -695,6 +726,7 @@ class Windower:
         self._trimmed_ns: int | None = None  # the horizon of the last trim
         self._jump: tuple[int, int] | None = None  # (newest before, first after) the last stall of every cell
         self._stall_ns = int(round(WATERMARK_STALL_S * 1e9))
+        self.grid_margin_ns = grid_margin_ns(robot)
         self._retain_ns = max(self.length_ns, self.max_ns) + self.lateness_ns + self._stall_ns + 1_000_000_000
 
     # ------------------------------------------------------------- settings
@@ -731,6 +763,9 @@ class Windower:
         for attr in ("length_ns", "hop_ns", "min_ns", "max_ns", "release_ns", "onset_n", "release_n", "lateness_ns",
                      "_retain_ns"):
             setattr(self, attr, getattr(probe, attr))
+        if self._next_start_ns is not None:  # the next window on the new grid, none before the one due
+            self._next_start_ns = first_fixed_start(self._next_start_ns, self.length_ns, self.hop_ns,
+                                                    self.grid_margin_ns)
 
     # ------------------------------------------------------------------ input
     def add(self, cell_id: int, chunk: CellChunk) -> bool:
@@ -1103,7 +1138,7 @@ class Windower:
         out = []
         if self._next_start_ns is None:
             firsts = [st.vib._t[st.vib._lo] for st in self._cells.values() if len(st.vib)]
-            self._next_start_ns = int(min(firsts))
+            self._next_start_ns = first_fixed_start(int(min(firsts)), self.length_ns, self.hop_ns, self.grid_margin_ns)
         watermark = self._vibration_watermark()
         while self._next_start_ns + self.length_ns + self.lateness_ns <= watermark:
             start = self._next_start_ns

@@ -38,7 +38,7 @@ def _chunks(n_batches: int, seed: int, *, invalid: int | None = None, quiet: int
             light: int | None = None, first: str = "left_hand") -> list[PartChunk]:
     """10 ms messages, one per body part and batch, every cell on the same stamps (``first``'s message first).
 
-    ``invalid``: a cell with an invalid accelerometer sample in batch 3; ``quiet``: a cell that never sends;
+    ``invalid``: a cell with an invalid accelerometer sample in batch 12; ``quiet``: a cell that never sends;
     ``light``: a cell pressed below the contact threshold."""
     rng = np.random.default_rng(seed)
     order = [first] + [p for p in PARTS if p != first]
@@ -50,7 +50,7 @@ def _chunks(n_batches: int, seed: int, *, invalid: int | None = None, quiet: int
             ids = [c for c in PARTS[name] if c != quiet]
             n = len(ids)
             va = np.ones(10 * n, bool)
-            if invalid in ids and b == 3:
+            if invalid in ids and b == 12:
                 va[10 * ids.index(invalid) + 4] = False
             force = rng.uniform(1.0, 2.0, tf.size * n)
             if light in ids:
@@ -145,7 +145,7 @@ def test_a_window_with_an_invalid_sample_or_a_missing_cell_is_cut_cell_by_cell(c
     with mock.patch.object(windowing, "COMPILED_CUT", False):
         reference = _windows(chunks)
     assert [_arrays(w) for w in windows] == [_arrays(w) for w in reference]
-    if case == "invalid":  # batch 3 is in the first window only
+    if case == "invalid":  # batch 12 is in the first window only: [5.0985, 5.2985) s (on the grid of the hop)
         assert windows[0].cells[cell].invalid_samples == 1 and windows[0].stacks is None
         assert windows[-1].stacks is not None
     else:

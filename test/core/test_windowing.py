@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tactile_descriptors_ros.core.robot import load_robot
-from tactile_descriptors_ros.core.windowing import CellChunk, Windower
+from tactile_descriptors_ros.core.windowing import CellChunk, Windower, first_fixed_start
 from tactile_descriptors_ros.errors import ConfigError
 
 MS = 1_000_000
@@ -20,9 +20,14 @@ def _chunk(t0_ns: int, force_n: float, rng, n_frames: int = 10) -> CellChunk:
                      frame_t, np.full(n_frames, force_n), frame_t)
 
 
-def _feed(w: Windower, schedule, rng, cell_id: int = 1):
+def _grid_start(w: Windower) -> int:
+    """The first fixed window's start for data from 0: a stream starting there is cut from its first sample."""
+    return first_fixed_start(0, w.length_ns, w.hop_ns, w.grid_margin_ns)
+
+
+def _feed(w: Windower, schedule, rng, cell_id: int = 1, t0_ns: int = 0):
     """schedule: list of (duration_s, force_n); returns windows emitted."""
-    out, t = [], 0
+    out, t = [], t0_ns
     for duration_s, force in schedule:
         for _ in range(int(round(duration_s * 10))):
             w.add(cell_id, _chunk(t, force, rng))
@@ -61,7 +66,45 @@ def test_fixed_windows_have_length_and_hop():
     starts = [x.start_ns for x in wins]
     assert np.all(np.diff(starts) == 500 * MS)
     assert all(x.end_ns - x.start_ns == 2000 * MS and x.exploration_id == 0 for x in wins)
-    assert len(wins) == 6  # windows ending by 4.9 s + lateness
+    # ends 1.5 PAC periods before whole hops: the first complete window after the first sample at 0 ends then
+    assert w.grid_margin_ns == round(1.5e9 / 2200)
+    assert [x.end_ns for x in wins] == [k * 500 * MS - w.grid_margin_ns for k in range(5, 10)]
+    first_pac = wins[0].cells[1].vibration_t_ns[0]
+    assert 0 <= first_pac - wins[0].start_ns < 454_546  # the first PAC sample at or after the start
+
+
+def test_fixed_windows_lie_on_one_grid_of_stamp_time_whenever_the_data_starts():
+    """Two windowers fed the same stream from different first samples (a node started later, a bag replayed
+    from its middle) cut the same windows where both have the data, to the same samples."""
+    rng = np.random.default_rng(7)
+    early = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=0.3, lateness_s=0.0)
+    late = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=0.3, lateness_s=0.0)
+    chunks = [_chunk(k * 100 * MS + 12_345, 1.0, rng) for k in range(50)]
+    a, b = [], []
+    for k, c in enumerate(chunks):
+        early.add(1, c)
+        a += early.poll()
+        if k >= 17:
+            late.add(1, c)
+            b += late.poll()
+    assert len(b) == 7 and b[0].start_ns >= chunks[17].vibration_t_ns[0] and len(a) > len(b)  # ends 3 .. 4.8 s
+    same = {x.start_ns: x for x in a}
+    for x in b:
+        assert (x.end_ns + early.grid_margin_ns) % (300 * MS) == 0
+        y = same[x.start_ns]
+        assert np.array_equal(x.cells[1].vibration_t_ns, y.cells[1].vibration_t_ns)
+        assert np.array_equal(x.cells[1].vibration, y.cells[1].vibration)
+
+
+def test_a_new_hop_moves_the_next_window_onto_its_own_grid_never_back():
+    rng = np.random.default_rng(8)
+    w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=0.5, lateness_s=0.0)
+    got = _feed(w, [(2.0, 1.0)], rng)  # data to 2 s: windows ending at 1.5 and 2 s - margin
+    assert [x.end_ns for x in got] == [1500 * MS - w.grid_margin_ns, 2000 * MS - w.grid_margin_ns]
+    w.retune(hop_s=0.4)
+    got = _feed(w, [(2.0, 1.0)], rng, t0_ns=2000 * MS)
+    # the window due next starts at 1.5 s - margin; the first on the 0.4 s grid not before it at 1.8 s - margin
+    assert [x.end_ns for x in got] == [k * 400 * MS - w.grid_margin_ns for k in range(7, 11)]
 
 
 def test_fixed_window_waits_for_every_live_cell_not_the_first_past_its_end():
@@ -69,20 +112,21 @@ def test_fixed_window_waits_for_every_live_cell_not_the_first_past_its_end():
     rng = np.random.default_rng(5)
     w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=1.0, lateness_s=0.0)
     ahead, behind = 1, 2
+    s = _grid_start(w)
     for t in range(0, 1000, 100):
-        assert w.add(ahead, _chunk(t * MS, 1.0, rng)) and w.add(behind, _chunk(t * MS, 1.0, rng))
+        assert w.add(ahead, _chunk(s + t * MS, 1.0, rng)) and w.add(behind, _chunk(s + t * MS, 1.0, rng))
     assert w.poll() == []
-    assert w.add(ahead, _chunk(1000 * MS, 1.0, rng))  # one cell past the end of [0, 1 s)
+    assert w.add(ahead, _chunk(s + 1000 * MS, 1.0, rng))  # one cell past the end of [s, s + 1 s)
     assert w.poll() == []  # the other cell's last samples of the window are still on their way
-    assert w.add(behind, _chunk(1000 * MS, 1.0, rng))
+    assert w.add(behind, _chunk(s + 1000 * MS, 1.0, rng))
     (win,) = w.poll()
-    assert (win.start_ns, win.end_ns) == (0, 1000 * MS) and set(win.cells) == {ahead, behind}
+    assert (win.start_ns, win.end_ns) == (s, s + 1000 * MS) and set(win.cells) == {ahead, behind}
     assert not any(c.gap for c in win.cells.values()) and w.faults["gap"] == 0
     # a cell silent for longer than the stall time is not waited for
     for t in range(1100, 2700, 100):
-        assert w.add(ahead, _chunk(t * MS, 1.0, rng))
+        assert w.add(ahead, _chunk(s + t * MS, 1.0, rng))
     (win2,) = w.poll()
-    assert win2.end_ns == 2000 * MS
+    assert win2.end_ns == s + 2000 * MS
 
 
 def test_faults_are_counted_not_hidden():
@@ -107,7 +151,7 @@ def test_invalid_samples_are_removed_not_replaced_and_too_many_exclude_the_cell(
     w = Windower(load_robot("shadow_hand"), mode="fixed", length_s=1.0, hop_s=1.0)
     sent = {}
     for k in range(35):
-        c = _chunk(k * 100 * MS, 1.0, rng)
+        c = _chunk(_grid_start(w) + k * 100 * MS, 1.0, rng)
         if k == 3:  # one bad PAC word
             c.vibration_valid = np.ones(c.vibration.shape[1], bool)
             c.vibration_valid[5] = False

@@ -228,7 +228,8 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     assert spin_until(ex, lambda: pub.get_subscription_count() >= 2, 10)
 
     rng = np.random.default_rng(0)
-    rounds, t0 = 24, 5_000_000_000  # 1.2 s of 50 ms batches: windows end at 0.5, 0.75, 1.0 s
+    # 1.2 s of 50 ms batches from the start of a window on the windows' grid: windows end at 0.5, 0.75, 1.0 s
+    rounds, t0 = 24, 5_000_000_000 - batched.windower.grid_margin_ns
     off_a = np.arange(50, dtype=np.int64) * 1_000_000
     off_f = np.arange(12, dtype=np.int64) * 4_000_000
     half = len(part.cells) // 2

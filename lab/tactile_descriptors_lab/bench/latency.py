@@ -13,7 +13,10 @@ per prediction:
   after the last sample of a window was taken);
 * ``wait``: the part of it spent waiting for data: a fixed window closes when
   a sample later than its end plus ``lateness_s`` arrives, i.e. when the
-  batch holding that sample has been acquired and published;
+  batch holding that sample has been acquired and published (fixed windows
+  end 1.5 sample periods before a batch ends,
+  :data:`~tactile_descriptors_ros.core.windowing.GRID_MARGIN_PERIODS`, so
+  without lateness that is the batch holding the window's last samples);
 * ``processing``: arrival minus the time that closing batch was published
   (window cut, descriptor, classifier, two topic hops and callbacks).
 
@@ -45,12 +48,15 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_descriptors_ros.core.windowing import first_fixed_start, grid_margin_ns
+
 __all__ = ["measure_latency", "message_cost", "shipped_latency_settings", "ProbeFrames", "probe_frames",
            "set_sequence", "TARGET_MS", "DESIGN_WAIT_TARGET_MS", "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
 
 #: Target: sensor stamp (fixed: window end; exploration: release decision) -> prediction, p95, at NAO full rate.
 TARGET_MS = 20.0
-#: Target: the wait by design, batch_s + lateness_s, of the shipped NAO graph.
+#: Target: the wait by design of the shipped NAO graph, from a window's end (or release decision) to the end of
+#: the batch that closes it (:func:`_design_wait_ms`).
 DESIGN_WAIT_TARGET_MS = 10.0
 
 
@@ -432,7 +438,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         # the last predictions: until every window the data closed has its prediction (a node behind its input
         # answers late), or nothing came for 10 s; then one diagnostics period
         expected = _expected_predictions(mode, start_ns, n_batches * batch_ns, length_s, hop_s, lateness_s,
-                                         release_ns) * (len(desc.body_parts) if split_window_nodes else 1)
+                                         release_ns, grid_margin_ns(desc)) * (len(desc.body_parts) if split_window_nodes else 1)
         time.sleep(max(1.2, 2 * lateness_s + 2 * batch_s))
         deadline = time.monotonic() + 60.0
         last_count, quiet_since = -1, time.monotonic()
@@ -506,7 +512,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             per_callback.append(float(values["frames_per_callback"]))
         node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "cut_", "frames_age_"))}
     e2e_summary = _summary(e2e)
-    design_wait_ms = 1e3 * (batch_s + (lateness_s if mode == "fixed" else 0.0))
+    design_wait_ms = _design_wait_ms(mode, start_ns, n_batches * batch_ns, batch_ns, length_s, hop_s, lateness_s,
+                                     grid_margin_ns(desc))
     return {
         "robot": robot, "cells": desc.n_cells, "batch_s": batch_s, "lateness_s": lateness_s, "mode": mode,
         "reference": "window end stamp" if mode == "fixed" else
@@ -549,12 +556,36 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     }
 
 
+def _fixed_ends(start_ns: int, span_ns: int, length_s: float, hop_s: float, lateness_s: float,
+                margin_ns: int) -> np.ndarray:
+    """Ends of the fixed windows the probe's data close: on the windower's grid
+    (:func:`~tactile_descriptors_ros.core.windowing.first_fixed_start`), each once an accelerometer sample at or
+    after its end + lateness was sent (the last one is 1 ms before the data's end)."""
+    length_ns, hop_ns = int(round(length_s * 1e9)), int(round(hop_s * 1e9))
+    first_end = first_fixed_start(start_ns, length_ns, hop_ns, margin_ns) + length_ns
+    last_closing = start_ns + span_ns - 1_000_000 - int(round(lateness_s * 1e9))
+    return np.arange(first_end, last_closing + 1, hop_ns, dtype=np.int64)
+
+
+def _design_wait_ms(mode: str, start_ns: int, span_ns: int, batch_ns: int, length_s: float, hop_s: float,
+                    lateness_s: float, margin_ns: int) -> float:
+    """The wait by design, from a window's end stamp (exploration: release decision) to the end of the batch
+    that closes it: for fixed windows, the batch holding end + lateness (the longest over the run's windows);
+    for explorations, a whole batch (the sample that decides a release can be the first of a batch)."""
+    if mode != "fixed":
+        return batch_ns / 1e6
+    ends = _fixed_ends(start_ns, span_ns, length_s, hop_s, lateness_s, margin_ns)
+    if not ends.size:
+        return batch_ns / 1e6 + lateness_s * 1e3
+    late = ends + int(round(lateness_s * 1e9))
+    return float(np.max((late // batch_ns + 1) * batch_ns - ends)) / 1e6
+
+
 def _expected_predictions(mode: str, start_ns: int, span_ns: int, length_s: float, hop_s: float,
-                          lateness_s: float, release_ns: int) -> int:
+                          lateness_s: float, release_ns: int, margin_ns: int) -> int:
     """Windows the probe's data close (one prediction each with one window node)."""
     if mode == "fixed":
-        usable = span_ns - 1_000_000 - int(round(lateness_s * 1e9)) - int(round(length_s * 1e9))  # last sample
-        return max(0, usable // int(round(hop_s * 1e9)) + 1) if usable >= 0 else 0
+        return int(_fixed_ends(start_ns, span_ns, length_s, hop_s, lateness_s, margin_ns).size)
     cycle_ns = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
     first_end = int(round((EXPLORATION_RELEASED_S + EXPLORATION_TOUCH_S) * 1e9))
     usable = span_ns - first_end - release_ns - 50_000_000  # the release shows after release_s (and smoothing)

@@ -1,7 +1,7 @@
 """One feature engine: the window node publishes, for a recorded window, what the evaluation computes.
 
 A recording's frames go out as ``BioTacFrameBatch`` messages to a window node
-(fixed windows cut exactly on frame stamps); its ``Descriptor`` must equal
+(fixed windows cut exactly on frame stamps, moved onto the windows' grid); its ``Descriptor`` must equal
 the evaluation's feature bank for the same frames, for the shipped groups and
 the paper's.  And a model trained on one group selection refuses descriptors
 of another, naming both.
@@ -19,7 +19,7 @@ N_FRAMES = 200  # a 2 s window
 START = 37
 
 
-def _messages(rec, ct, first: int, count: int, batch: int = 10):
+def _messages(rec, ct, first: int, count: int, batch: int = 10, shift_ns: int = 0):
     from tactile_descriptors_ros.nodes.conversions import biotac_batch_to_msg
     from tactile_descriptors_ros.streams.frames import BioTacBatch
 
@@ -29,7 +29,7 @@ def _messages(rec, ct, first: int, count: int, batch: int = 10):
         f = slice(s, s + batch)
         p = slice(s * ppf, (s + batch) * ppf)
         t0 = int(rec.frame_t_ns[s])
-        b = BioTacBatch(stamp_ns=t0, pac=rec.pac[p], pac_offset_ns=rec.pac_t_ns[p] - t0,
+        b = BioTacBatch(stamp_ns=t0 + shift_ns, pac=rec.pac[p], pac_offset_ns=rec.pac_t_ns[p] - t0,
                         frame_offset_ns=rec.frame_t_ns[f] - t0, pdc=rec.pdc[f], tac=rec.tac[f], tdc=rec.tdc[f],
                         electrodes=rec.electrodes[:, f].T, first_frame_sequence=s)
         out.append(biotac_batch_to_msg(b, sensor_name="biotac_index", body_part="index", chip_select=1,
@@ -52,6 +52,7 @@ def _node_descriptor(ros_context, rec, groups, block_s=0.0):
 
     from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout
     from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.core.windowing import first_fixed_start
     from tactile_descriptors_ros.layouts import DescriptorLayouts
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
@@ -74,7 +75,11 @@ def _node_descriptor(ros_context, rec, groups, block_s=0.0):
         ex.add_node(n)
     try:
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, 10)
-        for m in _messages(rec, ct, START, N_FRAMES + 30):
+        # fixed windows lie on a grid of stamp time: moved onto it, the recording's window is the node's first
+        first_ns = int(rec.pac_t_ns[START * rec.pac_per_frame])
+        cut = w.windower
+        shift_ns = first_fixed_start(first_ns, cut.length_ns, cut.hop_ns, cut.grid_margin_ns) - first_ns
+        for m in _messages(rec, ct, START, N_FRAMES + 30, shift_ns=shift_ns):
             pub.publish(m)
             ex.spin_once(timeout_sec=0.002)
         assert spin_until(ex, lambda: len(got) >= 1 and layouts.of(got[0]) is not None, 20), \
