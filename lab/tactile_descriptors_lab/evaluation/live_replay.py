@@ -247,8 +247,11 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
                     if time.monotonic() >= deadline:
                         raise BagError(f"live replay: no {what} within {timeout_s:.0f} s") from None
         # The graph is up when the window node takes frames, the classifier takes labels and both report.
+        # Discovery matches each side on its own: a volatile reader that matches the player's writer only
+        # after frames went out never receives them, so both sides' counts must show the match.
         wait("window node subscribed to the frames",
-             lambda: all(p.get_subscription_count() > 0 for p in player.publishers.values()))
+             lambda: all(p.get_subscription_count() > 0 for p in player.publishers.values())
+             and int(teacher.diag.get("window", {}).get(f"{body_part}_publishers", "0")) > 0)
         wait("classifier node subscribed to labels and publishing predictions",
              lambda: teacher.label_pub.get_subscription_count() > 0
              and teacher.node.count_publishers("/tactile/prediction") > 0
