@@ -46,7 +46,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from rclpy.node import Node
@@ -82,7 +82,7 @@ from .conversions import (
 from .parameters import NodeParameters
 from .qos import qos_of
 
-__all__ = ["WindowNode", "main"]
+__all__ = ["WindowNode", "frames_matched", "main"]
 
 
 
@@ -471,12 +471,12 @@ class WindowNode(StopsQuietly, Node):
         silent = []
         for part, meter in self._rates.items():
             values[f"{part}_rate_hz"] = meter.rate_hz  # BioTac frames/s, skin cell batches/s
+            # the subscription's own count: what a player waits for (frames_matched)
+            publishers = values[_publishers_key(part)] = self._part_sub[part].get_publisher_count()
             seen = self._last_seen.get(part)
             if seen is None or now - seen > self.params["diagnostics.silent_after_s"]:
                 # a silent part with matched publishers is a sender that stopped or a delivery that did
                 # (docs/nodes.md: a node stopped for seconds); with none, nothing publishes the topic
-                publishers = self._part_sub[part].get_publisher_count()
-                values[f"{part}_publishers"] = publishers
                 if seen is not None:
                     values[f"{part}_silent_s"] = round(now - seen, 1)
                 silent.append(f"{part} ({_publishers(publishers)})")
@@ -498,6 +498,39 @@ class WindowNode(StopsQuietly, Node):
 def _windower_settings(values) -> dict[str, float]:
     """The schema's ``windower`` parameters as :class:`Windower` keywords (``window.length_s`` -> ``length_s``)."""
     return {name.rsplit(".", 1)[1]: values[name] for name in WINDOW_NODE.apply_groups()["windower"]}
+
+
+def _publishers_key(part: str) -> str:
+    return f"{part}_publishers"
+
+
+def frames_matched(values: Mapping[str, str], part: str) -> bool:
+    """Whether a window node's diagnostics show its subscription to ``part``'s frames matched to a publisher.
+
+    Discovery matches each side of a topic on its own: a publisher can count
+    the window node's subscription before that subscription knows the
+    publisher, and a best-effort, volatile subscription drops what a
+    publisher it does not know yet sends.  A player that must not lose its
+    first frames waits for this, the reader's side, as well as for its own
+    ``get_subscription_count()``.
+
+    Parameters
+    ----------
+    values : mapping of str to str
+        The ``window_node: windows`` status's key-value pairs, as published.
+    part : str
+        A body part the node serves.
+
+    Returns
+    -------
+    bool
+        True when the status reports at least one matched publisher of the
+        part's frames.
+    """
+    try:
+        return int(values.get(_publishers_key(part), "0")) > 0
+    except ValueError:
+        return False
 
 
 def _publishers(count: int) -> str:

@@ -336,6 +336,16 @@ def _matched_text(count: int) -> str:
     return "no publisher" if count == 0 else f"{count} publisher{'s' if count > 1 else ''} matched"
 
 
+def test_frames_matched_reads_the_reader_side_count():
+    """frames_matched: true only for a positive `<part>_publishers` of that part; absent or unreadable is false."""
+    from tactile_descriptors_ros.nodes.window_node import frames_matched
+
+    assert frames_matched({"index_publishers": "1", "thumb_publishers": "0"}, "index")
+    assert not frames_matched({"index_publishers": "1", "thumb_publishers": "0"}, "thumb")
+    assert not frames_matched({"index_publishers": "1"}, "middle")  # a part this node does not serve
+    assert not frames_matched({"index_publishers": "one"}, "index")
+
+
 def test_silent_after_is_set_at_run_time(ros_context):
     """diagnostics.silent_after_s: a body part that sent frames is silent once that long has passed without more;
     the status says whether a publisher is still matched (a stopped sender or a lost delivery) or none is."""
@@ -344,6 +354,7 @@ def test_silent_after_is_set_at_run_time(ros_context):
     from rclpy.parameter import Parameter
 
     from tactile_descriptors_msgs.msg import BioTacFrameBatch
+    from tactile_descriptors_ros.nodes.window_node import frames_matched
 
     w = _window(ros_context, qos__frames__reliability="reliable")
     io = rclpy.create_node("io", context=ros_context)
@@ -369,6 +380,7 @@ def test_silent_after_is_set_at_run_time(ros_context):
         values = {kv.key: kv.value for kv in w.diagnostics.statuses()[0].values}
         matched = int(values["index_publishers"])
         assert matched >= 1 and float(values["index_silent_s"]) >= 0.1
+        assert frames_matched(values, "index")  # what a player waits for before its first frames
         assert f"no frames from index ({_matched_text(matched)})" in status()
         # this publisher gone: the same silence counts one publisher less
         io.destroy_publisher(pub)

@@ -311,7 +311,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     from tactile_descriptors_ros.nodes.classifier_node import ClassifierNode
     from tactile_descriptors_ros.nodes.common import executor_kind
     from tactile_descriptors_ros.nodes.conversions import ns_to_stamp, stamp_to_ns
-    from tactile_descriptors_ros.nodes.window_node import WindowNode
+    from tactile_descriptors_ros.nodes.window_node import WindowNode, frames_matched
     from tactile_descriptors_ros.topics import DESCRIPTOR_TOPIC, FRAMES_TOPIC, PREDICTION_TOPIC
 
     if in_process and split_window_nodes:
@@ -401,17 +401,25 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             executor.add_node(node)
         spinner = threading.Thread(target=lambda: _spin(executor, stop), daemon=True)
         spinner.start()
+        # Discovery matches each side of a topic on its own, and a best-effort subscription drops what a
+        # publisher it does not know yet sends: the probe starts once its writers count the window nodes'
+        # subscriptions and the window nodes report every body part's frames matched (their diagnostics).
+
+        def matched() -> bool:
+            with lock:
+                reports = list(diagnostics.values())
+            return (all(p.get_subscription_count() > 0 for p in pubs)
+                    and all(any(frames_matched(r, part) for r in reports) for part in by_part)
+                    and probe.count_publishers(PREDICTION_TOPIC) > 0)
+
         deadline = time.monotonic() + discovery_timeout_s
-        while time.monotonic() < deadline and not (
-                all(p.get_subscription_count() > 0 for p in pubs)
-                and probe.count_publishers(PREDICTION_TOPIC) > 0):
+        while time.monotonic() < deadline and not matched():
             time.sleep(0.1)
-        if not all(p.get_subscription_count() > 0 for p in pubs):
+        if not matched():
             tail = "; ".join(f"{n.spec.name}: {' | '.join(n.lines[-3:]) or 'no output'}"
                              for n in graph.nodes) if graph else ""
             raise RuntimeError(f"window_node did not subscribe to the frames within {discovery_timeout_s} s"
                                + (f" ({tail})" if tail else ""))
-        time.sleep(0.5)
 
         pids = {n.spec.name: n.process.pid for n in graph.nodes} if graph else {"probe (all nodes)": os.getpid()}
         cpu_start = {name: _cpu_s(pid) for name, pid in pids.items()}
