@@ -5,10 +5,11 @@ is compared with):
 
 * the robot's ``window_node`` and ``classifier_node`` start as their own
   processes from the robot description's node graph
-  (:func:`~..launching.graph.build_graph`, the drivers left out: the bag
-  stands in for them), on the deployed topics (``tactile/<body
+  (:func:`~..launching.graph.build_graph`; the bag stands in for the
+  drivers, and the views are left out), on the deployed topics (``tactile/<body
   part>/frames``, ``tactile/descriptor``, ``tactile/label``,
-  ``tactile/prediction``);
+  ``tactile/prediction``), this process's participant with the nodes' Fast
+  DDS profile (:func:`~..launching.processes.dds_environment`);
 * the bag's frames are published in bag order, paced by the graph
   (:meth:`~.replay.Player.play_paced`): a trial's frames go out only after
   the previous trial's descriptor and prediction have arrived and, for a
@@ -59,6 +60,17 @@ class LiveRun:
     window_node_faults: dict[str, int] = field(default_factory=dict)
     classifier_updates: int = 0
     wall_s: float = 0.0
+
+
+def _nothing_delivered(player: Any, window: Mapping[str, str], body_part: str) -> str:
+    """A line for a replay whose frames all went out to a matched window node that received none, else ''."""
+    from tactile_descriptors_ros.nodes.window_node import frames_matched
+
+    sent = sum(player.report.published.values()) if player is not None else 0
+    if not sent or window.get("messages_received") != "0" or not frames_matched(window, body_part):
+        return ""
+    return (f"\nthe window node matched the player but received none of the {sent} frames messages sent: the "
+            "middleware delivered nothing (both sides of the topic matched)")
 
 
 class _Teacher:
@@ -162,21 +174,26 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
         When a node exits, an event does not come, a prediction was made with another number of
         updates than taught before it, or the window node lost frames.
     """
+    from tactile_descriptors_ros.launching.processes import GraphProcesses, dds_environment, localhost_environment
+
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    os.environ.update(dds_environment())  # the player's participant as the nodes' (before rclpy makes it)
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     from tactile_descriptors_ros.bags.replay import Player, PlayOptions
     from tactile_descriptors_ros.core.robot import load_robot
-    from tactile_descriptors_ros.launching.graph import DRIVERS, build_graph
-    from tactile_descriptors_ros.launching.processes import GraphProcesses, localhost_environment
+    from tactile_descriptors_ros.launching.graph import build_graph
+    from tactile_descriptors_ros.nodes.window_node import frames_matched
 
     n = len(trial_start_ns)
     if not (n == len(train) == len(class_names) == len(trial_end_ns)) or n == 0:
         raise ConfigError("one start, end, split flag and class name per trial are needed")
     rob = load_robot(robot)
-    graph = [s for s in build_graph(rob) if s.executable not in DRIVERS]
+    # What the replay checks: the window node and the classifier, nothing else on the frames
+    replayed = ("window_node", "classifier_node")
+    graph = [s for s in build_graph(rob) if s.executable in replayed]
     windows = [s for s in graph if s.executable == "window_node"]
     classifiers = [s for s in graph if s.executable == "classifier_node"]
     if len(windows) != 1 or len(classifiers) != 1:
@@ -206,7 +223,7 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
                  **dict(classifier_parameters or {})},
     }
     specs = [s for s in build_graph(rob, model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
-             if s.executable not in DRIVERS]
+             if s.executable in replayed]
     procs = GraphProcesses(specs, env=localhost_environment(), output=None, keep_lines=400)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -251,7 +268,7 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
         # after frames went out never receives them, so both sides' counts must show the match.
         wait("window node subscribed to the frames",
              lambda: all(p.get_subscription_count() > 0 for p in player.publishers.values())
-             and int(teacher.diag.get("window", {}).get(f"{body_part}_publishers", "0")) > 0)
+             and frames_matched(teacher.diag.get("window", {}), body_part))
         wait("classifier node subscribed to labels and publishing predictions",
              lambda: teacher.label_pub.get_subscription_count() > 0
              and teacher.node.count_publishers("/tactile/prediction") > 0
@@ -332,7 +349,8 @@ def run_live_replay(bag: str | os.PathLike[str], trial_start_ns: Sequence[int], 
                            + ", ".join(f"{k} {v}" for k, v in sorted(bad.items())))
     except BagError as exc:
         tails = "\n".join(f"[{node.spec.name}] {line}" for node in procs.nodes for line in node.lines[-12:])
-        raise BagError(f"{exc}\nlast lines of the nodes:\n{tails}\nlast diagnostics: {teacher.diag}") from None
+        raise BagError(f"{exc}{_nothing_delivered(player, teacher.diag.get('window', {}), body_part)}\n"
+                       f"last lines of the nodes:\n{tails}\nlast diagnostics: {teacher.diag}") from None
     finally:
         run.wall_s = time.monotonic() - t0
         stop.set()

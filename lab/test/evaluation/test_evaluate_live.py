@@ -110,6 +110,22 @@ def test_imported_stream_stays_in_order_into_the_release_gap(biotac_data_dir, tm
 
 
 @pytest.mark.ros
+def test_a_replay_the_matched_window_node_received_nothing_of_says_so():
+    """The error names a delivery stall only when frames went out, both sides matched and none arrived."""
+    from types import SimpleNamespace
+
+    from tactile_descriptors_lab.evaluation.live_replay import _nothing_delivered
+
+    player = SimpleNamespace(report=SimpleNamespace(published={"/tactile/index/frames": 412}))
+    stalled = {"messages_received": "0", "index_publishers": "1"}
+    assert "received none of the 412 frames messages sent" in _nothing_delivered(player, stalled, "index")
+    assert _nothing_delivered(player, {**stalled, "messages_received": "3"}, "index") == ""
+    assert _nothing_delivered(player, {**stalled, "index_publishers": "0"}, "index") == ""  # discovery, not delivery
+    assert _nothing_delivered(SimpleNamespace(report=SimpleNamespace(published={"/f": 0})), stalled, "index") == ""
+    assert _nothing_delivered(None, stalled, "index") == ""
+
+
+@pytest.mark.ros
 @pytest.mark.realdata
 @pytest.mark.slow
 def test_evaluate_live_gives_the_offline_descriptors_and_predictions(biotac_data_dir, tmp_path):
