@@ -401,21 +401,20 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             executor.add_node(node)
         spinner = threading.Thread(target=lambda: _spin(executor, stop), daemon=True)
         spinner.start()
-        # Discovery matches each side of a topic on its own, and a best-effort subscription drops what a
-        # publisher it does not know yet sends: the probe starts once its writers count the window nodes'
-        # subscriptions and the window nodes report every body part's frames matched (their diagnostics).
 
-        def matched() -> bool:
+        def frames_ready() -> bool:
+            """Both sides of every frames topic matched: discovery matches each side on its own, and a
+            best-effort subscription drops what a publisher it does not know yet sends.  The probe's writers
+            count the window nodes' subscriptions; the window nodes' diagnostics count the probe."""
             with lock:
                 reports = list(diagnostics.values())
             return (all(p.get_subscription_count() > 0 for p in pubs)
-                    and all(any(frames_matched(r, part) for r in reports) for part in by_part)
-                    and probe.count_publishers(PREDICTION_TOPIC) > 0)
+                    and all(any(frames_matched(r, part) for r in reports) for part in by_part))
 
         deadline = time.monotonic() + discovery_timeout_s
-        while time.monotonic() < deadline and not matched():
+        while time.monotonic() < deadline and not (frames_ready() and probe.count_publishers(PREDICTION_TOPIC) > 0):
             time.sleep(0.1)
-        if not matched():
+        if not frames_ready():
             tail = "; ".join(f"{n.spec.name}: {' | '.join(n.lines[-3:]) or 'no output'}"
                              for n in graph.nodes) if graph else ""
             raise RuntimeError(f"window_node did not subscribe to the frames within {discovery_timeout_s} s"
