@@ -161,6 +161,19 @@ def test_power_spectrum_of_an_odd_length_is_that_of_its_last_fast_length(dtype):
     assert power_spectrum(x, out=out) is out and np.array_equal(out, got)
 
 
+@pytest.mark.parametrize("shape", [(116, 3, 2000), (7, 5, 501), (1, 4400)])
+def test_power_spectrum_of_many_signals_is_each_signal_s_own_bit_for_bit(shape):
+    """The compiled path transforms the signals in blocks (a NAO window's 348 in blocks of 32): each signal's
+    spectrum is the one it has alone, which is what the evaluation computes cell by cell."""
+    n = spectral_length(shape[-1])
+    x = np.random.default_rng(11).integers(-512, 512, shape).astype(np.int32)
+    got = power_spectrum(x)
+    rows = x.reshape(-1, shape[-1])
+    want = np.stack([power_spectrum(r[None])[0] for r in rows]).reshape(got.shape)
+    assert np.array_equal(got, want)
+    np.testing.assert_allclose(got.sum(-1), x[..., shape[-1] - n:].astype(np.float64).var(axis=-1), rtol=1e-12)
+
+
 def test_band_powers_equal_scipy_periodogram_sums():
     rng = np.random.default_rng(1)
     x = rng.normal(0, 1, (3, 200)) + 5
