@@ -56,7 +56,7 @@ from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
 from ..core.groups import check_groups, groups_of_channels, selection_name
 from ..core.robot import check_blocks, load_robot, select_body_parts
-from ..core.windowing import CellChunk, PartChunk, Window, Windower
+from ..core.windowing import CellChunk, PartChunk, Window, Windower, rehearsal_window
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
@@ -171,6 +171,8 @@ class WindowNode(StopsQuietly, Node):
         self._frames_age_ms: deque[float] = deque(maxlen=5000)
         self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
+        self._sample_types: tuple[np.dtype, np.dtype] | None = None  # of the first frames: the rehearsal's
+        self.rehearsal_ms: float | None = None  # how long the rehearsal of the describing path took (_rehearse)
         self._cut_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
         # served cells as sorted arrays (a message's runs are checked at once): id, body part, batch numbers
@@ -250,6 +252,9 @@ class WindowNode(StopsQuietly, Node):
         now_ns = time.time_ns()
         for sub_msg, handle in self._drain(msg):
             got = handle(sub_msg)
+            if self._sample_types is None and len(got):
+                first = got if isinstance(got, PartChunk) else got[0][1]
+                self._sample_types = (first.vibration.dtype, first.deformation.dtype)
             if isinstance(got, PartChunk):
                 took |= self._buffer(items)
                 items = []
@@ -270,6 +275,36 @@ class WindowNode(StopsQuietly, Node):
             if windows:
                 self._cut_ms.append(1e3 * (time.perf_counter() - started))
             self._emit(windows)
+        if self.rehearsal_ms is None and self._sample_types is not None and self.kernel_ready.is_set():
+            self._rehearse(*self._sample_types)
+
+    def _rehearse(self, vibration_dtype: np.dtype, deformation_dtype: np.dtype) -> None:
+        """Describe a window of noise in the live data's sample types once, here, before the first real one.
+
+        The first description on a thread pages in its buffers, plans its
+        transforms and loads the compiled code for the data's types: the
+        NAO's first window took 33-62 ms to describe instead of 10.  The
+        rehearsal (:func:`~..core.windowing.rehearsal_window`, the node's
+        window length and feature groups) takes that cost at the first
+        frames instead, which queue meanwhile.  Its descriptor is not
+        published; its layout is (:meth:`_announce_layout`).
+        """
+        started = time.perf_counter()
+        cut_ms = 0.0
+        try:
+            window = rehearsal_window(self.robot, self.windower.length_ns / 1e9, vibration_dtype, deformation_dtype)
+            cut_ms = 1e3 * (time.perf_counter() - started)
+            desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
+                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n,
+                                   stacks=window.stacks)
+            # the labels depend on the robot and the parameters only: a classifier has them before the first
+            # descriptor (it holds a descriptor until its layout comes)
+            self._announce_layout(desc)
+        except (ConfigError, SignalError) as exc:  # a warm-up only: the real windows report their own faults
+            self.get_logger().warning(f"describing path not rehearsed: {exc}")
+        self.rehearsal_ms = 1e3 * (time.perf_counter() - started)
+        self.get_logger().info(f"describing path rehearsed in {self.rehearsal_ms:.0f} ms (window of noise made "
+                               f"and cut in {cut_ms:.0f} ms)")
 
     def _buffer(self, data: list[tuple[int, CellChunk]] | PartChunk) -> bool:
         """Hand a message's chunks (one per cell, or a body part's runs) to the windower; False if there are none."""
@@ -431,13 +466,7 @@ class WindowNode(StopsQuietly, Node):
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
             return
         eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
-        layout = self._layout_ids.get(desc.labels)
-        if layout is None:  # hashing a NAO layout's 917 labels takes 0.2 ms; it changes only with the parameters
-            layout = self._layout_ids[desc.labels] = layout_id(desc.labels)
-        if layout not in self.layouts_published:  # before the first descriptor that names it
-            self.layout_pub.publish(descriptor_layout_to_msg(desc, frame_id=self.params["frame_id"],
-                                                             stamp_ns=self.get_clock().now().nanoseconds))
-            self.layouts_published.add(layout)
+        layout = self._announce_layout(desc)
         msg = descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid, layout=layout)
         self.pub.publish(msg)
         self._describe_ms.append(1e3 * (time.perf_counter() - started))
@@ -449,12 +478,25 @@ class WindowNode(StopsQuietly, Node):
                 f"exploration {eid}: {(window.end_ns - window.start_ns) / 1e9:.2f} s, "
                 f"contact {', '.join(touching) or 'none'}")
 
+    def _announce_layout(self, desc) -> str:
+        """The id of ``desc``'s labels; their ``DescriptorLayout`` is published before the first descriptor that
+        names it (latched), once per layout."""
+        layout = self._layout_ids.get(desc.labels)
+        if layout is None:  # hashing a NAO layout's 917 labels takes 0.2 ms; it changes only with the parameters
+            layout = self._layout_ids[desc.labels] = layout_id(desc.labels)
+        if layout not in self.layouts_published:
+            self.layout_pub.publish(descriptor_layout_to_msg(desc, frame_id=self.params["frame_id"],
+                                                             stamp_ns=self.get_clock().now().nanoseconds))
+            self.layouts_published.add(layout)
+        return layout
+
     def _status(self) -> Status:
         faults = dict(self.faults)
         faults.update({f"windower_{k}": v for k, v in self.windower.faults.items()})
         values: dict = {"descriptors_published": self.descriptors_published,
                         "kernel": self.kernel_info["accelerator"] if self.kernel_info else "warming up",
                         "windows_held_at_start": self.windows_held_at_start,
+                        "rehearsal_ms": -1.0 if self.rehearsal_ms is None else round(self.rehearsal_ms, 1),
                         "messages_received": self.frames_taken,
                         "frames_per_callback": self.frames_taken / self.batches if self.batches else 0.0,
                         "frames_messages_taken": self.frames_taken,

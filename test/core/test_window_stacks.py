@@ -197,3 +197,24 @@ def test_stack_cells_lays_out_an_offline_window_as_the_windower_does():
                                      vibration_t_ns=cells[one].vibration_t_ns[1:])
     assert stack_cells(ROBOT, short) is None  # one cell shorter than the others
     assert stack_cells(NAO, cells) is None  # not every cell of that robot
+
+
+@pytest.mark.parametrize("robot_name,dtypes", [("nao", (np.int32, np.int32)), ("shadow_hand", (np.int64, np.float64))])
+def test_rehearsal_window_is_a_live_window_of_every_cell_in_contact(robot_name, dtypes):
+    """The window node's rehearsal: every cell of the robot in one set of stacks, the window's length, the data's
+    sample types, each cell on its own clock, and a description with every cell in contact and every value finite."""
+    robot = load_robot(robot_name)
+    w = windowing.rehearsal_window(robot, 2.0, *dtypes)
+    assert w.end_ns - w.start_ns == 2_000_000_000 and w.mode == "fixed"
+    assert sorted(w.cells) == sorted(c.id for p in robot.body_parts for c in p.cells)
+    assert w.stacks is not None and w.stacks.vibration.dtype == dtypes[0] and w.stacks.deformation.dtype == dtypes[1]
+    ct = robot.cell_types[robot.body_parts[0].cell_type]
+    assert w.stacks.vibration.shape[-1] == round(2.0 * ct.vibration.rate_hz)
+    assert np.unique(w.stacks.vibration_t_ns[:, 0]).size == len(w.cells)  # a clock per cell, as a driver stamps
+    d = robot.descriptor
+    desc = describe_blocks(robot, w.cells, stacks=w.stacks, block_s=d.block_s, block_hop_s=d.block_hop_s,
+                           groups=d.groups)
+    assert [bp.cells_in_contact for bp in desc.body_parts] == [len(p.cells) for p in robot.body_parts]
+    assert np.isfinite(desc.values).all()
+    again = windowing.rehearsal_window(robot, 2.0, *dtypes)
+    assert np.array_equal(again.stacks.vibration, w.stacks.vibration)  # seeded: the same noise every time

@@ -44,17 +44,14 @@ def test_layouts_resolve_hold_and_expire():
     assert lay.of(late[2]) is None
 
 
-@pytest.mark.ros
-def test_the_window_node_latches_the_layout_and_sends_descriptors_without_labels(ros_context):
-    """A subscriber that starts after the first descriptor still gets the layout (transient local); a
-    descriptor names it by id, and carries about a quarter of the bytes it did with the labels inline."""
+def _window_node_and_io(ros_context):
+    """A Shadow Hand window node taking reliable frames, and a node ``io`` that publishes the index finger's frames
+    (``pub``) and collects the descriptors (``got``); both in ``ex``, once matched and the kernel ready."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rclpy.serialization import serialize_message
 
-    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor, DescriptorLayout
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, Descriptor
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
     w = WindowNode(context=ros_context, parameter_overrides=[
@@ -66,6 +63,19 @@ def test_the_window_node_latches_the_layout_and_sends_descriptors_without_labels
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(w)
     ex.add_node(io)
+    return w, io, got, pub, ex
+
+
+@pytest.mark.ros
+def test_the_window_node_latches_the_layout_and_sends_descriptors_without_labels(ros_context):
+    """A subscriber that starts after the first descriptor still gets the layout (transient local); a
+    descriptor names it by id, and carries about a quarter of the bytes it did with the labels inline."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.serialization import serialize_message
+
+    from tactile_descriptors_msgs.msg import Descriptor, DescriptorLayout
+
+    w, io, got, pub, ex = _window_node_and_io(ros_context)
     try:
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and w.kernel_ready.is_set(), 60)
         for m in BiotacStream().exploration(40.0):
@@ -89,6 +99,38 @@ def test_the_window_node_latches_the_layout_and_sends_descriptors_without_labels
         sizes = len(serialize_message(d)), len(serialize_message(inline))
         assert sizes[0] < 0.3 * sizes[1], sizes
         print(f"Descriptor of the Shadow Hand: {sizes[0]} bytes, {sizes[1]} with its labels inline")
+    finally:
+        ex.shutdown()
+        w.destroy_node()
+        io.destroy_node()
+
+
+@pytest.mark.ros
+def test_the_window_node_announces_its_layout_at_its_first_frames(ros_context):
+    """At its first frames the window node rehearses its describing path (a window of noise, described, not
+    published) and publishes the layout then: a classifier holds the labels before the first descriptor, which
+    names that same layout; one layout message in all."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import DescriptorLayout
+
+    w, io, got, pub, ex = _window_node_and_io(ros_context)
+    layouts: list = []
+    io.create_subscription(DescriptorLayout, "tactile/descriptor_layout", layouts.append,
+                           QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                      durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    try:
+        assert spin_until(ex, lambda: pub.get_subscription_count() >= 1 and w.kernel_ready.is_set(), 60)
+        stream = BiotacStream()
+        pub.publish(stream.batch(2.0, 40.0))  # 0.1 s of frames: no window closes
+        assert spin_until(ex, lambda: layouts, 30), "no layout at the first frames"
+        assert w.rehearsal_ms is not None and w.frames_taken == 1 and w.descriptors_published == 0 and not got
+        for m in stream.exploration(40.0):
+            pub.publish(m)
+            ex.spin_once(timeout_sec=0.005)
+        assert spin_until(ex, lambda: got, 30)
+        assert [lay.layout_id for lay in layouts] == [got[0].layout_id] == [layout_id(layouts[0].labels)]
+        assert len(w.layouts_published) == 1
     finally:
         ex.shutdown()
         w.destroy_node()

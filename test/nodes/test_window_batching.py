@@ -249,6 +249,9 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     assert single.largest_batch == 1 and single.batches == n_msgs
     assert batched.faults == single.faults and batched.windower.faults == single.windower.faults
     assert not +batched.faults  # every run in sequence, every cell known (no count above zero)
+    # each rehearsed its describing path at its first frames (kernel ready), and published nothing for it
+    assert batched.rehearsal_ms is not None and single.rehearsal_ms is not None
+    assert batched.descriptors_published == single.descriptors_published == 3
     for a, b in zip(out["desc_batched"], out["desc_single"]):
         assert (a.window_start, a.window_end) == (b.window_start, b.window_end)
         assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)

@@ -538,6 +538,11 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         "e2e": e2e_summary, "wait": _summary(wait), "processing": _summary(proc),
         "e2e_ms": [round(v, 2) for v in e2e],  # in arrival order: a slow start shows here
         "wait_ms": [round(v, 2) for v in wait], "processing_ms": [round(v, 2) for v in proc],
+        # the same predictions' window node and classifier stages (those whose descriptor the probe saw)
+        "window_node_ms": [round(v, 2) for v in window_stage], "classifier_ms": [round(v, 2) for v in classifier_stage],
+        # each window node's rehearsal of its describing path at its first frames (nodes/window_node.py)
+        "rehearsal_ms": {name: float(values["rehearsal_ms"]) for name, values in diagnostics.items()
+                         if "rehearsal_ms" in values},
         "parts_ms": {
             "design_wait": _summary(wait),
             "frames_age_at_window_node": _node_summary(node_timing, "frames_age"),

@@ -35,6 +35,12 @@ def test_latency_through_the_node_graph_in_process():
     assert parts["cut"]["n"] >= 1 and 0.0 < parts["cut"]["median_ms"] <= parts["cut"]["max_ms"]
     for total, waited in zip(res["e2e_ms"], res["wait_ms"]):
         assert total >= waited
+    # per prediction, its window node and classifier stages add up to its processing
+    assert len(res["window_node_ms"]) == len(res["classifier_ms"]) == e2e["n"]
+    for processed, node, classified in zip(res["processing_ms"], res["window_node_ms"], res["classifier_ms"]):
+        assert processed == pytest.approx(node + classified, abs=0.03)
+    # the window node rehearsed its describing path at its first frames, before its first window
+    assert len(res["rehearsal_ms"]) == 1 and next(iter(res["rehearsal_ms"].values())) > 0.0
     assert res["settings"]["batch_s"] == 0.05 and res["settings"]["messages_per_s"] == pytest.approx(140)
     # one prediction per window: the last prediction of a window is the only one
     assert res["complete"]["n"] == e2e["n"]
