@@ -272,6 +272,23 @@ def test_arow_first_update_by_hand():
     assert pa.predict(x) == "b"
 
 
+def test_arow_makes_its_covariance_at_the_first_update_not_for_predicting(tmp_path):
+    """A new AROW model predicts without its n x n covariance (a NAO descriptor's is 918 x 918, 5 ms to make);
+    the first update makes it, as the identity it starts from, and a saved model holds it either way."""
+    pa = PassiveAggressive(2, update="arow", r_per_feature=1.0)
+    pa.add_class("a")
+    assert pa.predict(np.array([1.0, 2.0])) == "a" and pa._covariance is None
+    pa.partial_fit(np.array([1.0, 2.0]), "b")
+    assert pa._covariance is not None and pa.covariance.shape == (3, 3)
+    fresh = OnlineClassifier(["x/1", "x/2"], update="arow")
+    fresh.observe(np.array([1.0, 2.0]))
+    fresh.predict(np.array([1.0, 2.0]))
+    assert fresh.pa._covariance is None
+    save_model(fresh, tmp_path / "m.json")
+    np.testing.assert_array_equal(load_model(tmp_path / "m.json").pa.covariance, np.eye(3))
+    assert PassiveAggressive(2, update="max_loss").covariance is None
+
+
 def test_arow_is_open_ended_and_learns_separable_classes():
     rng = np.random.default_rng(0)
     centres = rng.normal(size=(6, 8)) * 4
