@@ -52,6 +52,7 @@ import numpy as np
 from rclpy.node import Node
 
 from ..codecs.sequence import SequenceEvent, SequenceTracker
+from ..core.aggregation import RobotDescriptor
 from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
 from ..core.groups import check_groups, groups_of_channels, selection_name
@@ -294,9 +295,7 @@ class WindowNode(StopsQuietly, Node):
         try:
             window = rehearsal_window(self.robot, self.windower.length_ns / 1e9, vibration_dtype, deformation_dtype)
             cut_ms = 1e3 * (time.perf_counter() - started)
-            desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
-                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n,
-                                   stacks=window.stacks)
+            desc = self._describe(window)
             # the labels depend on the robot and the parameters only: a classifier has them before the first
             # descriptor (it holds a descriptor until its layout comes)
             self._announce_layout(desc)
@@ -458,9 +457,7 @@ class WindowNode(StopsQuietly, Node):
     def _publish(self, window: Window) -> None:
         started = time.perf_counter()
         try:
-            desc = describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
-                                   layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n,
-                                   stacks=window.stacks)
+            desc = self._describe(window)
         except SignalError as exc:
             self.faults["describe_failed"] += 1
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
@@ -478,7 +475,13 @@ class WindowNode(StopsQuietly, Node):
                 f"exploration {eid}: {(window.end_ns - window.start_ns) / 1e9:.2f} s, "
                 f"contact {', '.join(touching) or 'none'}")
 
-    def _announce_layout(self, desc) -> str:
+    def _describe(self, window: Window) -> RobotDescriptor:
+        """This node's descriptor of ``window``: its feature groups, layout, blocks and contact threshold."""
+        return describe_blocks(self.robot, window.cells, block_s=self.block_s, block_hop_s=self.block_hop_s,
+                               layout=self.layout, groups=self.groups, force_threshold_n=self.force_threshold_n,
+                               stacks=window.stacks)
+
+    def _announce_layout(self, desc: RobotDescriptor) -> str:
         """The id of ``desc``'s labels; their ``DescriptorLayout`` is published before the first descriptor that
         names it (latched), once per layout."""
         layout = self._layout_ids.get(desc.labels)
