@@ -1126,6 +1126,40 @@ class Windower:
         self._trim()
         return out
 
+    def closing_exploration(self) -> tuple[int, int, int] | None:
+        """The window the open exploration is cut as if its release holds: ``(start_ns, end_ns, exploration_id)``.
+
+        While every cell has stayed below the release threshold since
+        ``end_ns`` and the release time (``release_s``) runs, the exploration
+        can only end as ``[start_ns, end_ns)``, or go on if a cell touches
+        again before ``end_ns + release_s``.  None otherwise: no open
+        exploration, a cell still touching, a window already cut at
+        ``max_duration_s``, one shorter than ``min_duration_s`` (it would be
+        dropped), or fixed mode.
+        """
+        if self.mode != "exploration" or self._onset_ns is None or self._emitted_current \
+                or self._released_since is None or self._released_since - self._onset_ns < self.min_ns:
+            return None
+        return self._onset_ns, self._released_since, self._exploration_id
+
+    def cut_ahead(self) -> Window | None:
+        """The window of :meth:`closing_exploration` (None without one), cut now from the samples buffered.
+
+        The same cut :meth:`poll` makes when the release is decided, so the
+        two are equal unless samples inside the window arrive in between
+        (:func:`same_window` tells); the faults the cut finds (gaps, invalid
+        samples) are not counted here but by that cut, once.
+        """
+        key = self.closing_exploration()
+        if key is None:
+            return None
+        counted = self.faults.copy()
+        try:
+            return self._make_window(key[0], key[1], key[2], "exploration")
+        finally:
+            self.faults.clear()
+            self.faults.update(counted)
+
     def flush(self) -> list[Window]:
         """End of stream: close an open exploration (if long enough)."""
         if self.mode == "exploration" and self._onset_ns is not None and not self._emitted_current \

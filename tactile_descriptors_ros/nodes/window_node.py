@@ -38,6 +38,12 @@ instead) and
 samples copied out of its buffers) and ``describe_ms_*`` (window cut to
 descriptor published), median, p95 and max over the last messages and windows.
 
+In exploration mode an exploration's window is described during its release
+time (``window.describe_ahead``, :mod:`~tactile_descriptors_ros.core.ahead`):
+when the release is decided and the window cut then holds the same samples,
+that descriptor is published at once (``described_ahead_used``; the cost of
+those descriptions is ``describe_ahead_ms_*``).
+
 Topics, parameters and QoS: ``docs/nodes.md``.
 """
 
@@ -53,6 +59,7 @@ from rclpy.node import Node
 
 from ..codecs.sequence import SequenceEvent, SequenceTracker
 from ..core.aggregation import RobotDescriptor
+from ..core.ahead import DescribeAhead
 from ..core.blocks import describe_blocks
 from ..core.fast import warm_up
 from ..core.groups import check_groups, groups_of_channels, selection_name
@@ -112,6 +119,8 @@ class WindowNode(StopsQuietly, Node):
         self.windower = Windower(self.robot, mode=params["window.mode"], **_windower_settings(params))
         params.on_set("windower", self._retune_windower)
         self.force_threshold_n = self.windower.onset_n
+        # an exploration's window is described while its release time runs (core/ahead.py)
+        self.ahead = DescribeAhead(self._descriptor_msg) if params["window.describe_ahead"] else None
         self.id_stride = params["exploration_id_stride"]
         self.id_offset = params["exploration_id_offset"]
         if self.id_offset >= self.id_stride and self.id_stride > 1:
@@ -172,6 +181,7 @@ class WindowNode(StopsQuietly, Node):
         self._frames_age_ms: deque[float] = deque(maxlen=5000)
         self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
+        self._ahead_ms: deque[float] = deque(maxlen=500)
         self._sample_types: tuple[np.dtype, np.dtype] | None = None  # of the first frames: the rehearsal's
         self.rehearsal_ms: float | None = None  # how long the rehearsal of the describing path took (_rehearse)
         self._cut_ms: deque[float] = deque(maxlen=500)
@@ -232,6 +242,8 @@ class WindowNode(StopsQuietly, Node):
         def apply() -> None:
             self.windower.retune(**settings)
             self.force_threshold_n = self.windower.onset_n
+            if self.ahead is not None:  # described with the old contact threshold
+                self.ahead.clear()
 
         return apply
 
@@ -276,6 +288,10 @@ class WindowNode(StopsQuietly, Node):
             if windows:
                 self._cut_ms.append(1e3 * (time.perf_counter() - started))
             self._emit(windows)
+            if self.ahead is not None and self.rehearsal_ms is not None and not self.held_windows:
+                started = time.perf_counter()
+                if self.ahead.offer(self.windower):
+                    self._ahead_ms.append(1e3 * (time.perf_counter() - started))
         if self.rehearsal_ms is None and self._sample_types is not None and self.kernel_ready.is_set():
             self._rehearse(*self._sample_types)
 
@@ -457,14 +473,12 @@ class WindowNode(StopsQuietly, Node):
     def _publish(self, window: Window) -> None:
         started = time.perf_counter()
         try:
-            desc = self._describe(window)
+            made = self.ahead.take(window) if self.ahead is not None else None
+            desc, msg = made if made is not None else self._descriptor_msg(window)
         except SignalError as exc:
             self.faults["describe_failed"] += 1
             self.get_logger().error(f"window {window.start_ns}..{window.end_ns}: {exc}")
             return
-        eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
-        layout = self._announce_layout(desc)
-        msg = descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid, layout=layout)
         self.pub.publish(msg)
         self._describe_ms.append(1e3 * (time.perf_counter() - started))
         self.descriptors_published += 1
@@ -472,8 +486,16 @@ class WindowNode(StopsQuietly, Node):
         if window.mode == "exploration":
             touching = [bp.name for bp in desc.body_parts if bp.contact]
             self.get_logger().info(
-                f"exploration {eid}: {(window.end_ns - window.start_ns) / 1e9:.2f} s, "
+                f"exploration {msg.exploration_id}: {(window.end_ns - window.start_ns) / 1e9:.2f} s, "
                 f"contact {', '.join(touching) or 'none'}")
+
+    def _descriptor_msg(self, window: Window) -> tuple[RobotDescriptor, object]:
+        """The descriptor of ``window`` and its ``Descriptor`` message (its layout announced first)."""
+        desc = self._describe(window)
+        eid = window.exploration_id * self.id_stride + self.id_offset if window.exploration_id else 0
+        layout = self._announce_layout(desc)
+        return desc, descriptor_to_msg(desc, window, frame_id=self.params["frame_id"], exploration_id=eid,
+                                       layout=layout)
 
     def _describe(self, window: Window) -> RobotDescriptor:
         """This node's descriptor of ``window``: its feature groups, layout, blocks and contact threshold."""
@@ -507,7 +529,10 @@ class WindowNode(StopsQuietly, Node):
                         "largest_frames_batch": self.largest_batch,
                         "frames_not_host_time": self.frames_not_host_time,
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
-        for name, samples in (("frames_age", self._frames_age_ms), ("cut", self._cut_ms), ("describe", self._describe_ms)):
+        if self.ahead is not None:
+            values.update({f"described_ahead_{k}": v for k, v in self.ahead.counts().items()})
+        for name, samples in (("frames_age", self._frames_age_ms), ("cut", self._cut_ms), ("describe", self._describe_ms),
+                              ("describe_ahead", self._ahead_ms)):
             if samples:
                 arr = np.fromiter(samples, np.float64, len(samples))
                 values.update({f"{name}_ms_p50": float(np.median(arr)), f"{name}_ms_p95": float(np.percentile(arr, 95)),

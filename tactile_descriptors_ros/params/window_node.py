@@ -46,6 +46,9 @@ WINDOW_NODE = NodeSchema("window_node", join(
     _windower("window.max_duration_s", "longest exploration window", low=0.001, robot="window.max_duration_s"),
     _windower("window.release_s", "force below the release threshold this long ends an exploration", low=0.0,
               high=60.0, robot="window.release_s"),
+    Param("window.describe_ahead", "bool", "describe an exploration's window while its release time runs, so its "
+          "descriptor leaves when the release is decided (the same bits; false: described after the decision)",
+          default=True),
     _windower("window.lateness_s", "wait for late cells after a fixed window's end", low=0.0, high=60.0,
               default=0.05),
     _windower("contact.force_threshold_n", "contact gate F_t (eq. 13, 27): a cell is in contact at or above it; "

@@ -511,10 +511,13 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     faults: dict[str, int] = {}
     per_callback = []
     node_timing: dict[str, dict[str, float]] = {}
+    ahead: dict[str, int] = {}
     for name, values in diagnostics.items():
         for key, value in values.items():
             if key.startswith("fault_"):
                 faults[key[6:]] = faults.get(key[6:], 0) + int(float(value))
+            elif key.startswith("described_ahead_"):
+                ahead[key[16:]] = ahead.get(key[16:], 0) + int(float(value))
         if "frames_per_callback" in values:
             per_callback.append(float(values["frames_per_callback"]))
         node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "cut_", "frames_age_"))}
@@ -549,6 +552,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             "window_node": _summary(window_stage),
             "cut": _node_summary(node_timing, "cut"),
             "describe": _node_summary(node_timing, "describe"),
+            # explorations: described during the release time, off the path after the decision (core/ahead.py)
+            "describe_ahead": _node_summary(node_timing, "describe_ahead"),
             "classifier": _summary(classifier_stage),
         },
         "complete": _summary([(arr - ref) / 1e6 for ref, arr in complete.items()]),
@@ -562,6 +567,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         "window_cpu_us_per_message": 1e6 * window_cpu_s / n_messages if window_cpu_s and n_messages else None,
         "window_cpu_fraction_of_core": window_cpu_s / (n_batches * batch_s) if window_cpu_s else None,
         "window_faults": faults,
+        # windows described ahead: used (published at the decision), changed (described again), discarded
+        "described_ahead": ahead,
         "frames_per_callback": float(np.mean(per_callback)) if per_callback else None,
         "per_message": per_message,
         "load_average": {"before": list(load_before), "after": list(os.getloadavg())},

@@ -78,6 +78,9 @@ def test_exploration_latency_is_timed_from_the_release_decision():
         assert total == pytest.approx(waited + processed, abs=0.02) and processed > 0.0
         assert waited > 0.0  # the batch holding the release decision goes out after its samples were taken
     assert res["target_met"] == (res["e2e"]["p95_ms"] <= 20.0)
+    # the window node's descriptions made during the release time (how many depends on how far behind it ran)
+    ahead = res["described_ahead"]
+    assert set(ahead) == {"used", "changed", "discarded"} and ahead["used"] + ahead["changed"] <= res["predictions"]
 
 
 @pytest.mark.ros

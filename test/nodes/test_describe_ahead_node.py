@@ -1,0 +1,76 @@
+"""The window node describes an exploration's window during its release time and publishes the same bits."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from node_helpers import spin_until
+
+pytestmark = pytest.mark.ros
+
+
+def test_window_node_publishes_the_exploration_described_ahead_with_the_same_values(ros_context):
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+    from tactile_descriptors_ros.streams.frames import SkinFrame
+    from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
+
+    part = load_robot("nao").body_part("left_hand")
+    common = [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),
+              Parameter("window.mode", value="exploration"), Parameter("window.min_duration_s", value=0.5),
+              Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
+    ahead = WindowNode("wn_ahead", context=ros_context, parameter_overrides=common,
+                       cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_ahead"])
+    after = WindowNode("wn_after", context=ros_context,
+                       parameter_overrides=[*common, Parameter("window.describe_ahead", value=False)],
+                       cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_after"])
+    io = rclpy.create_node("io", context=ros_context)
+    pub = io.create_publisher(SkinPartFrames, "tactile/left_hand/frames",
+                              QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE))
+    out = {"desc_ahead": [], "desc_after": []}
+    for topic, got in out.items():
+        io.create_subscription(Descriptor, topic, got.append, 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (ahead, after, io):
+        ex.add_node(n)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= 2, 10)
+
+    rng = np.random.default_rng(2)
+    off_a = np.arange(50, dtype=np.int64) * 1_000_000
+    off_f = np.arange(12, dtype=np.int64) * 4_000_000
+    # 50 ms batches: 0.4 s released, 1.2 s touching (about 1.2 N), 0.5 s released
+    touching = [False] * 8 + [True] * 24 + [False] * 10
+    for k, touch in enumerate(touching):
+        runs = []
+        for cell in part.cells:
+            acc = np.clip(rng.normal(0, 12, (3, 50)) + [[0], [0], [256]], -512, 511).astype(np.int16)
+            force = rng.integers(300, 700, (3, 12)) if touch else rng.integers(0, 10, (3, 12))
+            frame = SkinFrame(5_000_000_000 + k * 50_000_000, acc, off_a, force.astype(np.uint16), off_f,
+                              np.zeros(0, np.uint16), sequence=k)
+            runs.append(SkinRun(cell.id, frame, np.zeros(3)))
+        pub.publish(skin_part_to_msg(pack_skin_part("left_hand", runs, force_n_per_count=0.0024)))
+        # taken one by one, as a node keeping up with its input takes them
+        assert spin_until(ex, lambda n=k + 1: ahead.frames_taken == after.frames_taken == n, 10)
+    assert spin_until(ex, lambda: ahead.frames_taken == after.frames_taken == len(touching)
+                      and len(out["desc_ahead"]) == len(out["desc_after"]) == 1, 20)
+    # described during the release time, and that descriptor published at the decision
+    assert ahead.ahead.counts() == {"used": 1, "changed": 0, "discarded": 0} and after.ahead is None
+    assert len(ahead._ahead_ms) == 1
+    a, b = out["desc_ahead"][0], out["desc_after"][0]
+    assert (a.window_start, a.window_end, a.exploration_id) == (b.window_start, b.window_end, b.exploration_id)
+    assert a.exploration_id == 1 and (b.window_end.sec * 10**9 + b.window_end.nanosec) \
+        - (b.window_start.sec * 10**9 + b.window_start.nanosec) == pytest.approx(1.2e9, abs=0.02e9)
+    assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
+    status = ahead._status()
+    assert status.values["described_ahead_used"] == 1 and status.values["describe_ahead_n"] == 1
+    for n in (ahead, after, io):
+        n.destroy_node()
