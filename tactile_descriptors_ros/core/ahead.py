@@ -11,7 +11,10 @@ either ends as that window or goes on because a cell touches again.
 :class:`DescribeAhead` describes that window then
 (:meth:`~.windowing.Windower.cut_ahead`), and when the windower closes the
 exploration it hands back the descriptor made ahead, instead of describing
-again, if the window cut at the decision holds the same samples, bit for bit
+again, if the window at the decision holds the same samples, bit for bit:
+the windower returns the very window it cut ahead when no sample inside
+its span and no new tare reached it since (a few array operations per
+buffer, without cutting again), and a window cut again is compared with it
 (:func:`same_window`).  Otherwise (samples of the window that arrived late,
 a new tare) the caller describes the final window as before: the descriptor
 published is the same bits either way, and a replayed bag gives the same
@@ -33,7 +36,7 @@ import numpy as np
 from ..errors import SignalError
 from .windowing import Window, Windower
 
-__all__ = ["DescribeAhead", "same_window"]
+__all__ = ["DescribeAhead", "same_bits", "same_window"]
 
 T = TypeVar("T")
 
@@ -44,15 +47,23 @@ _OWN = ("valid", "gap", "invalid_samples", "deformation_tare")
 _ALL = _STACKED + _OWN
 
 
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two arrays (views too) have one dtype and shape and the same bytes per element: floats are
+    compared as integers, so NaN equals its own bits and -0.0 differs from 0.0."""
+    if a.dtype != b.dtype or a.shape != b.shape:
+        return False
+    if a.dtype.kind in "fc":
+        as_int = np.dtype(f"u{a.dtype.itemsize // 2 if a.dtype.kind == 'c' else a.dtype.itemsize}")
+        a, b = a.view(as_int), b.view(as_int)
+    return bool(np.array_equal(a, b))
+
+
 def _same(x, y) -> bool:
-    """Same bits: arrays of one dtype and shape whose bytes are equal (NaN equals its own bits), or equal scalars."""
+    """Same bits (:func:`same_bits`) for arrays, equal values of one type else."""
+    if isinstance(x, np.ndarray) and isinstance(y, np.ndarray):
+        return same_bits(x, y)
     if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
-        if not (isinstance(x, np.ndarray) and isinstance(y, np.ndarray)) or x.dtype != y.dtype or x.shape != y.shape:
-            return False
-        if x.dtype.kind in "fc" and x.dtype.itemsize in (4, 8, 16):  # compared as integers: NaN, -0.0 by their bits
-            as_int = np.dtype(f"u{x.dtype.itemsize // 2 if x.dtype.kind == 'c' else x.dtype.itemsize}")
-            x, y = x.view(as_int), y.view(as_int)
-        return bool(np.array_equal(x, y))
+        return False
     return x is y or (x == y and type(x) is type(y))
 
 
@@ -164,7 +175,7 @@ class DescribeAhead(Generic[T]):
         self._key = self._window = self._result = None
         if ahead is None:  # described ahead without a result (it failed): describe it now
             return None
-        if same_window(ahead, window):
+        if window is ahead or same_window(ahead, window):  # the windower hands back the window it cut ahead
             self.used += 1
             return result
         self.changed += 1

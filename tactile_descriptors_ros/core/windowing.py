@@ -367,6 +367,7 @@ class _RowBuffer:
         self._plan: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last append_runs' positions
         self.last = np.zeros(n_rows, np.int64)  # newest stamp of each row (valid where ``has``)
         self.has = np.zeros(n_rows, bool)
+        self.added = np.zeros(n_rows, np.int64)  # samples appended to each row so far (Windower._held_since)
 
     @property
     def capacity(self) -> int:
@@ -413,6 +414,7 @@ class _RowBuffer:
         self.v[:, row, hi:hi + n] = values
         self.ok[row, hi:hi + n] = True if valid is None else valid
         self.hi[row] = hi + n
+        self.added[row] += n
         self.last[row] = t_ns[n - 1]
         self.has[row] = True
 
@@ -449,6 +451,7 @@ class _RowBuffer:
         if self.n_channels:
             self.v.reshape(self.n_channels, -1)[:, flat] = values
         self.hi += need
+        self.added += need
         has = counts > 0  # the newest stamp of each row: the last sample of its run
         self.last[rows[has]] = t_ns[np.cumsum(counts)[has] - 1]
         self.has[rows[has]] = True
@@ -472,6 +475,7 @@ class _RowBuffer:
         if not kernel.append_runs(self.t, self.v, self.ok, self.hi, self.last, self.has, rows, counts, t_ns, values,
                                   _NO_VALID if valid is None else valid, valid is not None):
             return False  # a row out of room: the numpy path makes room
+        self.added[rows] += counts  # every row takes at most one run
         self._plan = None  # no positions to share: a buffer given this one as ``like`` computes its own
         return True
 
@@ -483,6 +487,24 @@ class _RowBuffer:
         out = np.empty((4, self.lo.size), dtype=np.int64)
         kernel.cut_rows(self.t, self.ok, self.lo, self.hi, start_ns, end_ns, scan, out[0], out[1], out[2], out[3])
         return out
+
+    def added_inside(self, before: np.ndarray, start_ns: int, end_ns: int) -> bool:
+        """Whether any sample appended since :attr:`added` was ``before`` lies in ``[start_ns, end_ns)``.
+
+        Appended samples are a row's newest (moving rows down or growing
+        keeps their order, trimming drops the oldest), so each row's are its
+        last ``added - before``; looked at all at once, in whatever order
+        their stamps came."""
+        new = self.added - before
+        rows = np.flatnonzero(new)
+        if not rows.size:
+            return False
+        new, hi = new[rows], self.hi[rows]
+        if np.any(new > hi - self.lo[rows]):  # fewer held than appended: trimmed since (not in an open window)
+            return True
+        at = (hi - new)[:, None] + np.arange(int(new.max()))[None, :]
+        t = self.t[rows[:, None], np.minimum(at, (hi - 1)[:, None])]
+        return bool(np.any((at < hi[:, None]) & (t >= start_ns) & (t < end_ns)))
 
     def tails(self, rows: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The newest ``k`` samples of each of ``rows`` as 2-D arrays: stamps, first channel's values, and
@@ -715,6 +737,10 @@ class Windower:
         self._onset_ns: int | None = None
         self._emitted_current = False
         self._released_since: int | None = None
+        # the window cut_ahead cut last and each body part's buffers' ``added`` then, until the exploration closes
+        self._ahead: Window | None = None
+        self._ahead_marks: dict[str, list[np.ndarray]] = {}
+        self._ahead_cut_faults: Counter[str] = Counter()  # the faults its cut found, counted if it is handed back
         self._now_ns = 0  # the time of the current exploration step
         self._swept_ns: int | None = None  # the watermark the state machine has run to
         self._swept_key: tuple | None = None  # that watermark and the settings it was run with
@@ -1107,6 +1133,7 @@ class Windower:
         part.last_force[rows[upd]] = total[upd] / n[upd]
 
     def _reset_time(self) -> None:
+        self._ahead = None
         self._swept_ns = None
         self._swept_key = None
         self._resumed_ns = None
@@ -1145,20 +1172,29 @@ class Windower:
     def cut_ahead(self) -> Window | None:
         """The window of :meth:`closing_exploration` (None without one), cut now from the samples buffered.
 
-        The same cut :meth:`poll` makes when the release is decided, so the
-        two are equal unless samples inside the window arrive in between
-        (:func:`same_window` tells); the faults the cut finds (gaps, invalid
-        samples) are not counted here but by that cut, once.
+        The same cut :meth:`poll` makes when the release is decided.  When
+        the release is decided on this span and no sample has reached the
+        buffers inside it since, nor a new tare of one of its cells
+        (:meth:`_held_since`), :meth:`poll` returns this very window instead
+        of cutting it again; otherwise it cuts it again (which then differs
+        from this one unless the new samples were all invalid or the tare
+        the same; :func:`~.ahead.same_window` tells).  The faults the cut
+        finds (gaps, invalid samples) are counted once, when the
+        exploration closes.
         """
         key = self.closing_exploration()
         if key is None:
             return None
         counted = self.faults.copy()
         try:
-            return self._make_window(key[0], key[1], key[2], "exploration")
+            window = self._make_window(key[0], key[1], key[2], "exploration")
+            self._ahead_cut_faults = self.faults - counted
         finally:
             self.faults.clear()
             self.faults.update(counted)
+        self._ahead = window
+        self._ahead_marks = {name: [b.added.copy() for b in part.buffers] for name, part in self._parts.items()}
+        return window
 
     def flush(self) -> list[Window]:
         """End of stream: close an open exploration (if long enough)."""
@@ -1538,10 +1574,29 @@ class Windower:
 
     def _close_exploration(self, end_ns: int) -> Window | None:
         start = self._onset_ns
+        ahead, self._ahead = self._ahead, None
         if end_ns - start < self.min_ns:
             self.faults["exploration_too_short"] += 1
             return None
+        if ahead is not None and (ahead.start_ns, ahead.end_ns, ahead.exploration_id) == \
+                (start, end_ns, self._exploration_id) and self._held_since(ahead):
+            self.faults.update(self._ahead_cut_faults)  # what its cut found, counted as the cut it saves would
+            return ahead
         return self._make_window(start, end_ns, self._exploration_id, "exploration")
+
+    def _held_since(self, window: Window) -> bool:
+        """Whether cutting ``window`` (cut by :meth:`cut_ahead`) again would copy the same samples: no sample
+        appended to any buffer since lies inside its span, no body part's buffers are new, and each of its
+        cells has the tare it had.  The buffers are append-only between a clock jump's reset (which abandons
+        the exploration, :meth:`_reset_time`), and an open exploration's samples are never trimmed."""
+        marks = self._ahead_marks
+        if marks.keys() != self._parts.keys():
+            return False
+        for name, part in self._parts.items():
+            for buf, before in zip(part.buffers, marks[name]):
+                if buf.added_inside(before, window.start_ns, window.end_ns):
+                    return False
+        return all(_same_tare(cell.deformation_tare, self._cells[cid].tare) for cid, cell in window.cells.items())
 
     def _make_window(self, start: int, end: int, exploration_id: int, mode: str) -> Window:
         """The window ``[start, end)``: every cell's samples in it, as :class:`CellSignals` (copies).
@@ -1830,6 +1885,13 @@ def rehearsal_window(robot: RobotDescription, length_s: float, vibration_dtype: 
             extra=rng.uniform(0.0, 1.0, (len(ct.extra_channels), n * n_d)) if ct.extra_channels else None)
         windower.add_part(chunk)
     return windower.poll()[0]
+
+
+def _same_tare(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Whether two tares (arrays, or None) are the same bits: each message carries a fresh copy."""
+    if a is None or b is None:
+        return a is b
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
 def _aligned(*cuts: np.ndarray | None) -> bool:

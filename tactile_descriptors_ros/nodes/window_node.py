@@ -40,7 +40,7 @@ descriptor published), median, p95 and max over the last messages and windows.
 
 In exploration mode an exploration's window is described during its release
 time (``window.describe_ahead``, :mod:`~tactile_descriptors_ros.core.ahead`):
-when the release is decided and the window cut then holds the same samples,
+when the release is decided and the window still holds the same samples,
 that descriptor is published at once (``described_ahead_used``; the cost of
 those descriptions is ``describe_ahead_ms_*``).
 

@@ -10,7 +10,7 @@ import pytest
 from tactile_descriptors_ros.core.aggregation import CellSignals, describe_window
 from tactile_descriptors_ros.core.ahead import DescribeAhead, same_window
 from tactile_descriptors_ros.core.robot import load_robot
-from tactile_descriptors_ros.core.windowing import CellChunk, Windower, rehearsal_window
+from tactile_descriptors_ros.core.windowing import CellChunk, PartChunk, Windower, rehearsal_window
 
 MS = 1_000_000
 
@@ -180,3 +180,142 @@ def test_described_ahead_equals_described_after_on_random_touches(seed):
     without, *_ = _run(schedule, ahead=False, seed=seed)
     assert [(a, b, _bits(v)) for a, b, v in with_ahead] == [(a, b, _bits(v)) for a, b, v in without]
     assert keeper.used == len(without) >= 1
+
+
+def _nao_run(touching: list[bool], *, ahead: bool, seed: int = 0, tare_at: int | None = None,
+             gap_at: int | None = None):
+    """Every NAO body part's cells in 20 ms messages (accelerometer 1 kHz, force 250 Hz, the cells sampled
+    together, as the latency bench's frames), touching (about 1.2 N) or released per message round; polled after
+    each round as the window node does.
+
+    ``tare_at``: from that round on one cell reports another tare; ``gap_at``: that round's first 8 ms of
+    accelerometer samples are missing, every cell's.  Returns (windows, descriptors, windows cut ahead with the
+    rounds they were cut at, windower, DescribeAhead)."""
+    robot = load_robot("nao")
+    w = Windower(robot, mode="exploration", min_duration_s=0.5)
+    describe = _describe(robot)
+    keeper = DescribeAhead(describe)
+    rng = np.random.default_rng(seed)
+    wins, descs, cut_ahead = [], [], []
+    for k, touch in enumerate(touching):
+        t0 = 1_000_000_000 + k * 20 * MS
+        first = 0
+        for part in robot.body_parts:
+            ct = robot.cell_types[part.cell_type]
+            n = len(part.cells)
+            n_a = 12 if gap_at == k else 20
+            t_a = np.tile(t0 + np.arange(20 - n_a, 20, dtype=np.int64) * MS, n)
+            t_d = np.tile(t0 + np.arange(5, dtype=np.int64) * 4 * MS, n)
+            counts_a = np.full(n, n_a, np.int64)
+            vib = rng.integers(-300, 300, (len(ct.vibration.channels), n * n_a)).astype(np.int16)
+            force = rng.uniform(1.0, 1.4, n * 5) if touch else rng.uniform(0.0, 0.02, n * 5)
+            tare = np.zeros((n, len(ct.deformation.channels)))
+            if tare_at is not None and k >= tare_at and first == 0:
+                tare[0] = 3.0
+            w.add_part(PartChunk(
+                np.array([c.id for c in part.cells], np.int64), counts_a, np.full(n, 5, np.int64), vib, t_a,
+                rng.integers(0, 900, (len(ct.deformation.channels), n * 5)).astype(np.uint16), t_d, force,
+                extra=rng.uniform(0.0, 1.0, (len(ct.extra_channels), n * 5)) if ct.extra_channels else None,
+                deformation_tare=tare))
+            first += n
+        for win in w.poll():
+            got = keeper.take(win) if ahead else None
+            wins.append(win)
+            descs.append(got if got is not None else describe(win))
+        if ahead and keeper.offer(w):
+            cut_ahead.append((k, keeper._window))
+    return wins, descs, cut_ahead, w, keeper
+
+
+def test_a_stacked_window_still_held_is_handed_back_without_cutting_again():
+    """The NAO, every body part in the window as one set of stacks: the window at the decision is the very one
+    cut ahead (nothing inside its span reached the buffers since), its descriptor the bits of one described
+    after."""
+    touching = [False] * 20 + [True] * 60 + [False] * 15
+    wins, descs, cut_ahead, w, keeper = _nao_run(touching, ahead=True)
+    ref_wins, ref_descs, _, ref_w, _ = _nao_run(touching, ahead=False)
+    assert len(wins) == len(ref_wins) == 1 and wins[0].stacks is not None
+    assert (wins[0].start_ns, wins[0].end_ns) == (ref_wins[0].start_ns, ref_wins[0].end_ns)
+    assert (wins[0].end_ns - wins[0].start_ns) / 1e9 == pytest.approx(1.2, abs=0.01)
+    assert len(cut_ahead) == 1 and wins[0] is cut_ahead[0][1]
+    assert same_window(wins[0], ref_wins[0]) and _bits(descs[0]) == _bits(ref_descs[0])
+    assert keeper.counts() == {"used": 1, "changed": 0, "discarded": 0}
+    assert w.faults == ref_w.faults
+
+
+def test_a_stacked_window_with_a_gap_counts_it_once():
+    touching = [False] * 20 + [True] * 60 + [False] * 15
+    wins, descs, cut_ahead, w, keeper = _nao_run(touching, ahead=True, gap_at=40)
+    ref_wins, ref_descs, _, ref_w, _ = _nao_run(touching, ahead=False, gap_at=40)
+    assert wins[0].stacks is not None and wins[0] is cut_ahead[0][1] and same_window(wins[0], ref_wins[0])
+    n_cells = load_robot("nao").n_cells
+    assert sum(c.gap for c in wins[0].cells.values()) == n_cells
+    assert w.faults["gap"] == ref_w.faults["gap"] == n_cells and w.faults == ref_w.faults
+    assert _bits(descs[0]) == _bits(ref_descs[0])
+
+
+def test_a_stacked_window_whose_tare_changed_is_cut_and_described_again():
+    touching = [False] * 20 + [True] * 60 + [False] * 15
+    _, _, [(cut_at, _)], _, _ = _nao_run(touching, ahead=True)
+    # a new tare one round after the window was cut ahead, inside the release time
+    wins, descs, cut_ahead, w, keeper = _nao_run(touching, ahead=True, tare_at=cut_at + 1)
+    ref_wins, ref_descs, _, ref_w, _ = _nao_run(touching, ahead=False, tare_at=cut_at + 1)
+    assert [k for k, _ in cut_ahead] == [cut_at] and wins[0] is not cut_ahead[0][1]
+    assert same_window(wins[0], ref_wins[0]) and not same_window(wins[0], cut_ahead[0][1])
+    assert keeper.counts() == {"used": 0, "changed": 1, "discarded": 0}
+    assert _bits(descs[0]) == _bits(ref_descs[0]) and w.faults == ref_w.faults
+
+
+def test_samples_arriving_late_inside_the_window_make_it_cut_and_described_again():
+    """A finger silent for longer than the windower waits (0.5 s) sends its backlog after the window was cut
+    ahead, stamps inside the window: the window is cut again with them, and described again."""
+    robot = load_robot("shadow_hand")
+    results = []
+    for ahead in (True, False):
+        w = Windower(robot, mode="exploration", min_duration_s=0.5, release_s=0.5)
+        describe = _describe(robot)
+        keeper = DescribeAhead(describe)
+        rng = np.random.default_rng(7)
+        backlog, out, cut_at = [], [], []
+        for k in range(60):  # 6 s of 100 ms chunks; the first finger touches from 1 to 3 s
+            t = k * 100 * MS
+            w.add(1, _chunk(t, 1.0 if 10 <= k < 30 else 0.0, rng))
+            chunk = _chunk(t, 1.0 if 10 <= k < 20 else 0.0, rng)
+            if 15 <= k < 33:  # the second finger falls silent from 1.5 s ...
+                backlog.append(chunk)
+            else:
+                w.add(2, chunk)
+            if k == 32:  # ... and its backlog arrives at once, after the release was first seen
+                w.add_many([(2, c) for c in backlog])
+            for win in w.poll():
+                got = keeper.take(win) if ahead else None
+                out.append((win.start_ns, win.end_ns, sorted(win.cells), got if got is not None else describe(win)))
+            if ahead and keeper.offer(w):
+                cut_at.append(k)
+        results.append((out, keeper.counts(), cut_at, dict(w.faults)))
+    (with_ahead, counts, cut_at, faults), (without, _, _, ref_faults) = results
+    assert [(a, b, c) for a, b, c, _ in with_ahead] == [(a, b, c) for a, b, c, _ in without] == \
+        [(1000 * MS, 3000 * MS, [1, 2])]
+    assert [_bits(v) for *_, v in with_ahead] == [_bits(v) for *_, v in without]
+    assert cut_at and cut_at[0] < 32 and faults == ref_faults
+    assert counts["used"] == 0 and counts["changed"] == 1
+
+
+def test_samples_added_since_a_mark_are_found_through_moves_and_growth():
+    """``_RowBuffer.added_inside``: the samples appended since a mark, wherever rows were moved or grown to."""
+    from tactile_descriptors_ros.core.windowing import _RowBuffer
+
+    buf = _RowBuffer(3, 1, np.dtype(np.int32), capacity=8)
+    for t in range(6):  # rows 0 and 1 in step, row 2 silent
+        buf.append_runs(np.array([0, 1]), np.array([1, 1]), np.array([10 * t, 10 * t + 1]), np.zeros((1, 2), np.int32))
+    buf.trim_before(30)
+    mark = buf.added.copy()
+    assert not buf.added_inside(mark, 0, 1000)
+    buf.append(2, np.array([25, 26]), np.zeros((1, 2), np.int32))  # a late cell, inside [20, 30)
+    assert buf.added_inside(mark, 20, 30) and not buf.added_inside(mark, 30, 1000)
+    mark = buf.added.copy()
+    for t in range(6, 40):  # rows moved down and the arrays grown, several times
+        buf.append_runs(np.array([0, 1]), np.array([1, 1]), np.array([10 * t, 10 * t + 1]), np.zeros((1, 2), np.int32))
+    assert buf.capacity > 8
+    assert not buf.added_inside(mark, 0, 60) and buf.added_inside(mark, 391, 392) and buf.added_inside(mark, 0, 61)
+    assert not buf.added_inside(buf.added.copy(), 0, 10**6)
