@@ -28,7 +28,7 @@ that touches again within ``release_s`` (counted, ``discarded``).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -113,6 +113,11 @@ class DescribeAhead(Generic[T]):
         ``describe(window) -> descriptor``: what the caller publishes for a
         window.  A :class:`~..errors.SignalError` it raises ahead is left to
         the description at the decision, which reports it.
+    settings : callable, optional
+        ``settings() -> hashable``: the caller's settings the description
+        depends on besides the window (a contact threshold, a frame id).
+        A description made under other settings than those at the decision
+        is not handed back (``discarded``).
 
     Attributes
     ----------
@@ -123,11 +128,14 @@ class DescribeAhead(Generic[T]):
         samples, a new tare): described again.
     discarded : int
         Descriptions made ahead whose window never closed (a cell touched
-        again within ``release_s``, a stall).
+        again within ``release_s``, a stall) or that the settings changed
+        since.
     """
 
-    def __init__(self, describe: Callable[[Window], T]) -> None:
+    def __init__(self, describe: Callable[[Window], T], settings: Callable[[], Hashable] | None = None) -> None:
         self._describe = describe
+        self._settings = settings or (lambda: None)
+        self._made_with: Hashable = None
         self._key: tuple[int, int, int] | None = None
         self._window: Window | None = None
         self._result: T | None = None
@@ -151,6 +159,7 @@ class DescribeAhead(Generic[T]):
         self.clear()
         window = windower.cut_ahead()
         self._key = key
+        self._made_with = self._settings()
         if window is None or not window.cells:
             return False
         try:
@@ -168,7 +177,8 @@ class DescribeAhead(Generic[T]):
         """
         if self._key is None:
             return None
-        if self._key != (window.start_ns, window.end_ns, window.exploration_id) or window.mode != "exploration":
+        if self._key != (window.start_ns, window.end_ns, window.exploration_id) or window.mode != "exploration" \
+                or self._made_with != self._settings():
             self.clear()
             return None
         ahead, result = self._window, self._result

@@ -119,8 +119,10 @@ class WindowNode(StopsQuietly, Node):
         self.windower = Windower(self.robot, mode=params["window.mode"], **_windower_settings(params))
         params.on_set("windower", self._retune_windower)
         self.force_threshold_n = self.windower.onset_n
-        # an exploration's window is described while its release time runs (core/ahead.py)
-        self.ahead = DescribeAhead(self._descriptor_msg) if params["window.describe_ahead"] else None
+        # an exploration's window is described while its release time runs (core/ahead.py); a description
+        # made under another contact threshold or frame id than the decision's is not used
+        self.ahead = DescribeAhead(self._descriptor_msg, lambda: (self.force_threshold_n, self.params["frame_id"])) \
+            if params["window.describe_ahead"] else None
         self.id_stride = params["exploration_id_stride"]
         self.id_offset = params["exploration_id_offset"]
         if self.id_offset >= self.id_stride and self.id_stride > 1:
@@ -242,8 +244,6 @@ class WindowNode(StopsQuietly, Node):
         def apply() -> None:
             self.windower.retune(**settings)
             self.force_threshold_n = self.windower.onset_n
-            if self.ahead is not None:  # described with the old contact threshold
-                self.ahead.clear()
 
         return apply
 
