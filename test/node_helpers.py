@@ -57,3 +57,34 @@ def cell_runs(messages, cell_id: int | None = None) -> list:
     for msg in messages:
         out += [r for r in skin_part_from_msg(msg).frames() if cell_id is None or r[0] == cell_id]
     return out
+
+
+def window_nodes_side_by_side(ros_context, common: list, variants: dict[str, list]):
+    """Window nodes fed the same ``SkinPartFrames`` of the NAO's left hand, one per variant, and an ``io`` node.
+
+    Node ``wn_<name>`` takes ``common`` plus its variant's parameters and publishes its descriptors on
+    ``desc_<name>``; ``io`` publishes the frames (reliable, depth 2000) on ``tactile/left_hand/frames`` and
+    collects each node's descriptors in ``out["desc_<name>"]``.  Returns ``(nodes, io, pub, out, executor)``
+    once every node's subscription has matched the publisher.
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    nodes = {name: WindowNode(f"wn_{name}", context=ros_context, parameter_overrides=[*common, *extra],
+                              cli_args=["--ros-args", "-r", f"tactile/descriptor:=desc_{name}"])
+             for name, extra in variants.items()}
+    io = rclpy.create_node("io", context=ros_context)
+    pub = io.create_publisher(SkinPartFrames, "tactile/left_hand/frames",
+                              QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE))
+    out = {f"desc_{name}": [] for name in variants}
+    for topic, got in out.items():
+        io.create_subscription(Descriptor, topic, got.append, 50)
+    ex = SingleThreadedExecutor(context=ros_context)
+    for n in (*nodes.values(), io):
+        ex.add_node(n)
+    assert spin_until(ex, lambda: pub.get_subscription_count() >= len(nodes), 10)
+    return nodes, io, pub, out, ex

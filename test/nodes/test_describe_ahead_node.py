@@ -6,21 +6,16 @@ import math
 
 import numpy as np
 import pytest
-from node_helpers import spin_until
+from node_helpers import spin_until, window_nodes_side_by_side
 
 pytestmark = pytest.mark.ros
 
 
 def test_window_node_publishes_the_exploration_described_ahead_with_the_same_values(ros_context):
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
-    from tactile_descriptors_ros.nodes.window_node import WindowNode
     from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
 
@@ -28,21 +23,9 @@ def test_window_node_publishes_the_exploration_described_ahead_with_the_same_val
     common = [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),
               Parameter("window.mode", value="exploration"), Parameter("window.min_duration_s", value=0.5),
               Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
-    ahead = WindowNode("wn_ahead", context=ros_context, parameter_overrides=common,
-                       cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_ahead"])
-    after = WindowNode("wn_after", context=ros_context,
-                       parameter_overrides=[*common, Parameter("window.describe_ahead", value=False)],
-                       cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_after"])
-    io = rclpy.create_node("io", context=ros_context)
-    pub = io.create_publisher(SkinPartFrames, "tactile/left_hand/frames",
-                              QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE))
-    out = {"desc_ahead": [], "desc_after": []}
-    for topic, got in out.items():
-        io.create_subscription(Descriptor, topic, got.append, 50)
-    ex = SingleThreadedExecutor(context=ros_context)
-    for n in (ahead, after, io):
-        ex.add_node(n)
-    assert spin_until(ex, lambda: pub.get_subscription_count() >= 2, 10)
+    nodes, io, pub, out, ex = window_nodes_side_by_side(
+        ros_context, common, {"ahead": [], "after": [Parameter("window.describe_ahead", value=False)]})
+    ahead, after = nodes["ahead"], nodes["after"]
 
     rng = np.random.default_rng(2)
     off_a = np.arange(50, dtype=np.int64) * 1_000_000

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from node_helpers import spin_until
+from node_helpers import spin_until, window_nodes_side_by_side
 
 pytestmark = pytest.mark.ros
 
@@ -194,15 +194,10 @@ def test_part_message_with_inconsistent_lengths_is_rejected(field, value, match)
 
 def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):
     """A node behind its input takes every waiting frame in one callback; the windows are those of one-by-one."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from tactile_descriptors_msgs.msg import Descriptor, SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
-    from tactile_descriptors_ros.nodes.window_node import WindowNode
     from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
 
@@ -211,21 +206,9 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
               Parameter("window.mode", value="fixed"), Parameter("window.length_s", value=0.5),
               Parameter("window.hop_s", value=0.25), Parameter("window.lateness_s", value=0.0),
               Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
-    batched = WindowNode("wn_batched", context=ros_context, parameter_overrides=common,
-                         cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_batched"])
-    single = WindowNode("wn_single", context=ros_context,
-                        parameter_overrides=[*common, Parameter("frames.drain_max", value=0)],
-                        cli_args=["--ros-args", "-r", "tactile/descriptor:=desc_single"])
-    io = rclpy.create_node("io", context=ros_context)
-    qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-    pub = io.create_publisher(SkinPartFrames, "tactile/left_hand/frames", qos)
-    out = {"desc_batched": [], "desc_single": []}
-    for topic, got in out.items():
-        io.create_subscription(Descriptor, topic, got.append, 50)
-    ex = SingleThreadedExecutor(context=ros_context)
-    for n in (batched, single, io):
-        ex.add_node(n)
-    assert spin_until(ex, lambda: pub.get_subscription_count() >= 2, 10)
+    nodes, io, pub, out, ex = window_nodes_side_by_side(
+        ros_context, common, {"batched": [], "single": [Parameter("frames.drain_max", value=0)]})
+    batched, single = nodes["batched"], nodes["single"]
 
     rng = np.random.default_rng(0)
     # 1.2 s of 50 ms batches from the start of a window on the windows' grid: windows end at 0.5, 0.75, 1.0 s
