@@ -59,6 +59,17 @@ def cell_runs(messages, cell_id: int | None = None) -> list:
     return out
 
 
+def left_hand_fixed_parameters() -> list:
+    """Window node parameters of the NAO's left hand in fixed 0.5 s windows every 0.25 s, no lateness, frames
+    taken reliably from a deep queue (:func:`window_nodes_side_by_side`'s ``common``)."""
+    from rclpy.parameter import Parameter
+
+    return [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),
+            Parameter("window.mode", value="fixed"), Parameter("window.length_s", value=0.5),
+            Parameter("window.hop_s", value=0.25), Parameter("window.lateness_s", value=0.0),
+            Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
+
+
 def window_nodes_side_by_side(ros_context, common: list, variants: dict[str, list]):
     """Window nodes fed the same ``SkinPartFrames`` of the NAO's left hand, one per variant, and an ``io`` node.
 

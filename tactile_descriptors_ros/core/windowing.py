@@ -80,6 +80,11 @@ TRIM_STEP_NS = 100_000_000
 #: inside the window, which then waits for the next batch again.
 GRID_MARGIN_PERIODS = 1.5
 
+#: A fixed window's samples are cut ahead (:meth:`Windower.cut_fixed_ahead`) once every live cell has sent
+#: data to within this much of its end [s]: about the last batches, whose samples are then all that is left to
+#: copy when the window closes.
+CUT_AHEAD_S = 0.05
+
 #: A cell whose vibration samples leave a hole longer than this many sample
 #: periods inside a window (or at its edges) is marked ``gap`` and counted.
 GAP_PERIODS = 3.0
@@ -741,6 +746,10 @@ class Windower:
         self._ahead: Window | None = None
         self._ahead_marks: dict[str, list[np.ndarray]] = {}
         self._ahead_cut_faults: Counter[str] = Counter()  # the faults its cut found, counted if it is handed back
+        self._head: _Head | None = None  # the next fixed window's samples cut ahead (cut_fixed_ahead)
+        #: fixed windows closed from the samples :meth:`cut_fixed_ahead` cut (``used``) or cut whole although
+        #: it had (``recut``: the head did not hold, or was not one set of stacks)
+        self.heads: Counter[str] = Counter()
         self._now_ns = 0  # the time of the current exploration step
         self._swept_ns: int | None = None  # the watermark the state machine has run to
         self._swept_key: tuple | None = None  # that watermark and the settings it was run with
@@ -1134,6 +1143,7 @@ class Windower:
 
     def _reset_time(self) -> None:
         self._ahead = None
+        self._head = None
         self._swept_ns = None
         self._swept_key = None
         self._resumed_ns = None
@@ -1196,6 +1206,104 @@ class Windower:
         self._ahead_marks = {name: [b.added.copy() for b in part.buffers] for name, part in self._parts.items()}
         return window
 
+    def cut_fixed_ahead(self) -> bool:
+        """Copy the next fixed window's samples buffered so far, so that closing it copies only the rest.
+
+        A fixed window ``[start, end)`` closes when every live cell has a
+        vibration sample at or after ``end`` (:meth:`poll`); until then its
+        samples before the watermark (the newest stamp every live cell has
+        reached) are known and, the buffers being append-only, stay what they
+        are.  Once the watermark is within :data:`CUT_AHEAD_S` of ``end``,
+        this cuts ``[start, watermark]`` (the whole window when the watermark
+        passed ``end`` and the window waits for late cells, ``lateness_s``)
+        as one set of stacks (the cut of
+        :meth:`poll`, one copy per buffer and stream) and returns True; the
+        poll that closes the window then cuts only ``(watermark, end)``,
+        copies the stacks made ahead and the new samples into the window's
+        arrays and combines the widest steps of both parts, exactly (a gap is
+        a step between consecutive samples, and the step across the mark is
+        at least each part's step to or from the mark).  The window is the
+        one a single cut makes, to the bit: the same arrays, dtypes, layouts,
+        gaps and fault counts.  It falls back to the single cut whenever the
+        head does not hold: a sample appended since inside ``[start,
+        watermark]``, a new body part, a window that would not be one set of
+        stacks, a clock jump (which drops the head), new window settings.
+        Returns False when nothing was cut: not fixed mode, the window's end
+        still further away, its head already cut, or the head not one set of
+        stacks (then not tried again for this window).
+        """
+        kernel = fast.kernel_module() if COMPILED_CUT else None
+        if self.mode != "fixed" or self._next_start_ns is None or self._latest_ns is None or kernel is None:
+            return False
+        start = self._next_start_ns
+        end = start + self.length_ns
+        if self._head is not None and self._head.window == (start, end):
+            return False
+        # the head is [start, mark): every live cell's newest sample in; the whole window while it waits for
+        # late cells (``lateness_s``)
+        mark = min(self._vibration_watermark() + 1, end)
+        if mark <= start or end - mark > CUT_AHEAD_S * 1e9:
+            return False
+        counted = self.faults.copy()
+        try:
+            cuts = self._part_cuts(kernel, start, mark)
+            order = self._stack_order(cuts) if all(c[-1] for c in cuts) else None
+        finally:  # the faults the head shows are counted when the window closes, by the cut that closes it
+            self.faults.clear()
+            self.faults.update(counted)
+        below = {name: _below(c, 1) for name, c in zip(self._parts, cuts)}
+        if order is None:
+            self._head = _Head((start, end), mark, None, (0, 0, 0), None, below)
+            return False
+        # room after the head for the samples due before the end, each stream at its cell type's rate: the
+        # window's arrays then take them as they are (else they are copied once more, into arrays that fit)
+        ct = self.robot.cell_types[self.robot.body_part(self._part_names[0]).cell_type]
+        p0, vc0, dc0, fc0 = order[0][:4]
+        room = tuple(0 if mark == end else _due(int(buf.t[0, int(cut[1, 0]) - 1]), end, rate)
+                     for buf, cut, rate in ((p0.vib, vc0, ct.vibration.rate_hz), (p0.dfm, dc0, ct.deformation.rate_hz),
+                                            (p0.force, fc0, ct.force.rate_hz)))
+        head = _Head((start, end), mark, None, tuple(int(c[1, 0] - c[0, 0]) for c in (vc0, dc0, fc0)),
+                     np.concatenate([c[1][3] for c in order]), below)
+        head.arrays = _stack_arrays(order, None, room)
+        # the window's cells as views of those arrays' rows, made now: closing the window sets each one's gap and
+        # tare (used only where the room fits, the arrays then being the window's)
+        head.stacks = self._stack_cells(order, head.arrays, None)
+        self._head = head
+        return True
+
+    def _finish_fixed(self, kernel, start: int, end: int) -> Window | None:
+        """The fixed window ``[start, end)`` from the head :meth:`cut_fixed_ahead` cut and the samples since,
+        or None where the head does not hold (:meth:`_make_window` cuts it whole then)."""
+        head, self._head = self._head, None
+        if head is None or head.arrays is None or head.window != (start, end) or kernel is None \
+                or head.below.keys() != self._parts.keys():
+            return None
+        cuts = self._part_cuts(kernel, head.mark, end)
+        # no sample before the mark came since: each row's samples ever appended before it are as many as then
+        if any(not all(np.array_equal(a, b) for a, b in zip(_below(c, 0), head.below[name]))
+               for name, c in zip(self._parts, cuts)):
+            return None
+        vib_v, vib_t, dfm_v = head.arrays[:3]
+        if head.mark == end:  # the whole window was cut ahead (it waited for late cells): nothing since
+            by_name = dict(zip(self._parts, cuts))
+            order, widest = [by_name[name] for name in self._part_names], head.widest
+        else:
+            if not all(c[-1] for c in cuts) or (order := self._stack_order(cuts)) is None \
+                    or (order[0][4] is None) != (head.arrays[5] is None) \
+                    or (order[0][0].vib.v.dtype, order[0][0].dfm.v.dtype) != (vib_v.dtype, dfm_v.dtype):
+                return None
+            # the widest step over the whole window: each part's (its outer edge the mark), and the step across it
+            later = np.concatenate([c[1][3] for c in order])
+            first = np.concatenate([c[0].vib.t[np.arange(len(c[0].cell_ids)), c[1][0]] for c in order])
+            widest = np.maximum(np.maximum(head.widest, later), first - vib_t[:, head.widths[0] - 1])
+        made: dict[int, CellSignals] = {}
+        w = Window(start, end, 0, "fixed")
+        w.stacks = self._stack_parts(made, order, head, widest)
+        for cid in self._cells:
+            if (cell := made.get(cid)) is not None:
+                w.cells[cid] = cell
+        return w
+
     def flush(self) -> list[Window]:
         """End of stream: close an open exploration (if long enough)."""
         if self.mode == "exploration" and self._onset_ns is not None and not self._emitted_current \
@@ -1210,9 +1318,15 @@ class Windower:
             firsts = [st.vib._t[st.vib._lo] for st in self._cells.values() if len(st.vib)]
             self._next_start_ns = first_fixed_start(int(min(firsts)), self.length_ns, self.hop_ns, self.grid_margin_ns)
         watermark = self._vibration_watermark()
+        kernel = fast.kernel_module() if COMPILED_CUT and self._head is not None else None
         while self._next_start_ns + self.length_ns + self.lateness_ns <= watermark:
             start = self._next_start_ns
-            w = self._make_window(start, start + self.length_ns, 0, "fixed")
+            w = None
+            if self._head is not None:
+                w = self._finish_fixed(kernel, start, start + self.length_ns)
+                self.heads["used" if w is not None else "recut"] += 1
+            if w is None:
+                w = self._make_window(start, start + self.length_ns, 0, "fixed")
             if w.cells:
                 out.append(w)
             else:  # inside a stall: no cell sent anything in it
@@ -1616,16 +1730,7 @@ class Windower:
                     w.cells[cid] = cell
             return w
         made: dict[int, CellSignals] = {}
-        cuts = []
-        for part in self._parts.values():
-            # the widest step of the vibration samples (gaps), the invalid deformation samples, positions else
-            vc, dc, fc = part.vib.cut(kernel, start, end), part.dfm.cut(kernel, start, end, 1), \
-                part.force.cut(kernel, start, end, 0)
-            xc = part.extra.cut(kernel, start, end, 0) if part.extra is not None else None
-            held = vc[1] > vc[0]
-            clean = held & (vc[2] == 0) & (dc[2] == 0)
-            cuts.append((part, vc, dc, fc, xc, held, clean,
-                         bool(clean.all()) and _aligned(vc, dc, fc, xc)))
+        cuts = self._part_cuts(kernel, start, end)
         if all(c[-1] for c in cuts) and (order := self._stack_order(cuts)) is not None:
             w.stacks = self._stack_parts(made, order)
         else:
@@ -1638,6 +1743,22 @@ class Windower:
             if (cell := made.get(cid)) is not None:
                 w.cells[cid] = cell
         return w
+
+    def _part_cuts(self, kernel, start: int, end: int) -> list[tuple]:
+        """Each body part's buffers cut at ``[start, end)`` (:meth:`_RowBuffer.cut`): ``(part, vc, dc, fc, xc,
+        held, clean, aligned)``, the rows holding vibration samples, those without invalid ones, and whether
+        every row is clean and at the same positions as the others (:func:`_aligned`)."""
+        cuts = []
+        for part in self._parts.values():
+            # the widest step of the vibration samples (gaps), the invalid deformation samples, positions else
+            vc, dc, fc = part.vib.cut(kernel, start, end), part.dfm.cut(kernel, start, end, 1), \
+                part.force.cut(kernel, start, end, 0)
+            xc = part.extra.cut(kernel, start, end, 0) if part.extra is not None else None
+            held = vc[1] > vc[0]
+            clean = held & (vc[2] == 0) & (dc[2] == 0)
+            cuts.append((part, vc, dc, fc, xc, held, clean,
+                         bool(clean.all()) and _aligned(vc, dc, fc, xc)))
+        return cuts
 
     def _stack_order(self, cuts: list) -> list | None:
         """The cuts of :meth:`_make_window` in the robot's order of body parts when the window can be one set of
@@ -1658,43 +1779,47 @@ class Windower:
                 return None
         return order
 
-    def _stack_parts(self, made: dict[int, CellSignals], order: list) -> CellStacks:
+    def _stack_parts(self, made: dict[int, CellSignals], order: list, head: _Head | None = None,
+                     widest: np.ndarray | None = None) -> CellStacks:
         """The body parts of ``order`` (:meth:`_make_window`'s cuts, each part's cells clean and at the same
         positions of its buffers, :func:`_aligned`; several parts: :meth:`_stack_order`) copied into one set of
         arrays, one copy per buffer and stream instead of one per cell, each cell's arrays views of its row;
         the same values, dtypes and C-contiguous layouts as the cell-by-cell copies.  Returns the
-        :class:`~.aggregation.CellStacks` of those arrays."""
-        n = sum(len(c[0].cell_ids) for c in order)
-        p0, vc0, dc0, fc0, xc0 = order[0][:5]
-        nv, nd, nf = (int(x[1, 0] - x[0, 0]) for x in (vc0, dc0, fc0))
-        vib_t, dfm_t = np.empty((n, nv), np.int64), np.empty((n, nd), np.int64)
-        vib_v = np.empty((n, p0.vib.n_channels, nv), p0.vib.v.dtype)
-        dfm_v = np.empty((n, p0.dfm.n_channels, nd), p0.dfm.v.dtype)
-        force = np.empty((n, nf), np.float64)
-        extra = np.empty((n, p0.extra.n_channels, nd), np.float64) if xc0 is not None else None
+        :class:`~.aggregation.CellStacks` of those arrays.
+
+        ``head``: the window's earlier samples, cut before (:meth:`cut_fixed_ahead`); the cuts are then of the
+        rest of the window, copied after them (into the head's own arrays when their room fits), and
+        ``widest`` gives each row's widest step over the whole window (its gap)."""
+        arrays = _stack_arrays(order, head)
         gaps: list[bool] = []
-        cells: list[CellSignals] = []
         r0 = 0
-        for part, vc, dc, fc, xc, *_ in order:
+        for part, vc, *_ in order:
             r1 = r0 + len(part.cell_ids)
-            for buf, cut, t_out, v_out in ((part.vib, vc, vib_t, vib_v), (part.dfm, dc, dfm_t, dfm_v)):
-                i, j = int(cut[0, 0]), int(cut[1, 0])
-                t_out[r0:r1] = buf.t[:, i:j]
-                v_out[r0:r1] = buf.v[:, :, i:j].transpose(1, 0, 2)
-            force[r0:r1] = part.force.v[0, :, int(fc[0, 0]):int(fc[1, 0])]
-            if extra is not None:
-                extra[r0:r1] = part.extra.v[:, :, int(xc[0, 0]):int(xc[1, 0])].transpose(1, 0, 2)
-            gaps += (vc[3] > self._gap_limit_ns(part.cell_ids[0])).tolist()
+            gaps += ((vc[3] if widest is None else widest[r0:r1]) > self._gap_limit_ns(part.cell_ids[0])).tolist()
             r0 = r1
+        if n_gaps := sum(gaps):
+            self.faults["gap"] += n_gaps
         ids = [cid for c in order for cid in c[0].cell_ids]
-        for r, (cid, gap) in enumerate(zip(ids, gaps)):
-            if gap:
-                self.faults["gap"] += 1
-            cell = CellSignals(vib_v[r], vib_t[r], dfm_v[r], dfm_t[r], force[r], True, gap, 0,
-                               extra[r] if extra is not None else None, self._cells[cid].tare)
-            made[cid] = cell
-            cells.append(cell)
-        return CellStacks(tuple(cells), vib_v, vib_t, dfm_v, dfm_t, force, extra)
+        if head is not None and arrays is head.arrays:  # the cells made with the head: their gap and tare now
+            for cell, cid, gap in zip(head.stacks.cells, ids, gaps):
+                cell.gap = gap
+                cell.deformation_tare = self._cells[cid].tare
+                made[cid] = cell
+            return head.stacks
+        stacks = self._stack_cells(order, arrays, gaps)
+        made.update(zip(ids, stacks.cells))
+        return stacks
+
+    def _stack_cells(self, order: list, arrays: tuple, gaps: list[bool] | None) -> CellStacks:
+        """The :class:`~.aggregation.CellStacks` of :func:`_stack_arrays`' ``arrays`` for ``order``'s cells: each
+        cell's arrays the views of its row, with its tare and ``gaps`` (False where None)."""
+        vib_v, vib_t, dfm_v, dfm_t, force, extra = arrays
+        ids = [cid for c in order for cid in c[0].cell_ids]
+        cells = tuple(CellSignals(vib_v[r], vib_t[r], dfm_v[r], dfm_t[r], force[r], True,
+                                  bool(gaps[r]) if gaps is not None else False, 0,
+                                  extra[r] if extra is not None else None, self._cells[cid].tare)
+                      for r, cid in enumerate(ids))
+        return CellStacks(cells, *arrays)
 
     def _cut_part(self, made: dict[int, CellSignals], part: _Part, start: int, end: int, vc: np.ndarray,
                   dc: np.ndarray, fc: np.ndarray, xc: np.ndarray | None, held: np.ndarray, clean: np.ndarray) -> None:
@@ -1885,6 +2010,76 @@ def rehearsal_window(robot: RobotDescription, length_s: float, vibration_dtype: 
             extra=rng.uniform(0.0, 1.0, (len(ct.extra_channels), n * n_d)) if ct.extra_channels else None)
         windower.add_part(chunk)
     return windower.poll()[0]
+
+
+@dataclass
+class _Head:
+    """The samples of the fixed window ``window`` before ``mark`` (:meth:`Windower.cut_fixed_ahead`).
+
+    ``arrays``: their stacks (as :class:`~.aggregation.CellStacks`' arrays; None: not one set of stacks), each
+    stream's first ``widths`` samples (vibration, deformation, force; the extra channels as deformation), with
+    room after them for the samples due before the window's end; ``widest``: each row's widest step up to the
+    mark; ``below``: per body part and buffer, each row's samples appended before the mark (:func:`_below`);
+    ``stacks``: the window's cells as views of ``arrays``' rows, their gap and tare set when it closes."""
+
+    window: tuple[int, int]
+    mark: int
+    arrays: tuple | None
+    widths: tuple[int, int, int]
+    widest: np.ndarray | None
+    below: dict[str, list[np.ndarray]]
+    stacks: CellStacks | None = None
+
+
+def _below(cut: tuple, at: int) -> list[np.ndarray]:
+    """For a body part's cut (:meth:`Windower._part_cuts`) whose row ``at`` of each buffer's positions is the first
+    sample at or after a mark, each buffer's rows' samples ever appended before the mark: the samples appended
+    (``added``) less those held from the mark on (never trimmed while the window they are in is open).  Rows
+    hold their samples in time order, so the count grows only when a sample before the mark arrives."""
+    part, vc, dc, fc, xc = cut[:5]
+    return [buf.added - (buf.hi - c[at]) for buf, c in ((part.vib, vc), (part.dfm, dc), (part.force, fc), (part.extra, xc))
+            if c is not None]
+
+
+def _due(last_ns: int, end_ns: int, rate_hz: float) -> int:
+    """Samples due after ``last_ns`` and before ``end_ns`` at ``rate_hz``."""
+    return max(0, math.ceil((end_ns - last_ns) * rate_hz / 1e9) - 1)
+
+
+def _stack_arrays(order: list, head: _Head | None = None, room: tuple[int, int, int] = (0, 0, 0)) -> tuple:
+    """The arrays of :meth:`Windower._stack_parts`: ``(vibration, vibration_t_ns, deformation, deformation_t_ns,
+    force_n, extra)`` of ``order``'s cells, each stream's samples after ``head``'s (and ``room`` samples more,
+    left unwritten)."""
+    p0, vc0, dc0, fc0, xc0 = order[0][:5]
+    n = sum(len(c[0].cell_ids) for c in order)
+    nv, nd, nf = (int(x[1, 0] - x[0, 0]) for x in (vc0, dc0, fc0))
+    hv, hd, hf = (0, 0, 0) if head is None else head.widths
+    if head is not None and head.arrays[1].shape[1] == hv + nv and head.arrays[3].shape[1] == hd + nd \
+            and head.arrays[4].shape[1] == hf + nf:
+        arrays = head.arrays  # the room left fits the samples that came: written in place
+    else:
+        gv, gd, gf = hv + nv + room[0], hd + nd + room[1], hf + nf + room[2]
+        arrays = (np.empty((n, p0.vib.n_channels, gv), p0.vib.v.dtype), np.empty((n, gv), np.int64),
+                  np.empty((n, p0.dfm.n_channels, gd), p0.dfm.v.dtype), np.empty((n, gd), np.int64),
+                  np.empty((n, gf), np.float64),
+                  np.empty((n, p0.extra.n_channels, gd), np.float64) if xc0 is not None else None)
+        if head is not None:  # copied once more: the head's room did not fit
+            for out, early, k in zip(arrays, head.arrays, (hv, hv, hd, hd, hf, hd)):
+                if out is not None:
+                    out[..., :k] = early[..., :k]
+    vib_v, vib_t, dfm_v, dfm_t, force, extra = arrays
+    r0 = 0
+    for part, vc, dc, fc, xc, *_ in order:
+        r1 = r0 + len(part.cell_ids)
+        for buf, cut, t_out, v_out, k in ((part.vib, vc, vib_t, vib_v, hv), (part.dfm, dc, dfm_t, dfm_v, hd)):
+            i, j = int(cut[0, 0]), int(cut[1, 0])
+            t_out[r0:r1, k:k + j - i] = buf.t[:, i:j]
+            v_out[r0:r1, :, k:k + j - i] = buf.v[:, :, i:j].transpose(1, 0, 2)
+        force[r0:r1, hf:hf + nf] = part.force.v[0, :, int(fc[0, 0]):int(fc[1, 0])]
+        if extra is not None:
+            extra[r0:r1, :, hd:hd + nd] = part.extra.v[:, :, int(xc[0, 0]):int(xc[1, 0])].transpose(1, 0, 2)
+        r0 = r1
+    return arrays
 
 
 def _same_tare(a: np.ndarray | None, b: np.ndarray | None) -> bool:

@@ -42,7 +42,12 @@ In exploration mode an exploration's window is described during its release
 time (``window.describe_ahead``, :mod:`~tactile_descriptors_ros.core.ahead`):
 when the release is decided and the window still holds the same samples,
 that descriptor is published at once (``described_ahead_used``; the cost of
-those descriptions is ``describe_ahead_ms_*``).
+those descriptions is ``describe_ahead_ms_*``).  In fixed mode the next
+window's samples are cut once its end is within ``CUT_AHEAD_S`` (50 ms) of the newest ones
+(``window.cut_ahead``, :meth:`~tactile_descriptors_ros.core.windowing.Windower.cut_fixed_ahead`),
+so the poll that closes it copies only the samples since
+(``cut_ahead_used``, ``cut_ahead_recut``; the early cut's cost is
+``cut_ahead_ms_*``).
 
 Topics, parameters and QoS: ``docs/nodes.md``.
 """
@@ -123,6 +128,7 @@ class WindowNode(StopsQuietly, Node):
         # made under another contact threshold or frame id than the decision's is not used
         self.ahead = DescribeAhead(self._descriptor_msg, lambda: (self.force_threshold_n, self.params["frame_id"])) \
             if params["window.describe_ahead"] else None
+        self.cut_ahead = params["window.cut_ahead"] and self.windower.mode == "fixed"
         self.id_stride = params["exploration_id_stride"]
         self.id_offset = params["exploration_id_offset"]
         if self.id_offset >= self.id_stride and self.id_stride > 1:
@@ -184,6 +190,7 @@ class WindowNode(StopsQuietly, Node):
         self.frames_not_host_time = 0
         self._describe_ms: deque[float] = deque(maxlen=500)
         self._ahead_ms: deque[float] = deque(maxlen=500)
+        self._cut_ahead_ms: deque[float] = deque(maxlen=500)
         self._sample_types: tuple[np.dtype, np.dtype] | None = None  # of the first frames: the rehearsal's
         self.rehearsal_ms: float | None = None  # how long the rehearsal of the describing path took (_rehearse)
         self._cut_ms: deque[float] = deque(maxlen=500)
@@ -288,10 +295,12 @@ class WindowNode(StopsQuietly, Node):
             if windows:
                 self._cut_ms.append(1e3 * (time.perf_counter() - started))
             self._emit(windows)
-            if self.ahead is not None and self.rehearsal_ms is not None and not self.held_windows:
+            if self.rehearsal_ms is not None and not self.held_windows:
                 started = time.perf_counter()
-                if self.ahead.offer(self.windower):
+                if self.ahead is not None and self.ahead.offer(self.windower):
                     self._ahead_ms.append(1e3 * (time.perf_counter() - started))
+                elif self.cut_ahead and self.windower.cut_fixed_ahead():
+                    self._cut_ahead_ms.append(1e3 * (time.perf_counter() - started))
         if self.rehearsal_ms is None and self._sample_types is not None and self.kernel_ready.is_set():
             self._rehearse(*self._sample_types)
 
@@ -531,8 +540,10 @@ class WindowNode(StopsQuietly, Node):
                         "explorations": self.windower.exploration_id, "in_contact": self.windower.in_contact}
         if self.ahead is not None:
             values.update({f"described_ahead_{k}": v for k, v in self.ahead.counts().items()})
+        if self.cut_ahead:
+            values.update({f"cut_ahead_{k}": self.windower.heads[k] for k in ("used", "recut")})
         for name, samples in (("frames_age", self._frames_age_ms), ("cut", self._cut_ms), ("describe", self._describe_ms),
-                              ("describe_ahead", self._ahead_ms)):
+                              ("describe_ahead", self._ahead_ms), ("cut_ahead", self._cut_ahead_ms)):
             if samples:
                 arr = np.fromiter(samples, np.float64, len(samples))
                 values.update({f"{name}_ms_p50": float(np.median(arr)), f"{name}_ms_p95": float(np.percentile(arr, 95)),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES
+from ..core.windowing import CUT_AHEAD_S
 from ..topics import FRAMES_TOPIC
 from .common import body_parts, check_not_empty, diagnostics_period, frame_id, qos, robot, topic_pattern
 from .schema import NodeSchema, Param, join
@@ -49,6 +50,9 @@ WINDOW_NODE = NodeSchema("window_node", join(
     Param("window.describe_ahead", "bool", "describe an exploration's window while its release time runs, so its "
           "descriptor leaves when the release is decided (the same bits; false: described after the decision)",
           default=True),
+    Param("window.cut_ahead", "bool", f"copy a fixed window's samples once its end is within {CUT_AHEAD_S * 1e3:g} "
+          "ms of the newest ones, so that closing it copies only the last ones (the same window; false: all copied "
+          "when it closes)", default=True),
     _windower("window.lateness_s", "wait for late cells after a fixed window's end", low=0.0, high=60.0,
               default=0.05),
     _windower("contact.force_threshold_n", "contact gate F_t (eq. 13, 27): a cell is in contact at or above it; "

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from node_helpers import spin_until, window_nodes_side_by_side
+from node_helpers import left_hand_fixed_parameters, spin_until, window_nodes_side_by_side
 
 pytestmark = pytest.mark.ros
 
@@ -202,10 +202,7 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
 
     part = load_robot("nao").body_part("left_hand")
-    common = [Parameter("robot", value="nao"), Parameter("body_parts", value=["left_hand"]),
-              Parameter("window.mode", value="fixed"), Parameter("window.length_s", value=0.5),
-              Parameter("window.hop_s", value=0.25), Parameter("window.lateness_s", value=0.0),
-              Parameter("qos.frames.reliability", value="reliable"), Parameter("qos.frames.depth", value=2000)]
+    common = left_hand_fixed_parameters()
     nodes, io, pub, out, ex = window_nodes_side_by_side(
         ros_context, common, {"batched": [], "single": [Parameter("frames.drain_max", value=0)]})
     batched, single = nodes["batched"], nodes["single"]

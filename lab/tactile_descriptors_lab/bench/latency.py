@@ -512,12 +512,15 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     per_callback = []
     node_timing: dict[str, dict[str, float]] = {}
     ahead: dict[str, int] = {}
+    heads: dict[str, int] = {}
     for name, values in diagnostics.items():
         for key, value in values.items():
             if key.startswith("fault_"):
                 faults[key[6:]] = faults.get(key[6:], 0) + int(float(value))
             elif key.startswith("described_ahead_"):
                 ahead[key[16:]] = ahead.get(key[16:], 0) + int(float(value))
+            elif key in ("cut_ahead_used", "cut_ahead_recut"):
+                heads[key[10:]] = heads.get(key[10:], 0) + int(float(value))
         if "frames_per_callback" in values:
             per_callback.append(float(values["frames_per_callback"]))
         node_timing[name] = {k: float(v) for k, v in values.items() if k.startswith(("describe_", "cut_", "frames_age_"))}
@@ -554,6 +557,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
             "describe": _node_summary(node_timing, "describe"),
             # explorations: described during the release time, off the path after the decision (core/ahead.py)
             "describe_ahead": _node_summary(node_timing, "describe_ahead"),
+            # fixed windows: their samples cut before they close, off the path after the closing batch
+            "cut_ahead": _node_summary(node_timing, "cut_ahead"),
             "classifier": _summary(classifier_stage),
         },
         "complete": _summary([(arr - ref) / 1e6 for ref, arr in complete.items()]),
@@ -569,6 +574,8 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         "window_faults": faults,
         # windows described ahead: used (published at the decision), changed (described again), discarded
         "described_ahead": ahead,
+        # fixed windows closed from the samples cut ahead (used) or cut whole although some were (recut)
+        "cut_ahead": heads,
         "frames_per_callback": float(np.mean(per_callback)) if per_callback else None,
         "per_message": per_message,
         "load_average": {"before": list(load_before), "after": list(os.getloadavg())},

@@ -48,6 +48,11 @@ def test_latency_through_the_node_graph_in_process():
     # the window node's diagnostics arrived (faults counted, frames taken per callback)
     assert res["frames_per_callback"] is not None and res["frames_per_callback"] >= 1.0
     assert isinstance(res["window_faults"], dict)
+    # windows closed from samples cut ahead (how many depends on how far behind the node ran: a window whose
+    # samples came in one callback is cut whole), and the early cuts' cost
+    heads = res["cut_ahead"]
+    assert set(heads) == {"used", "recut"} and heads["used"] + heads["recut"] <= res["predictions"]
+    assert parts["cut_ahead"]["n"] >= heads["used"]
     text = bench.format_report(bench.BenchReport([], [], None, {"numpy": "x", "cpus": 2, "load_average": [0]},
                                                  latency=res))
     assert "Prediction received" in text and "what each part costs" in text
