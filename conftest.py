@@ -112,7 +112,17 @@ def biotac_data_dir() -> Path:
 
 @pytest.fixture
 def ros_context():
-    """A fresh rclpy context per test, shut down afterwards."""
+    """A fresh rclpy context per test, shut down afterwards, and its DDS participant gone before the next test.
+
+    A node the test left (one whose constructor raised, one in a reference cycle) keeps the context's Fast DDS
+    participant until the collector frees it, which could then happen during a later test, beside that test's
+    own participants.  Fast DDS can deadlock when participants of one process discover each other while one of
+    them is destroyed (seen once in this suite: a node's destruction waiting forever on another participant's
+    discovery thread), so the collector runs here, between tests, and each test meets at most the participants
+    it makes.
+    """
+    import gc
+
     import rclpy
 
     context = rclpy.Context()
@@ -122,6 +132,8 @@ def ros_context():
     finally:
         if context.ok():
             rclpy.shutdown(context=context)
+        del context
+        gc.collect()
 
 
 @pytest.fixture
