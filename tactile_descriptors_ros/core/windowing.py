@@ -750,6 +750,7 @@ class Windower:
         #: fixed windows closed from the samples :meth:`cut_fixed_ahead` cut (``used``) or cut whole although
         #: it had (``recut``: the head did not hold, or was not one set of stacks)
         self.heads: Counter[str] = Counter()
+        self._head_step_ns = _common_period_ns(robot)
         self._now_ns = 0  # the time of the current exploration step
         self._swept_ns: int | None = None  # the watermark the state machine has run to
         self._swept_key: tuple | None = None  # that watermark and the settings it was run with
@@ -1214,9 +1215,11 @@ class Windower:
         samples before the watermark (the newest stamp every live cell has
         reached) are known and, the buffers being append-only, stay what they
         are.  Once the watermark is within :data:`CUT_AHEAD_S` of ``end``,
-        this cuts ``[start, watermark]`` (the whole window when the watermark
-        passed ``end`` and the window waits for late cells, ``lateness_s``)
-        as one set of stacks (the cut of
+        this cuts ``[start, mark)``, the mark the last whole multiple of every
+        stream's sample period from ``start`` not after the watermark (cells
+        sampling at their own instants then hold as many samples before it;
+        the whole window when the watermark passed ``end`` and the window
+        waits for late cells, ``lateness_s``), as one set of stacks (the cut of
         :meth:`poll`, one copy per buffer and stream) and returns True; the
         poll that closes the window then cuts only ``(watermark, end)``,
         copies the stacks made ahead and the new samples into the window's
@@ -1239,9 +1242,11 @@ class Windower:
         end = start + self.length_ns
         if self._head is not None and self._head.window == (start, end):
             return False
-        # the head is [start, mark): every live cell's newest sample in; the whole window while it waits for
-        # late cells (``lateness_s``)
-        mark = min(self._vibration_watermark() + 1, end)
+        # the head is [start, mark): every live cell's newest sample in, the mark on the grid of whole sample
+        # periods from the start (so that cells sampling at their own instants hold as many samples before it);
+        # the whole window while it waits for late cells (``lateness_s``)
+        newest = self._vibration_watermark() + 1
+        mark = end if newest >= end else start + (newest - start) // self._head_step_ns * self._head_step_ns
         if mark <= start or end - mark > CUT_AHEAD_S * 1e9:
             return False
         counted = self.faults.copy()
@@ -1747,7 +1752,7 @@ class Windower:
     def _part_cuts(self, kernel, start: int, end: int) -> list[tuple]:
         """Each body part's buffers cut at ``[start, end)`` (:meth:`_RowBuffer.cut`): ``(part, vc, dc, fc, xc,
         held, clean, aligned)``, the rows holding vibration samples, those without invalid ones, and whether
-        every row is clean and at the same positions as the others (:func:`_aligned`)."""
+        every row is clean and holds as many samples as the others (:func:`_aligned`)."""
         cuts = []
         for part in self._parts.values():
             # the widest step of the vibration samples (gaps), the invalid deformation samples, positions else
@@ -1781,9 +1786,10 @@ class Windower:
 
     def _stack_parts(self, made: dict[int, CellSignals], order: list, head: _Head | None = None,
                      widest: np.ndarray | None = None) -> CellStacks:
-        """The body parts of ``order`` (:meth:`_make_window`'s cuts, each part's cells clean and at the same
-        positions of its buffers, :func:`_aligned`; several parts: :meth:`_stack_order`) copied into one set of
-        arrays, one copy per buffer and stream instead of one per cell, each cell's arrays views of its row;
+        """The body parts of ``order`` (:meth:`_make_window`'s cuts, each part's cells clean and with as many
+        samples of each buffer as the others, :func:`_aligned`; several parts: :meth:`_stack_order`) copied into
+        one set of arrays, one copy per buffer and stream instead of one per cell (:func:`_rows`), each cell's
+        arrays views of its row;
         the same values, dtypes and C-contiguous layouts as the cell-by-cell copies.  Returns the
         :class:`~.aggregation.CellStacks` of those arrays.
 
@@ -2041,6 +2047,20 @@ def _below(cut: tuple, at: int) -> list[np.ndarray]:
             if c is not None]
 
 
+def _common_period_ns(robot: RobotDescription) -> int:
+    """The least common multiple of every stream's sample period [ns] (a NAO skin cell: 1 ms and 4 ms give
+    4 ms): between two of its multiples, a stream sampled regularly has as many samples whatever its phase.
+    1 ns where a period is not a whole number of nanoseconds (the BioTac's 2.2 kHz)."""
+    step = 1
+    for ct in robot.cell_types.values():
+        for rate in (ct.vibration.rate_hz, ct.deformation.rate_hz, ct.force.rate_hz):
+            period = 1e9 / rate
+            if abs(period - round(period)) > 1e-6:
+                return 1
+            step = math.lcm(step, int(round(period)))
+    return step
+
+
 def _due(last_ns: int, end_ns: int, rate_hz: float) -> int:
     """Samples due after ``last_ns`` and before ``end_ns`` at ``rate_hz``."""
     return max(0, math.ceil((end_ns - last_ns) * rate_hz / 1e9) - 1)
@@ -2071,13 +2091,12 @@ def _stack_arrays(order: list, head: _Head | None = None, room: tuple[int, int, 
     r0 = 0
     for part, vc, dc, fc, xc, *_ in order:
         r1 = r0 + len(part.cell_ids)
-        for buf, cut, t_out, v_out, k in ((part.vib, vc, vib_t, vib_v, hv), (part.dfm, dc, dfm_t, dfm_v, hd)):
-            i, j = int(cut[0, 0]), int(cut[1, 0])
-            t_out[r0:r1, k:k + j - i] = buf.t[:, i:j]
-            v_out[r0:r1, :, k:k + j - i] = buf.v[:, :, i:j].transpose(1, 0, 2)
-        force[r0:r1, hf:hf + nf] = part.force.v[0, :, int(fc[0, 0]):int(fc[1, 0])]
+        for buf, cut, t_out, v_out, k, w in ((part.vib, vc, vib_t, vib_v, hv, nv), (part.dfm, dc, dfm_t, dfm_v, hd, nd)):
+            _rows(t_out[r0:r1, k:k + w], buf.t, cut[0], w)
+            _rows(v_out[r0:r1, :, k:k + w], buf.v, cut[0], w)
+        _rows(force[r0:r1, hf:hf + nf], part.force.v[0], fc[0], nf)
         if extra is not None:
-            extra[r0:r1, :, hd:hd + nd] = part.extra.v[:, :, int(xc[0, 0]):int(xc[1, 0])].transpose(1, 0, 2)
+            _rows(extra[r0:r1, :, hd:hd + nd], part.extra.v, xc[0], nd)
         r0 = r1
     return arrays
 
@@ -2090,12 +2109,32 @@ def _same_tare(a: np.ndarray | None, b: np.ndarray | None) -> bool:
 
 
 def _aligned(*cuts: np.ndarray | None) -> bool:
-    """Whether every row of each :meth:`_RowBuffer.cut` (None: no such buffer) holds its window at the same
-    positions (rows filled in step, as a body part's messages fill them)."""
+    """Whether every row of each :meth:`_RowBuffer.cut` (None: no such buffer) holds as many of its samples in the
+    window as the others: rows filled in step, as a body part's messages fill them, at the same positions or,
+    for cells sampling at their own instants (a clock per cell), one sample apart where the window's edges
+    fall between two cells' samples."""
     for c in cuts:
-        if c is not None and c.shape[1] and not ((c[0] == c[0, 0]).all() and (c[1] == c[1, 0]).all()):
+        if c is not None and c.shape[1] and not ((w := c[1] - c[0]) == w[0]).all():
             return False
     return True
+
+
+def _rows(dst: np.ndarray, src: np.ndarray, first: np.ndarray, width: int) -> None:
+    """``dst[r, ..., :width] = src[..., r, first[r]:first[r] + width]`` for every row ``r`` of a
+    :class:`_RowBuffer` array (``t``: rows x capacity, ``v``: channels x rows x capacity): one slice copy per
+    distinct start, the rows starting there at once (one copy when the rows are filled in step; two or three
+    for cells sampling at their own instants)."""
+    if not first.size or not width:
+        return
+    f0 = int(first[0])
+    if (first == f0).all():
+        src = src[..., f0:f0 + width]
+        dst[...] = src if src.ndim == 2 else src.transpose(1, 0, 2)
+        return
+    for f in np.unique(first).tolist():
+        rows = np.flatnonzero(first == f)
+        part = src[..., rows, f:f + width]
+        dst[rows] = part if part.ndim == 2 else part.transpose(1, 0, 2)
 
 
 def _intake_kernel():

@@ -9,6 +9,8 @@ field (``same_window``: every array's bits, dtype and shape; the stacks' arrays 
 
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -105,10 +107,31 @@ def _run(rounds: list[list[PartChunk]], *, ahead: bool, **windower) -> tuple[lis
     return out, w, heads
 
 
+def _same_cells(a, b) -> bool:
+    """Every cell of two windows with the same arrays (dtype, shape, bits) and flags, in the same order."""
+    if list(a.cells) != list(b.cells):
+        return False
+    for cid, x in a.cells.items():
+        y = b.cells[cid]
+        for name in ("vibration", "vibration_t_ns", "deformation", "deformation_t_ns", "force_n", "extra",
+                     "deformation_tare"):
+            u, v = getattr(x, name), getattr(y, name)
+            if (u is None) != (v is None) or (u is not None and not same_bits(u, v)):
+                return False
+        if (x.valid, x.gap, x.invalid_samples) != (y.valid, y.gap, y.invalid_samples):
+            return False
+    return True
+
+
 def _same_run(rounds, **windower) -> tuple[list, Windower, int]:
-    """Both windowers on ``rounds``: the same windows, to every bit and layout, and the same faults."""
+    """Both windowers on ``rounds``: the same windows, to every bit and layout, and the same faults; and the
+    cells of the per-cell cut (the reference, without the compiled backend's cut and stacks)."""
     got, w_ahead, heads = _run(rounds, ahead=True, **windower)
     want, w_once, _ = _run(rounds, ahead=False, **windower)
+    with mock.patch.object(windowing, "COMPILED_CUT", False):
+        reference, w_ref, _ = _run(rounds, ahead=True, **windower)
+    assert w_ref.heads == {} and w_ref.faults == w_once.faults
+    assert len(reference) == len(want) and all(_same_cells(a, b) for a, b in zip(want, reference))
     assert [(x.start_ns, x.end_ns) for x in got] == [(x.start_ns, x.end_ns) for x in want]
     for a, b in zip(got, want):
         assert same_window(a, b)
@@ -138,9 +161,9 @@ def test_a_window_closed_from_its_head_is_the_single_cut_and_copies_only_the_sam
     assert len(got) == 4 and all(x.stacks is not None and len(x.cells) == 116 for x in got)
     assert heads == 4 and w.heads == {"used": 4}
     closes = [c for c in copied if c[0]]
-    # each close copied the accelerometer samples since the head's mark (49 of the window's 2,000: the head is cut
-    # 50 ms before the end) into the arrays the head left room in
-    assert closes == [(True, True, 49)] * 4
+    # each close copied the accelerometer samples since the head's mark (40 of the window's 2,000: the head is cut
+    # within 50 ms of the end, on the grid of 4 ms from the start) into the arrays the head left room in
+    assert closes == [(True, True, 40)] * 4
 
 
 def test_the_head_is_cut_within_cut_ahead_s_of_the_end_and_once():
@@ -154,9 +177,11 @@ def test_the_head_is_cut_within_cut_ahead_s_of_the_end_and_once():
         if w.cut_fixed_ahead():
             cut_at.append((k, w._head.mark))
     # data from 1 s; the windows end 1.5 ms before whole multiples of the 0.5 s hop, the first at 3.4985 s
-    # (batch 249 holds it); its head is cut at the first batch after which its end is within 50 ms of the
-    # newest sample every cell has (3.449 s, the mark one nanosecond after it), once; the next 0.5 s later
-    assert closed_at == [249, 299] and cut_at == [(244, 3_449_000_001), (294, 3_949_000_001)]
+    # (batch 249 holds it); its head is cut once, at the first batch after which a mark within 50 ms of its end
+    # lies before the newest sample every cell has: the mark on the grid of the force's 4 ms period from the
+    # window's start (1.4985 s), 3.4585 s, the newest sample 3.459 s (after batch 244: 3.4465 s, 52 ms before
+    # the end); the next 0.5 s later
+    assert closed_at == [249, 299] and cut_at == [(245, 3_458_500_000), (295, 3_958_500_000)]
 
 
 def test_a_window_waiting_for_late_cells_is_cut_whole_ahead_and_closed_without_copying(monkeypatch):
@@ -191,30 +216,37 @@ def test_a_body_part_silent_beyond_the_stall_leaves_a_head_that_is_no_set_of_sta
 
 
 def test_a_gap_across_the_mark_is_found_from_the_step_across_it():
-    # the chest, a batch ahead of the others, misses the accelerometer samples 2,448-2,450 ms after the first:
-    # its last sample before the head's mark (2,449 ms + 1 ns, the others' newest) is 2 ms before it, its first
-    # after 2 ms after it: a 4 ms step (a gap: more than 3 periods) that neither part shows alone.  The other
-    # parts miss as many samples on either side of the mark, 3 ms apart at most (no gap), so every part has as
-    # many samples as the others and the window stays one set of stacks.
-    holes = {p.name: ({2448, 2449, 2450} if p.name == "chest" else {2300, 2301, 2470}) for p in NAO.body_parts}
-    got, w, heads = _same_run(_messages([10] * 260, holes_ms=holes, early=("chest", 244)))
+    # the chest, a batch ahead of the others, misses the accelerometer samples 2,457-2,459 ms after the first:
+    # its last sample before the head's mark (2,458.5 ms) is 2.5 ms before it, its first after 1.5 ms after it:
+    # a 4 ms step (a gap: more than 3 periods) that neither part shows alone.  The other parts miss as many
+    # samples on either side of the mark, 3 ms apart at most (no gap), so every part has as many samples as the
+    # others and the window stays one set of stacks.
+    holes = {p.name: ({2457, 2458, 2459} if p.name == "chest" else {2300, 2301, 2470}) for p in NAO.body_parts}
+    got, w, heads = _same_run(_messages([10] * 260, holes_ms=holes, early=("chest", 245)))
     assert w.heads == {"used": 1} and got[0].stacks is not None
     assert w._head is None and w.faults["gap"] == 32
     assert [c.gap for c in got[0].cells.values()] == [p.name == "chest" for p in NAO.body_parts for _ in p.cells]
 
 
-@pytest.mark.parametrize("case", ["gap", "invalid", "own_clocks", "jitter"])
+@pytest.mark.parametrize("case", ["gap", "invalid", "own_clocks", "fewer", "jitter"])
 def test_faults_and_unstacked_windows_give_the_single_cut(case):
     kwargs = {"gap": {"gap_at": 249}, "invalid": {"invalid_at": 330},
-              "own_clocks": {"offsets_ns": {1: 600_000, 40: 800_000}}, "jitter": {"slow_jitter": True}}[case]
+              "own_clocks": {"offsets_ns": {c.id: c.id * 7_919_000 % 1_000_000 for p in NAO.body_parts
+                                            for c in p.cells}},
+              "fewer": {"holes_ms": {"chest": {2600}}}, "jitter": {"slow_jitter": True}}[case]
     got, w, heads = _same_run(_messages([10] * 400, seed=3, **kwargs))
     assert len(got) == 4
     if case == "gap":  # in the first window's last samples (the cut since the mark) and the others' heads: once a cell
         assert w.faults["gap"] == 116 * 4 and w.heads == {"used": 4}
     if case == "invalid":  # a cell with an invalid sample in the head: no stacks, cut whole
         assert w.faults["windows_with_invalid_samples"] >= 1 and w.heads["recut"] >= 1
-    if case == "own_clocks":  # two cells whose samples cross the windows' edges where the others' do not: no stacks
-        assert all(x.stacks is None for x in got) and w.heads == {"recut": 4}
+    if case == "own_clocks":  # every cell sampling at its own instants (phases over the whole 1 ms period): the
+        # windows start at one of two positions of the rows, with as many samples: one set of stacks still, each
+        # row copied from its position, and the heads (marks on the grid of the periods) serve every window
+        assert len({c.vibration_t_ns[0] % 1_000_000 for c in got[0].cells.values()}) > 100
+        assert all(x.stacks is not None for x in got) and w.heads == {"used": 4}
+    if case == "fewer":  # the chest misses a sample (3.6 s) the others have: no stacks for the windows holding it
+        assert [x.stacks is None for x in got] == [False, True, True, True] and w.heads == {"used": 1, "recut": 3}
     if case == "jitter":  # force samples off the rate's count: the head's room does not fit, but it is used
         assert w.heads == {"used": 4}
 

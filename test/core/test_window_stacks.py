@@ -35,11 +35,13 @@ pytestmark = pytest.mark.skipif(fast.kernel_module() is None, reason="no compile
 
 
 def _chunks(n_batches: int, seed: int, *, invalid: int | None = None, quiet: int | None = None,
-            light: int | None = None, first: str = "left_hand") -> list[PartChunk]:
+            light: int | None = None, first: str = "left_hand", later_ns: dict[int, int] | None = None
+            ) -> list[PartChunk]:
     """10 ms messages, one per body part and batch, every cell on the same stamps (``first``'s message first).
 
     ``invalid``: a cell with an invalid accelerometer sample in batch 12; ``quiet``: a cell that never sends;
-    ``light``: a cell pressed below the contact threshold."""
+    ``light``: a cell pressed below the contact threshold; ``later_ns``: cells sampling that much after the
+    others (on a clock of their own)."""
     rng = np.random.default_rng(seed)
     order = [first] + [p for p in PARTS if p != first]
     out = []
@@ -59,9 +61,11 @@ def _chunks(n_batches: int, seed: int, *, invalid: int | None = None, quiet: int
             out.append(PartChunk(
                 cell_ids=np.array(ids, np.int64), vibration_count=np.full(n, 10, np.int64),
                 deformation_count=np.full(n, tf.size, np.int64),
-                vibration=rng.integers(-512, 512, (3, 10 * n)).astype(np.int32), vibration_t_ns=np.tile(ta, n),
+                vibration=rng.integers(-512, 512, (3, 10 * n)).astype(np.int32),
+                vibration_t_ns=np.concatenate([ta + (later_ns or {}).get(c, 0) for c in ids]),
                 deformation=rng.integers(0, 4096, (3, tf.size * n)).astype(np.int32),
-                deformation_t_ns=np.tile(tf, n), force_n=force, vibration_valid=va,
+                deformation_t_ns=np.concatenate([tf + (later_ns or {}).get(c, 0) for c in ids]), force_n=force,
+                vibration_valid=va,
                 deformation_valid=np.ones(tf.size * n, bool), extra=rng.normal(0, 1, (2, tf.size * n)),
                 deformation_tare=rng.normal(0, 5, (n, 3))))
     return out
@@ -108,6 +112,23 @@ def test_a_clean_window_is_one_set_of_stacks_whose_rows_are_the_cells(first):
                 assert np.shares_memory(getattr(cell, name), getattr(stacks, name)[k]), name
                 assert np.array_equal(getattr(cell, name), getattr(stacks, name)[k]), name
         assert stacks.holds(list(stacks.cells), "vibration", "deformation", "force_n", "extra")
+
+
+def test_cells_on_clocks_of_their_own_are_stacked_each_from_its_own_position():
+    # two cells sampling 0.6 and 0.3 ms after the others: the windows (edges half a ms before a whole ms) hold the
+    # same number of their samples; the one 0.6 ms late has a sample 0.1 ms after the window's start, a position
+    # earlier in its row than the others' first (0.5 ms after it; 0.8 ms for the one 0.3 ms late)
+    chunks = _chunks(40, 6, later_ns={PARTS["left_hand"][1]: 600_000, PARTS["right_hand"][0]: 300_000})
+    windows = _windows(chunks)
+    with mock.patch.object(windowing, "COMPILED_CUT", False):
+        reference = _windows(chunks)
+    assert len(windows) == len(reference) >= 2
+    for got, ref in zip(windows, reference):
+        assert _arrays(got) == _arrays(ref) and got.stacks is not None
+        firsts = {cid: int(c.vibration_t_ns[0] - got.start_ns) for cid, c in got.cells.items()}
+        assert sorted(set(firsts.values())) == [100_000, 500_000, 800_000]
+        assert _same_descriptors(describe_window(ROBOT, got.cells, stacks=got.stacks),
+                                 describe_window(ROBOT, ref.cells))
 
 
 @pytest.mark.parametrize("groups", SELECTIONS, ids="+".join)

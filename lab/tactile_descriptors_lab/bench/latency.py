@@ -92,11 +92,15 @@ class ProbeFrames:
     period_ns: int
 
 
-def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700)) -> ProbeFrames:
+def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700),
+                 phases_ns: dict[int, int] | None = None) -> ProbeFrames:
     """The probe's ``SkinPartFrames`` for every body part (see :class:`ProbeFrames`).
 
     Force counts are drawn from ``force_counts`` (untared: 300-700 counts are
     0.7-1.7 N, every cell in contact; 0-20 counts are below the release threshold).
+    ``phases_ns``: cell id -> how long after the grid that cell samples (less than
+    an accelerometer period; cells on clocks of their own, :func:`cell_phases_ns`);
+    every cell on the grid without it.
     """
     import math
 
@@ -125,7 +129,8 @@ def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] 
                 accel = np.clip(rng.normal(0, 12, (3, offsets_a.size)) + [[0], [0], [256]], -512, 511
                                 ).astype(np.int16)
                 force = rng.integers(force_counts[0], force_counts[1], (3, offsets_f.size)).astype(np.uint16)
-                frame = SkinFrame(0, accel, offsets_a - offsets_a[0], force, offsets_f - offsets_a[0],
+                ph = (phases_ns or {}).get(cell.id, 0)
+                frame = SkinFrame(0, accel, offsets_a - offsets_a[0] + ph, force, offsets_f - offsets_a[0] + ph,
                                   np.zeros(0, dtype=np.uint16))
                 runs.append(SkinRun(cell.id, frame, np.zeros(3)))
             msg = skin_part_to_msg(pack_skin_part(part.name, runs, force_n_per_count=n_per_count))
@@ -134,6 +139,18 @@ def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] 
         last_a.append(int(offsets_a[-1]))
         last_f.append(int(offsets_f[-1]) if offsets_f.size else -1)
     return ProbeFrames(templates, np.array(last_a, np.int64), np.array(last_f, np.int64), period_ns)
+
+
+def cell_phases_ns(desc, seed: int) -> dict[int, int]:
+    """Each cell's sampling instant after the grid, drawn over an accelerometer period (each body part's first
+    cell on the grid: its message's stamp stays the batch's start), as cells on clocks of their own sample."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for part in desc.body_parts:
+        period_ns = int(round(1e9 / desc.cell_types[part.cell_type].vibration.rate_hz))
+        for k, cell in enumerate(part.cells):
+            out[cell.id] = int(rng.integers(0, period_ns)) if k else 0
+    return out
 
 
 def set_sequence(msg, k: int) -> None:
@@ -249,7 +266,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
                     seed: int = 0, in_process: bool = False, discovery_timeout_s: float = 60.0,
                     split_window_nodes: bool = False, drain_max: int | None = None,
                     groups: Sequence[str] | None = None, window_parameters: dict | None = None,
-                    micro: bool = True) -> dict:
+                    micro: bool = True, cell_phases: bool = False) -> dict:
     """Publish ``duration_s`` of skin frames at full rate; time each Prediction (see the module doc).
 
     Parameters
@@ -285,6 +302,9 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         More window node parameters (e.g. ``{"qos.frames.reliability": "reliable"}``).
     micro : bool
         Also run :func:`message_cost` (before the graph starts).
+    cell_phases : bool
+        Every cell samples at its own instants (:func:`cell_phases_ns`), as
+        cells on clocks of their own do, instead of all on one grid.
 
     Returns
     -------
@@ -325,11 +345,12 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
     release_ns = int(round(desc.window.release_s * 1e9))
     load_before = os.getloadavg()
     per_message = message_cost(robot=robot, batch_s=batch_s, seed=seed, mode=mode) if micro else None
+    own = cell_phases_ns(desc, seed) if cell_phases else None
     if mode == "fixed":
-        phases = {"contact": probe_frames(desc, batch_s, seed)}
+        phases = {"contact": probe_frames(desc, batch_s, seed, phases_ns=own)}
     else:
-        phases = {"contact": probe_frames(desc, batch_s, seed, (800, 1000)),
-                  "released": probe_frames(desc, batch_s, seed + 1, (0, 20))}
+        phases = {"contact": probe_frames(desc, batch_s, seed, (800, 1000), own),
+                  "released": probe_frames(desc, batch_s, seed + 1, (0, 20), own)}
     contact_frames = phases["contact"]
     n_templates = len(contact_frames.templates)
     batch_ns = int(round(batch_s * 1e9))
@@ -536,6 +557,7 @@ def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, la
         "settings": {"batch_s": batch_s, "lateness_s": lateness_s, "window_mode": mode, "window_s": length_s,
                      "hop_s": hop_s, "release_s": release_ns / 1e9, "duration_s": duration_s,
                      "in_process": in_process, "split_window_nodes": split_window_nodes, "drain_max": drain_max,
+                     "cell_phases": cell_phases,
                      "groups": list(groups) if groups is not None else list(desc.descriptor.groups),
                      "messages_per_s": len(pubs) / batch_s,
                      "executor": "the bench's own" if in_process else executor_kind()},

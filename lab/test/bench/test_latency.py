@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from tactile_descriptors_lab.bench import bench
@@ -134,3 +135,31 @@ def test_the_shipped_graphs_fixed_windows_wait_only_the_margin_before_their_batc
     grid_start = 17 * 500_000_000 - margin_ns
     assert _expected_predictions("fixed", grid_start, 8_000_000_000, 2.0, 0.5, 0.0, 0, margin_ns) == 12
     assert _expected_predictions("fixed", grid_start + 1, 8_000_000_000, 2.0, 0.5, 0.0, 0, margin_ns) == 11
+
+
+@pytest.mark.ros
+def test_the_probe_gives_cells_clocks_of_their_own_and_their_fixed_windows_close():
+    """With ``cell_phases`` every cell samples at its own instants within the accelerometer period (each body
+    part's first on the grid); the windows still close, each once, with nothing counted as a fault."""
+    from tactile_descriptors_lab.bench.latency import cell_phases_ns, measure_latency, probe_frames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.nodes.conversions import skin_part_msg_to_part_chunk
+
+    desc = load_robot("nao")
+    phases = cell_phases_ns(desc, 3)
+    assert all(0 <= v < 1_000_000 for v in phases.values()) and len(set(phases.values())) > 100
+    assert all(phases[p.cells[0].id] == 0 for p in desc.body_parts)
+    frames = probe_frames(desc, 0.01, 3, phases_ns=phases)
+    for name, msg in frames.templates[1]:
+        chunk = skin_part_msg_to_part_chunk(msg)
+        n = chunk.vibration_count
+        firsts = chunk.vibration_t_ns[np.concatenate([[0], np.cumsum(n)[:-1]])]
+        assert (n == 10).all() and firsts.tolist() == [phases[int(c)] for c in chunk.cell_ids], name
+
+    res = measure_latency(duration_s=3.0, batch_s=0.01, lateness_s=0.0, in_process=True, micro=False,
+                          cell_phases=True, window_parameters={"qos.frames.reliability": "reliable",
+                                                               "qos.frames.depth": 2000})
+    assert res["settings"]["cell_phases"] is True
+    assert res["predictions"] == res["expected_predictions"] >= 2 and not any(res["window_faults"].values())
+    heads = res["cut_ahead"]
+    assert heads["used"] + heads["recut"] <= res["predictions"]
