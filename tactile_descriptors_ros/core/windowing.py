@@ -1221,16 +1221,16 @@ class Windower:
         the whole window when the watermark passed ``end`` and the window
         waits for late cells, ``lateness_s``), as one set of stacks (the cut of
         :meth:`poll`, one copy per buffer and stream) and returns True; the
-        poll that closes the window then cuts only ``(watermark, end)``,
-        copies the stacks made ahead and the new samples into the window's
-        arrays and combines the widest steps of both parts, exactly (a gap is
-        a step between consecutive samples, and the step across the mark is
-        at least each part's step to or from the mark).  The window is the
-        one a single cut makes, to the bit: the same arrays, dtypes, layouts,
-        gaps and fault counts.  It falls back to the single cut whenever the
-        head does not hold: a sample appended since inside ``[start,
-        watermark]``, a new body part, a window that would not be one set of
-        stacks, a clock jump (which drops the head), new window settings.
+        poll that closes the window then cuts only ``[mark, end)``, copies
+        those samples into the room left after the head and combines the
+        widest steps of both parts, exactly (a gap is a step between
+        consecutive samples, and the step across the mark is at least each
+        part's step to or from the mark).  The window is the one a single cut
+        makes, to the bit: the same arrays, dtypes, layouts, gaps and fault
+        counts.  It falls back to the single cut whenever the head does not
+        hold: a sample before the mark appended since, a new body part, a
+        window that would not be one set of stacks, a clock jump (which drops
+        the head), new window settings.
         Returns False when nothing was cut: not fixed mode, the window's end
         still further away, its head already cut, or the head not one set of
         stacks (then not tried again for this window).
@@ -1256,10 +1256,10 @@ class Windower:
         finally:  # the faults the head shows are counted when the window closes, by the cut that closes it
             self.faults.clear()
             self.faults.update(counted)
-        below = {name: _below(c, 1) for name, c in zip(self._parts, cuts)}
-        if order is None:
-            self._head = _Head((start, end), mark, None, (0, 0, 0), None, below)
+        if order is None:  # not tried again for this window
+            self._head = _Head((start, end), mark, None, (0, 0, 0), None, {})
             return False
+        below = {name: _below(c, 1) for name, c in zip(self._parts, cuts)}
         # room after the head for the samples due before the end, each stream at its cell type's rate: the
         # window's arrays then take them as they are (else they are copied once more, into arrays that fit)
         ct = self.robot.cell_types[self.robot.body_part(self._part_names[0]).cell_type]
@@ -1288,13 +1288,13 @@ class Windower:
         if any(not all(np.array_equal(a, b) for a, b in zip(_below(c, 0), head.below[name]))
                for name, c in zip(self._parts, cuts)):
             return None
+        if (order := self._stack_order(cuts)) is None:
+            return None
         vib_v, vib_t, dfm_v = head.arrays[:3]
         if head.mark == end:  # the whole window was cut ahead (it waited for late cells): nothing since
-            by_name = dict(zip(self._parts, cuts))
-            order, widest = [by_name[name] for name in self._part_names], head.widest
+            widest = head.widest
         else:
-            if not all(c[-1] for c in cuts) or (order := self._stack_order(cuts)) is None \
-                    or (order[0][4] is None) != (head.arrays[5] is None) \
+            if not all(c[-1] for c in cuts) or (order[0][4] is None) != (head.arrays[5] is None) \
                     or (order[0][0].vib.v.dtype, order[0][0].dfm.v.dtype) != (vib_v.dtype, dfm_v.dtype):
                 return None
             # the widest step over the whole window: each part's (its outer edge the mark), and the step across it
@@ -1789,9 +1789,8 @@ class Windower:
         """The body parts of ``order`` (:meth:`_make_window`'s cuts, each part's cells clean and with as many
         samples of each buffer as the others, :func:`_aligned`; several parts: :meth:`_stack_order`) copied into
         one set of arrays, one copy per buffer and stream instead of one per cell (:func:`_rows`), each cell's
-        arrays views of its row;
-        the same values, dtypes and C-contiguous layouts as the cell-by-cell copies.  Returns the
-        :class:`~.aggregation.CellStacks` of those arrays.
+        arrays views of its row; the same values, dtypes and C-contiguous layouts as the cell-by-cell copies.
+        Returns the :class:`~.aggregation.CellStacks` of those arrays.
 
         ``head``: the window's earlier samples, cut before (:meth:`cut_fixed_ahead`); the cuts are then of the
         rest of the window, copied after them (into the head's own arrays when their room fits), and
