@@ -30,6 +30,7 @@ pace it on the wall clock (``speed=1`` is real time).
 from __future__ import annotations
 
 import heapq
+import threading
 import time
 from collections import deque
 from collections.abc import Collection, Iterator
@@ -304,6 +305,10 @@ class _PacedSource:
         self.results: list[dict[str, Any]] = []  # ground truth of the chunks simulated so far
         self._pool: ThreadPoolExecutor | None = None  # paced: simulates the next chunks ahead
         self._ahead: deque[Future] = deque()
+        #: CPU time spent simulating chunks and putting them on the wire, on whichever thread [s]
+        self.simulate_cpu_s = 0.0
+        #: the native id of the thread that simulates a paced scene (``None``: not paced, or not started)
+        self.thread_id: int | None = None
 
     def open(self) -> None:
         self._t0_wall = self.clock()
@@ -316,11 +321,20 @@ class _PacedSource:
 
     def _simulate_next(self) -> tuple[SimResult, _Chunk] | None:
         """The scene's next chunk, simulated and put on the wire (``None`` at its end)."""
+        started = time.thread_time()
         try:
-            result = next(self._chunks)
-        except StopIteration:
-            return None
-        return result, self._convert(result)
+            try:
+                result = next(self._chunks)
+            except StopIteration:
+                return None
+            return result, self._convert(result)
+        finally:
+            self.simulate_cpu_s += time.thread_time() - started
+
+    def _simulate_on_worker(self) -> tuple[SimResult, _Chunk] | None:
+        """:meth:`_simulate_next` on the worker thread, which says who it is."""
+        self.thread_id = threading.get_native_id()
+        return self._simulate_next()
 
     def _fill(self) -> bool:
         """Queue the next chunk; False at the scene's end.
@@ -337,6 +351,11 @@ class _PacedSource:
         """
         if self.exhausted:
             return False
+        if self.speed is not None and self._pool is None:
+            # every chunk of a paced scene on the one worker thread, also the first, which is waited for here:
+            # the simulator's CPU is then that thread's (a bench tells it from the driver's own by its id)
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scene_ahead")
+            self._ahead.append(self._pool.submit(self._simulate_on_worker))
         got = self._ahead.popleft().result() if self._ahead else self._simulate_next()
         if got is None:
             self.exhausted = True
@@ -345,11 +364,9 @@ class _PacedSource:
         self.results.append({"explorations": [e.to_dict() for e in result.explorations],
                              "faults": result.faults, "end_ns": result.end_ns})
         self._items.append(chunk)
-        if self.speed is not None:
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scene_ahead")
+        if self._pool is not None:
             while len(self._ahead) < AHEAD_CHUNKS:
-                self._ahead.append(self._pool.submit(self._simulate_next))
+                self._ahead.append(self._pool.submit(self._simulate_on_worker))
         return True
 
     @property

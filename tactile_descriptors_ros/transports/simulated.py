@@ -144,5 +144,15 @@ class SimulatedTransport(ByteTransport, SpiTransport, MessageTransport):
             self.sent.append(msg)
 
     def describe(self) -> dict[str, Any]:
-        return {"transport": self.name, "source": type(self.source).__name__}
+        """Name and source; for a simulated scene also the CPU its simulation took so far (``simulator_cpu_s``)
+        and, paced, the native id of the thread simulating it (``simulator_thread_id``), which is not the
+        driver's work: a robot's bus has no simulator in the driver's process."""
+        out: dict[str, Any] = {"transport": self.name, "source": type(self.source).__name__}
+        cpu_s = getattr(self.source, "simulate_cpu_s", None)
+        if cpu_s is not None:
+            out["simulator_cpu_s"] = round(float(cpu_s), 3)
+        thread_id = getattr(self.source, "thread_id", None)
+        if thread_id is not None:
+            out["simulator_thread_id"] = int(thread_id)
+        return out
 

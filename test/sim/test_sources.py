@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import time
 
 import numpy as np
 import pytest
@@ -316,7 +317,9 @@ def test_a_paced_source_simulates_the_next_chunk_while_the_reader_takes_this_one
     rest = src.recv_batch(10**7, 0.0)
     while len(more := src.recv_batch(10**7, 0.0)):
         rest = np.concatenate([rest, more])
-    assert calls[0] == threading.main_thread().name and calls[1].startswith("scene_ahead")
+    # every chunk on the worker, also the first (waited for): the simulator's CPU is that one thread's
+    assert len(calls) >= 3 and all(c.startswith("scene_ahead") for c in calls), calls
+    assert src.thread_id is not None and src.thread_id != threading.get_native_id()
     plain = SkinCanSource(scene, chunk_s=0.5)
     plain.open()
     want = plain.recv_batch(10**8, 0.0)
@@ -361,3 +364,25 @@ def test_a_paced_source_keeps_two_chunks_simulated_ahead_of_the_reader():
     want = plain.recv_batch(10**8, 0.0)
     got = np.concatenate([first, rest])
     assert len(got) == len(want) > 0 and (got == want).all()
+
+
+def test_a_simulated_transport_reports_the_simulators_cpu_and_thread():
+    """The driver's diagnostics say what simulating took and on which thread, so a bench can tell the
+    simulator's CPU from the driver's own; an unpaced source simulates on the reader's thread and has none."""
+    import threading
+
+    from tactile_descriptors_ros.transports.simulated import SimulatedTransport
+
+    scene = parse_scene(copy.deepcopy(NAO))
+    for speed, on_worker in ((1e6, True), (None, False)):
+        transport = SimulatedTransport(SkinCanSource(scene, speed=speed, chunk_s=0.5))
+        transport.open()
+        before = time.thread_time()
+        assert len(transport.source.recv_batch(1000, 0.0)) == 1000
+        here_s = time.thread_time() - before
+        described = transport.describe()
+        assert described["simulator_cpu_s"] > 0.0
+        if on_worker:
+            assert described["simulator_thread_id"] not in (None, threading.get_native_id())
+        else:  # simulated here, within this thread's CPU time
+            assert "simulator_thread_id" not in described and described["simulator_cpu_s"] <= here_s + 1e-3

@@ -95,6 +95,8 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     path = sum(n["cpu_percent"] for name, n in d["nodes"].items() if name not in ("contact_node", "tf_publisher"))
     assert c["recognition_path_percent"] == pytest.approx(path) and c["cells"] == 116
     assert d["goal"]["cpu_met"] is (path < 100.0)
+    # the driver's simulator runs on a thread the soak finds by the id in the driver's diagnostics
+    assert 0.0 < c["simulator_percent"]["skin_driver"] < d["nodes"]["skin_driver"]["cpu_percent"]
 
 
 def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
@@ -185,6 +187,31 @@ def test_the_recognition_paths_cpu_is_judged_under_one_core_and_per_cell_second_
     bare = SoakReport("nao", 10.0, 10.0, 1.0, [NodeSamples("window_node", "window_node", 2)], {},
                       (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {})
     assert bare.to_dict()["goal"]["cpu_met"] is None and bare.to_dict()["goal"]["cell_second_met"] is None
+
+
+def test_the_simulators_thread_is_reported_apart_from_the_drivers_own_cpu():
+    """Known answers: the driver's process used 4 s of CPU over 10 s, 1.5 s of it on its simulator's thread
+    (unknown at the first sample, when the process had just started); with the window node's 5 s the path is
+    9 s, 7.5 s without the simulator: 7500 / 1160 ms per cell-second.  The goals stay judged with it."""
+    from tactile_descriptors_lab.bench.soak import format_soak
+
+    driver = NodeSamples("skin_driver", "skin_driver", 1, t_s=[0.0, 5.0, 10.0], rss_mb=[100.0] * 3,
+                         cpu_s=[1.0, 3.0, 5.0], simulator_cpu_s=[None, 0.7, 1.5])
+    window = NodeSamples("window_node", "window_node", 2, t_s=[0.0, 10.0], rss_mb=[100.0] * 2, cpu_s=[0.0, 5.0])
+    r = SoakReport("nao", 10.0, 10.0, 1.0, [driver, window], {}, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 2, 0, {},
+                   scene_frames_per_s=1000.0, driver_run_s=10.0, frames_sent_in_run=10000, cells=116)
+    c = r.to_dict()["cpu"]
+    assert c["simulator_percent"] == {"skin_driver": pytest.approx(15.0)}
+    assert c["simulator_ms_per_cell_second"]["skin_driver"] == pytest.approx(1500.0 / 1160.0)
+    assert c["recognition_path_ms_per_cell_second"] == pytest.approx(9000.0 / 1160.0)
+    assert c["recognition_path_ms_per_cell_second_without_simulator"] == pytest.approx(7500.0 / 1160.0)
+    assert r.to_dict()["goal"]["cell_second_met"] is False
+    assert "the recognition path without it 6.47" in format_soak(r)
+    # a driver whose simulator thread was never seen (a hardware bus) reports none
+    driver.simulator_cpu_s = [None, None, None]
+    c = r.to_dict()["cpu"]
+    assert c["simulator_percent"] == {} and c["recognition_path_ms_per_cell_second_without_simulator"] == \
+        pytest.approx(c["recognition_path_ms_per_cell_second"])
 
 
 def test_when_frames_were_lost_and_each_nodes_pauses_are_reported():
