@@ -59,9 +59,11 @@ __all__ = [
 #: Compiled backends by name: the module that implements them, imported on
 #: first use.  A backend module provides ``quantities``, ``cell_bounds``,
 #: ``central_moments``, ``power_spectrum``, ``band_moments``, ``rocket_ppv``, the windowing intake's
-#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the CAN decoder's ``decode_can_rows`` (and its
-#: verdicts ``CAN_*``), the sequence tracker's ``track_forward``, the status ``OK`` and ``CACHE_DIR``
-#: (:mod:`.numba_kernel` documents them).  The first name that imports serves.
+#: ``runs_in_order``, ``append_runs`` and ``explore_runs``, the message conversion ``skin_part_arrays`` and
+#: check ``check_runs``,
+#: the CAN decoder's ``decode_can_rows`` (and its verdicts ``CAN_*``), the sequence tracker's
+#: ``track_forward``, the status ``OK`` and ``CACHE_DIR`` (:mod:`.numba_kernel` documents them).
+#: The first name that imports serves.
 BACKENDS: dict[str, str] = {"numba": f"{__package__}.numba_kernel"}
 
 #: The name of the reference (:func:`.descriptors.cell_quantities`, no compiled code).
@@ -345,6 +347,14 @@ def warm_up() -> dict:
     i64 = np.zeros(1, dtype=np.int64)
     kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, 2,
                     i64.copy(), i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
+    # a body part's message converted (nodes.conversions: rclpy's array fields as writeable contiguous views)
+    one_u32, one_f64 = np.ones(1, dtype=np.uint32), np.zeros(3)
+    kernel.skin_part_arrays(one_u32, one_u32, one_f64, np.zeros(1, dtype=np.int16), np.zeros(1, dtype=np.int16),
+                            np.zeros(1, dtype=np.int16), t, np.zeros(3, dtype=np.uint16), t, 0, 1.0, -32768, 65535,
+                            np.zeros(1, dtype=np.uint16), one_f64[:1].copy(), np.zeros(1, dtype=np.int64))
+    # its runs checked against the served cells (streams.skin_parts.RunChecker)
+    kernel.check_runs(t, one_u32, one_u32, t, t, 0, np.zeros(1, dtype=bool), t.copy(), np.zeros(1, dtype=bool),
+                      np.zeros(7, dtype=np.int64))
     for dtype in (np.int32, np.int64, np.float64):
         kernel.append_runs(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1, 1), dtype=dtype),
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),

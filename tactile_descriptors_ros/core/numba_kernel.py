@@ -880,6 +880,152 @@ def rocket_ppv(x, dilations, per_dilation, channels_per_combination, channel_ind
                 comb += 1
 
 
+# ------------------------------------------------------------------ a body part's message, converted
+@_jit
+def skin_part_arrays(a_count, f_count, tare, ax, ay, az, a_off, force, f_off, stamp_ns, n_per_count,
+                     invalid_accel, invalid_count, proximity, temperature_c, extra_codes):  # pragma: no cover
+    """A ``SkinPartFrames``' sample arrays as :func:`..streams.skin_parts.skin_part_chunk` makes them, one pass each.
+
+    ``a_count``, ``f_count`` (uint32, one per run), ``tare`` (float64, three per run), the accelerometer axes
+    ``ax``, ``ay``, ``az`` (int16), ``a_off`` and ``f_off`` (int64 offsets from ``stamp_ns``) and ``force``
+    (uint16, three sensors per sample) are the message's fields.  Returns ``ok`` (False, and empty arrays,
+    when a length disagrees with the runs' counts: the caller's checks then name the fault), the counts as
+    int64, the accelerometer as (3, n) int32 with its validity and stamps, the force sensors as (3, m) int32
+    with their validity, the contact force in newtons and their stamps.  The force is numpy's sum of
+    the three tared sensors in sensor order divided by three, times ``n_per_count``, NaN where a sensor is
+    ``invalid_count``: the same operations in the same order, so the same bits.  ``extra_codes`` asks for
+    extra rows, one per code, over the force samples: 0 the ``proximity`` counts (NaN where
+    ``invalid_count``, or everywhere when the message has none), 1 each run's ``temperature_c``; they are
+    returned last, (len(extra_codes), m) float64.
+    """
+    n = a_count.shape[0]
+    n_a = 0
+    n_f = 0
+    for r in range(n):
+        n_a += np.int64(a_count[r])
+        n_f += np.int64(f_count[r])
+    ok = (f_count.shape[0] == n and tare.shape[0] == 3 * n and ax.shape[0] == n_a and ay.shape[0] == n_a
+          and az.shape[0] == n_a and a_off.shape[0] == n_a and force.shape[0] == 3 * n_f and f_off.shape[0] == n_f
+          and temperature_c.shape[0] == n and (proximity.shape[0] == 0 or proximity.shape[0] == n_f))
+    if not ok:
+        n, n_a, n_f = 0, 0, 0
+    a_cnt = np.empty(n, dtype=np.int64)
+    f_cnt = np.empty(n, dtype=np.int64)
+    acc = np.empty((3, n_a), dtype=np.int32)
+    vib_ok = np.empty(n_a, dtype=np.bool_)
+    t_a = np.empty(n_a, dtype=np.int64)
+    forces = np.empty((3, n_f), dtype=np.int32)
+    f_ok = np.empty(n_f, dtype=np.bool_)
+    force_n = np.empty(n_f)
+    t_f = np.empty(n_f, dtype=np.int64)
+    extra = np.empty((extra_codes.shape[0], n_f))
+    for r in range(n):
+        a_cnt[r] = a_count[r]
+        f_cnt[r] = f_count[r]
+    for i in range(n_a):
+        x = ax[i]
+        y = ay[i]
+        z = az[i]
+        acc[0, i] = x
+        acc[1, i] = y
+        acc[2, i] = z
+        vib_ok[i] = x != invalid_accel and y != invalid_accel and z != invalid_accel
+        t_a[i] = a_off[i] + stamp_ns
+    k = 0
+    for r in range(n):
+        c0 = tare[3 * r]
+        c1 = tare[3 * r + 1]
+        c2 = tare[3 * r + 2]
+        for _ in range(f_cnt[r]):
+            s0 = force[3 * k]
+            s1 = force[3 * k + 1]
+            s2 = force[3 * k + 2]
+            forces[0, k] = s0
+            forces[1, k] = s1
+            forces[2, k] = s2
+            good = s0 != invalid_count and s1 != invalid_count and s2 != invalid_count
+            f_ok[k] = good
+            if good:
+                force_n[k] = ((np.float64(s0) - c0) + (np.float64(s1) - c1) + (np.float64(s2) - c2)) / 3.0 \
+                    * n_per_count
+            else:
+                force_n[k] = np.nan
+            t_f[k] = f_off[k] + stamp_ns
+            for e in range(extra_codes.shape[0]):
+                if extra_codes[e] == 1:
+                    extra[e, k] = temperature_c[r]
+                elif proximity.shape[0] and proximity[k] != invalid_count:
+                    extra[e, k] = np.float64(proximity[k])
+                else:
+                    extra[e, k] = np.nan
+            k += 1
+    return ok, a_cnt, f_cnt, acc, vib_ok, t_a, forces, f_ok, force_n, t_f, extra
+
+
+@_jit
+def check_runs(ids, seq, bad, served_ids, served_part, part_code, have, high, mine, out):  # pragma: no cover
+    """Each run of a body part's message against the served cells and its cell's batch numbers, in run order.
+
+    The compiled form of :meth:`..streams.skin_parts.RunChecker.check`: ``mine[i]`` says whether run ``i``
+    is of a served cell of body part ``part_code``; for those, in order, the batch number ``seq[i]`` after
+    the cell's newest (``high``, unwrapped; ``have``: one was seen) counts the batches between as lost, a
+    number at or before it a restart.  ``out`` receives the unknown runs, the first unknown id, the runs of
+    another body part's cells, the first such id, the lost batches, the restarts and the bad frames of the
+    cell's runs; the sequence state is updated only when some run is the body part's.
+    """
+    n = ids.shape[0]
+    m = served_ids.shape[0]
+    n_unknown = 0
+    n_other = 0
+    first_unknown = -1
+    first_other = -1
+    any_mine = False
+    for i in range(n):
+        cid = ids[i]
+        pos = min(_left_of(served_ids, 0, m, cid), m - 1)
+        if m == 0 or served_ids[pos] != cid:
+            mine[i] = False
+            if n_unknown == 0:
+                first_unknown = cid
+            n_unknown += 1
+        elif served_part[pos] != part_code:
+            mine[i] = False
+            if n_other == 0:
+                first_other = cid
+            n_other += 1
+        else:
+            mine[i] = True
+            any_mine = True
+    lost = 0
+    restarts = 0
+    bad_sum = 0
+    if any_mine:
+        for i in range(n):
+            if not mine[i]:
+                continue
+            lo = _left_of(served_ids, 0, m, ids[i])  # a run of the body part's: its cell is there
+            q = np.int64(seq[i])
+            if have[lo]:
+                d = (q - (high[lo] + 1)) % 4294967296
+                if d >= 2147483648:
+                    restarts += 1
+                    high[lo] = q
+                else:
+                    lost += d
+                    high[lo] = high[lo] + 1 + d
+            else:
+                high[lo] = q
+            have[lo] = True
+            bad_sum += np.int64(bad[i])
+    out[0] = n_unknown
+    out[1] = first_unknown
+    out[2] = n_other
+    out[3] = first_other
+    out[4] = lost
+    out[5] = restarts
+    out[6] = bad_sum
+
+
 # ------------------------------------------------------------------ windowing intake
 @_jit
 def runs_in_order(t, counts, rows, n_rows, has_a, last_a, has_b, last_b):  # pragma: no cover - compiled

@@ -72,6 +72,7 @@ from ..core.robot import check_blocks, load_robot, select_body_parts
 from ..core.windowing import CellChunk, PartChunk, Window, Windower, rehearsal_window
 from ..errors import ConfigError, SignalError
 from ..params.window_node import WINDOW_NODE
+from ..streams.skin_parts import RunChecker
 from ..topics import DESCRIPTOR_TOPIC, layout_topic
 from .common import (
     Diagnostics,
@@ -195,13 +196,8 @@ class WindowNode(StopsQuietly, Node):
         self.rehearsal_ms: float | None = None  # how long the rehearsal of the describing path took (_rehearse)
         self._cut_ms: deque[float] = deque(maxlen=500)
         self._cell_part = {c.id: p.name for p in self.robot.body_parts for c in p.cells}
-        # served cells as sorted arrays (a message's runs are checked at once): id, body part, batch numbers
-        served = sorted((c.id, k) for k, p in enumerate(self.robot.body_parts) for c in p.cells)
-        self._part_code = {p.name: k for k, p in enumerate(self.robot.body_parts)}
-        self._served_ids = np.array([c for c, _ in served], np.int64)
-        self._served_part = np.array([k for _, k in served], np.int64)
-        self._seq_high = np.zeros(len(served), np.int64)
-        self._seq_have = np.zeros(len(served), bool)
+        # a message's runs checked at once against the served cells and their batch numbers
+        self._runs = RunChecker({p.name: [c.id for c in p.cells] for p in self.robot.body_parts})
         self.diagnostics = Diagnostics(self, params["diagnostics_period_s"])
         self.diagnostics.add("windows", self._status)
         params.finish()
@@ -396,44 +392,27 @@ class WindowNode(StopsQuietly, Node):
             self.get_logger().warning(f"malformed SkinPartFrames of body part {part!r}: {exc}",
                                       throttle_duration_sec=5.0)
             return []
-        ids = chunk.cell_ids
-        if not ids.size:
+        if not chunk.cell_ids.size:
             return []
-        pos = np.minimum(np.searchsorted(self._served_ids, ids), self._served_ids.size - 1)
-        known = self._served_ids[pos] == ids
-        mine = known & (self._served_part[pos] == self._part_code.get(part, -1))
-        if not known.all():
-            self.faults["unknown_cell"] += int((~known).sum())
-            self.get_logger().warning(f"frames from cell {int(ids[~known][0])} which is not in the served body parts; "
+        got = self._runs.check(part, chunk.cell_ids, _as_array(msg.sequence, np.uint32),
+                               _as_array(msg.bad_frames, np.uint32))
+        if got.unknown:
+            self.faults["unknown_cell"] += got.unknown
+            self.get_logger().warning(f"frames from cell {got.first_unknown} which is not in the served body parts; "
                                       "dropped", throttle_duration_sec=5.0)
-        if (known & ~mine).any():
-            cid = int(ids[known & ~mine][0])
-            self.faults["body_part_mismatch"] += int((known & ~mine).sum())
+        if got.other_part:
+            cid = got.first_other_part
+            self.faults["body_part_mismatch"] += got.other_part
             self.get_logger().warning(f"cell {cid} sent on body part {part!r} but the robot description puts it on "
                                       f"{self._cell_part[cid]!r}; dropped", throttle_duration_sec=5.0)
-        if not mine.any():
+        n_mine = chunk.cell_ids.size - got.unknown - got.other_part
+        if not n_mine:
             return []
-        self._sequence_cells(pos[mine], _as_array(msg.sequence, np.uint32)[mine])
-        self.faults["bad_frames"] += int(_as_array(msg.bad_frames, np.uint32)[mine].sum())
-        self._seen(part, int(mine.sum()))
-        return chunk.take(mine)
-
-    def _sequence_cells(self, cells: np.ndarray, seq: np.ndarray) -> None:
-        """Each cell's batch number (32-bit) after the one before: gaps are lost cell batches, a number at or
-        before the newest a restart of the driver's count (as ``SequenceTracker.track_run`` with one number)."""
-        if np.unique(cells).size < cells.size:  # a cell twice in one message: one run after the other
-            for c, q in zip(cells.tolist(), seq.tolist()):
-                self._sequence_cells(np.array([c]), np.array([q], np.int64))
-            return
-        seq = seq.astype(np.int64)
-        have = self._seq_have[cells]
-        d = (seq - (self._seq_high[cells] + 1)) % (1 << 32)
-        back = have & (d >= 1 << 31)
-        lost = np.where(have & ~back, d, 0)
-        self.faults["lost_cell_batches"] += int(lost.sum())
-        self.faults["sequence_restart"] += int(back.sum())
-        self._seq_high[cells] = np.where(have & ~back, self._seq_high[cells] + 1 + d, seq)
-        self._seq_have[cells] = True
+        self.faults["lost_cell_batches"] += got.lost
+        self.faults["sequence_restart"] += got.restarts
+        self.faults["bad_frames"] += got.bad_frames
+        self._seen(part, n_mine)
+        return chunk.take(got.mine)
 
     def _sequence(self, key: str, first: int, count: int) -> None:
         event, lost = self._sequences.track_run(key, first, max(count, 1))

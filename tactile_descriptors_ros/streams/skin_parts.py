@@ -41,7 +41,7 @@ from ..markers import INVALID_ACCEL, INVALID_COUNT
 from .frames import SkinFrame
 
 __all__ = ["SkinPartFrames", "SkinRun", "pack_skin_part", "skin_part_chunks", "skin_part_chunk", "PartGatherer",
-           "SKIN_PART_EXTRA_CHANNELS"]
+           "SKIN_PART_EXTRA_CHANNELS", "extra_rows", "RunCheck", "RunChecker"]
 
 #: Extra channels (robot description ``extra_channels``) a ``SkinPartFrames`` carries.
 SKIN_PART_EXTRA_CHANNELS: tuple[str, ...] = ("proximity", "temperature")
@@ -222,6 +222,19 @@ def skin_part_chunks(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -
     return skin_part_chunk(part, extra_channels).chunks()
 
 
+def extra_rows(proximity: np.ndarray, temperature_c: np.ndarray, force_count: np.ndarray, n_force: int,
+               extra_channels: Sequence[str]) -> np.ndarray | None:
+    """The extra channels of a body part's message, one row each over its ``n_force`` force samples
+    (:func:`skin_part_chunk`); None when none are asked for."""
+    if not extra_channels:
+        return None
+    prox = np.asarray(proximity)
+    cols = {"proximity": (np.where(prox != INVALID_COUNT, prox.astype(np.float64), np.nan) if prox.size
+                          else np.full(n_force, np.nan)),
+            "temperature": np.repeat(np.asarray(temperature_c, dtype=np.float64), force_count)}
+    return np.stack([cols[c] for c in extra_channels])
+
+
 def skin_part_chunk(part: SkinPartFrames, extra_channels: Sequence[str] = ()) -> PartChunk:
     """The whole message as one :class:`~..core.windowing.PartChunk` (vibration accelerometer, deformation force).
 
@@ -260,17 +273,110 @@ def skin_part_chunk(part: SkinPartFrames, extra_channels: Sequence[str] = ()) ->
     force_n = np.where(f_ok, mean_n, np.nan)
     t_a = np.asarray(part.accel_offset_ns, dtype=np.int64) + int(part.stamp_ns)
     t_f = np.asarray(part.force_offset_ns, dtype=np.int64) + int(part.stamp_ns)
-    extra = None
-    if extra_channels:
-        prox = np.asarray(part.proximity)
-        cols = {"proximity": (np.where(prox != INVALID_COUNT, prox.astype(np.float64), np.nan) if prox.size
-                              else np.full(m_total, np.nan)),
-                "temperature": np.repeat(np.asarray(part.temperature_c, dtype=np.float64), f_count)}
-        extra = np.stack([cols[c] for c in extra_channels])
+    extra = extra_rows(part.proximity, part.temperature_c, f_count, m_total, extra_channels)
     return PartChunk(cell_ids=np.asarray(part.cell_ids, dtype=np.int64), vibration_count=a_count,
                      deformation_count=f_count, vibration=acc, vibration_t_ns=t_a, deformation=forces,
                      deformation_t_ns=t_f, force_n=force_n, vibration_valid=vib_ok, deformation_valid=f_ok,
                      extra=extra, deformation_tare=tare)
+
+
+@dataclass(frozen=True)
+class RunCheck:
+    """What :meth:`RunChecker.check` found in one message's runs."""
+
+    #: per run, whether it is of a served cell of the message's body part (the runs to keep)
+    mine: np.ndarray
+    #: runs of cells that no served body part has, and the first such cell id
+    unknown: int
+    first_unknown: int | None
+    #: runs of served cells sent on another body part's message, and the first such cell id
+    other_part: int
+    first_other_part: int | None
+    #: the kept runs' cell batches that never arrived (gaps in each cell's batch numbers)
+    lost: int
+    #: the kept runs whose batch number is at or before the cell's newest: a driver that started again
+    restarts: int
+    #: the kept runs' ``bad_frames``
+    bad_frames: int
+
+
+class RunChecker:
+    """A body part's message's runs against the served cells and each cell's batch numbers (32-bit, wrapping).
+
+    The window node's check of every ``SkinPartFrames``: runs of unknown cells or of
+    another body part's cells are left out and counted; each kept run's batch number
+    follows its cell's newest (the numbers between are lost batches, a number at or
+    before it a restart of the driver's count, as ``SequenceTracker.track_run`` with
+    one number).  Runs are taken in order, so a cell with two runs in one message is
+    checked twice.  With the compiled backend one pass does it all
+    (:func:`.numba_kernel.check_runs`; about 40 us of array operations a NAO message
+    before); the numpy path gives the same results.
+
+    Parameters
+    ----------
+    parts : mapping of body part -> cell ids
+        The served cells of each body part (a cell id on one body part only).
+    """
+
+    def __init__(self, parts: dict[str, Iterable[int]]) -> None:
+        served = sorted((int(c), k) for k, cells in enumerate(parts.values()) for c in cells)
+        self.part_code = {name: k for k, name in enumerate(parts)}
+        self.ids = np.array([c for c, _ in served], np.int64)
+        self.part = np.array([k for _, k in served], np.int64)
+        self.high = np.zeros(len(served), np.int64)  # each cell's newest batch number, unwrapped
+        self.have = np.zeros(len(served), bool)
+        self._out = np.zeros(7, np.int64)
+
+    def check(self, part: str, ids: np.ndarray, sequence: np.ndarray, bad_frames: np.ndarray) -> RunCheck:
+        """Check one message's runs (cell ids, batch numbers, bad frames, one each per run) of body part ``part``."""
+        from ..core import fast, windowing
+
+        code = self.part_code.get(part, -1)
+        kernel = fast.kernel_module() if windowing.COMPILED_INTAKE else None
+        if kernel is not None and ids.dtype == np.int64 and sequence.dtype == bad_frames.dtype == np.uint32 \
+                and all(a.flags.c_contiguous and a.flags.writeable for a in (ids, sequence, bad_frames)) \
+                and ids.size == sequence.size == bad_frames.size:
+            mine = np.empty(ids.size, bool)
+            out = self._out
+            kernel.check_runs(ids, sequence, bad_frames, self.ids, self.part, code, self.have, self.high, mine, out)
+            n_unknown, first_unknown, n_other, first_other, lost, restarts, bad = out.tolist()
+            return RunCheck(mine, n_unknown, first_unknown if n_unknown else None, n_other,
+                            first_other if n_other else None, lost, restarts, bad)
+        return self._check_numpy(code, np.asarray(ids, np.int64), sequence, bad_frames)
+
+    def _check_numpy(self, code: int, ids: np.ndarray, sequence: np.ndarray, bad_frames: np.ndarray) -> RunCheck:
+        if not self.ids.size:
+            return RunCheck(np.zeros(ids.size, bool), int(ids.size), int(ids[0]) if ids.size else None, 0, None,
+                            0, 0, 0)
+        pos = np.minimum(np.searchsorted(self.ids, ids), self.ids.size - 1)
+        known = self.ids[pos] == ids
+        mine = known & (self.part[pos] == code)
+        other = known & ~mine
+        n_unknown, n_other = int((~known).sum()), int(other.sum())
+        first_unknown = int(ids[~known][0]) if n_unknown else None
+        first_other = int(ids[other][0]) if n_other else None
+        if not mine.any():
+            return RunCheck(mine, n_unknown, first_unknown, n_other, first_other, 0, 0, 0)
+        lost, restarts = self._sequence(pos[mine], np.asarray(sequence)[mine])
+        return RunCheck(mine, n_unknown, first_unknown, n_other, first_other, lost, restarts,
+                        int(np.asarray(bad_frames)[mine].sum()))
+
+    def _sequence(self, cells: np.ndarray, seq: np.ndarray) -> tuple[int, int]:
+        """Lost batches and restarts of the runs of ``cells`` (positions) with batch numbers ``seq``."""
+        if np.unique(cells).size < cells.size:  # a cell twice in one message: one run after the other
+            lost = restarts = 0
+            for c, q in zip(cells.tolist(), seq.tolist()):
+                got = self._sequence(np.array([c]), np.array([q], np.int64))
+                lost, restarts = lost + got[0], restarts + got[1]
+            return lost, restarts
+        seq = seq.astype(np.int64)
+        have = self.have[cells]
+        d = (seq - (self.high[cells] + 1)) % (1 << 32)
+        back = have & (d >= 1 << 31)
+        lost = np.where(have & ~back, d, 0)
+        self.high[cells] = np.where(have & ~back, self.high[cells] + 1 + d, seq)
+        self.have[cells] = True
+        return int(lost.sum()), int(back.sum())
 
 
 class PartGatherer:

@@ -143,6 +143,50 @@ def test_part_message_chunks_equal_the_per_cell_messages(cdr):
                 np.testing.assert_array_equal(a, b, err_msg=key)
 
 
+@pytest.mark.parametrize("cdr", [True, False])
+def test_compiled_part_conversion_equals_the_numpy_path_to_the_bit(cdr):
+    """The window node's conversion of a body part's message by the compiled intake gives the arrays of the
+    numpy path, dtype, shape and bits; tares far from the counts make the force's order of sums show."""
+    from unittest import mock
+
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.core import fast, windowing
+    from tactile_descriptors_ros.nodes.conversions import (
+        _part_chunk_compiled,
+        skin_part_msg_to_part_chunk,
+        skin_part_to_msg,
+    )
+    from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
+
+    if fast.kernel_module() is None:
+        pytest.skip("no compiled backend")
+    rng = np.random.default_rng(11)
+    for cells in ([3], [3, 4, 5, 6], [9, 9, 2], list(range(20, 37))):
+        for extra in ((), ("proximity", "temperature"), ("temperature",), ("temperature", "proximity")):
+            runs = _runs(rng, cells)
+            for run in runs[::2]:
+                run.tare_counts[:] = rng.uniform(-1e5, 1e5, 3)
+            msg = skin_part_to_msg(pack_skin_part("left_hand", runs, force_n_per_count=rng.uniform(1e-4, 1e-2)))
+            if cdr:
+                msg = deserialize_message(serialize_message(msg), SkinPartFrames)
+            assert _part_chunk_compiled(msg, extra) is not None  # the compiled path serves this message
+            got = skin_part_msg_to_part_chunk(msg, extra)
+            with mock.patch.object(windowing, "COMPILED_INTAKE", False):
+                assert _part_chunk_compiled(msg, extra) is None
+                want = skin_part_msg_to_part_chunk(msg, extra)
+            for key in ("cell_ids", "vibration_count", "deformation_count", "vibration", "vibration_t_ns",
+                        "deformation", "deformation_t_ns", "force_n", "vibration_valid", "deformation_valid",
+                        "extra", "deformation_tare"):
+                a, b = getattr(got, key), getattr(want, key)
+                if b is None:
+                    assert a is None, key
+                    continue
+                assert a.dtype == b.dtype and a.shape == b.shape, key
+                assert a.tobytes() == np.ascontiguousarray(b).tobytes(), key  # NaN where NaN, every bit
+
+
 def test_part_message_round_trip_gives_back_every_cell_batch():
     from rclpy.serialization import deserialize_message, serialize_message
 
@@ -180,7 +224,11 @@ def test_part_message_with_inconsistent_lengths_is_rejected(field, value, match)
     import array
 
     from tactile_descriptors_ros.errors import SignalError
-    from tactile_descriptors_ros.nodes.conversions import skin_part_msg_to_chunks, skin_part_to_msg
+    from tactile_descriptors_ros.nodes.conversions import (
+        skin_part_msg_to_chunks,
+        skin_part_msg_to_part_chunk,
+        skin_part_to_msg,
+    )
     from tactile_descriptors_ros.streams.skin_parts import pack_skin_part
 
     msg = skin_part_to_msg(pack_skin_part("left_hand", _runs(np.random.default_rng(1), [1, 2], n_a=5, n_f=2)))
@@ -190,6 +238,8 @@ def test_part_message_with_inconsistent_lengths_is_rejected(field, value, match)
     setattr(msg, field, array.array(code, value))
     with pytest.raises(SignalError, match=match):
         skin_part_msg_to_chunks(msg)
+    with pytest.raises(SignalError, match=match):  # the window node's path (compiled where it is loaded) too
+        skin_part_msg_to_part_chunk(msg)
 
 
 def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):

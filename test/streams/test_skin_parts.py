@@ -104,3 +104,64 @@ def test_gatherer_flushes_what_waited_too_long():
     clock.t = 0.1
     (part, runs), = g.flush_stale()
     assert part == "chest" and [r.cell_id for r in runs] == [1] and g.pending() == 0
+
+
+def _checkers():
+    from tactile_descriptors_ros.streams.skin_parts import RunChecker
+
+    parts = {"hand": [5, 9, 12], "arm": [20, 21]}
+    return RunChecker(parts), RunChecker(parts)
+
+
+def _check(checker, compiled: bool, part, ids, seq, bad):
+    from unittest import mock
+
+    from tactile_descriptors_ros.core import windowing
+
+    with mock.patch.object(windowing, "COMPILED_INTAKE", compiled):
+        return checker.check(part, np.array(ids, np.int64), np.array(seq, np.uint32), np.array(bad, np.uint32))
+
+
+def test_run_checker_known_answers():
+    """Batch numbers per cell: gaps are lost batches (also across the 32-bit wrap), a number at or before the
+    newest a restart; unknown cells and another body part's cells are left out and counted, first id named."""
+    checker, _ = _checkers()
+    got = _check(checker, True, "hand", [5, 9], [10, 2**32 - 1], [1, 0])
+    assert got.mine.tolist() == [True, True] and (got.lost, got.restarts, got.bad_frames) == (0, 0, 1)
+    got = _check(checker, True, "hand", [5, 9, 77, 20, 12], [13, 1, 0, 0, 4], [0, 2, 9, 9, 1])
+    assert got.mine.tolist() == [True, True, False, False, True]
+    assert (got.unknown, got.first_unknown, got.other_part, got.first_other_part) == (1, 77, 1, 20)
+    # cell 5: 11 and 12 lost; cell 9: 2**32 - 1 -> 1 wraps, 0 lost; cell 12: first seen
+    assert (got.lost, got.restarts, got.bad_frames) == (3, 0, 3)
+    got = _check(checker, True, "hand", [5, 5], [3, 4], [0, 0])  # one cell twice: a restart, then in order
+    assert (got.lost, got.restarts) == (0, 1)
+    got = _check(checker, True, "arm", [5, 99], [0, 0], [4, 4])  # nothing of the arm's: no state touched
+    assert not got.mine.any() and (got.unknown, got.other_part, got.bad_frames) == (1, 1, 0)
+    assert checker.high[checker.ids.tolist().index(5)] == 4
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_run_checker_compiled_equals_numpy(seed):
+    """Random messages (unknown and misplaced cells, repeats, gaps, restarts, wraps) give the compiled and the
+    numpy checks the same results and the same state, message after message."""
+    from tactile_descriptors_ros.core import fast
+
+    if fast.kernel_module() is None:
+        pytest.skip("no compiled backend")
+    rng = np.random.default_rng(seed)
+    a, b = _checkers()
+    newest = {}
+    for _ in range(300):
+        part = str(rng.choice(["hand", "arm", "leg"]))
+        ids = rng.choice([5, 9, 12, 20, 21, 3, 40], int(rng.integers(0, 7)))
+        seq = []
+        for cid in ids.tolist():
+            step = int(rng.choice([1, 1, 1, 2, 5, 0, -3, 2**31, 2**32 - 1]))
+            newest[cid] = (newest.get(cid, int(rng.integers(0, 2**32))) + step) % 2**32
+            seq.append(newest[cid])
+        bad = rng.integers(0, 4, ids.size)
+        x, y = _check(a, True, part, ids, seq, bad), _check(b, False, part, ids, seq, bad)
+        assert x.mine.tolist() == y.mine.tolist()
+        fields = ("unknown", "first_unknown", "other_part", "first_other_part", "lost", "restarts", "bad_frames")
+        assert [getattr(x, f) for f in fields] == [getattr(y, f) for f in fields]
+        assert (a.high == b.high).all() and (a.have == b.have).all()
