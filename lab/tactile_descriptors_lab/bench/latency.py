@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import random
 import tempfile
 import threading
 import time
@@ -50,7 +51,7 @@ import numpy as np
 
 from tactile_descriptors_ros.core.windowing import first_fixed_start, grid_margin_ns
 
-__all__ = ["measure_latency", "message_cost", "shipped_latency_settings", "ProbeFrames", "probe_frames",
+__all__ = ["measure_latency", "message_cost", "node_message_cost", "shipped_latency_settings", "ProbeFrames", "probe_frames",
            "set_sequence", "TARGET_MS", "DESIGN_WAIT_TARGET_MS", "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
 
 #: Target: sensor stamp (fixed: window end; exploration: release decision) -> prediction, p95, at NAO full rate.
@@ -175,6 +176,30 @@ EXPLORATION_RELEASED_S = 0.4
 EXPLORATION_TOUCH_S = 1.2
 
 
+def _serialized_rounds(desc, batch_s: float, seed: int, rounds: int, start_ns: int,
+                       in_order: bool = False) -> list[list[bytes]]:
+    """``rounds`` batches of the probe's ``SkinPartFrames`` (one per body part), CDR-serialised, stamped
+    ``batch_s`` apart from about ``start_ns`` (a whole number of sample periods); ``in_order``: each cell's
+    batch numbers count the rounds (:func:`set_sequence`)."""
+    from rclpy.serialization import serialize_message
+
+    from tactile_descriptors_ros.nodes.conversions import ns_to_stamp
+
+    probe = probe_frames(desc, batch_s, seed)
+    batch_ns = int(round(batch_s * 1e9))
+    t0 = probe.period_ns * (start_ns // probe.period_ns)
+    out = []
+    for k in range(rounds):
+        batch = []
+        for _, msg in probe.templates[k % len(probe.templates)]:
+            msg.header.stamp = ns_to_stamp(t0 + k * batch_ns)
+            if in_order:
+                set_sequence(msg, k)
+            batch.append(serialize_message(msg))
+        out.append(batch)
+    return out
+
+
 def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40, repeat: int = 5,
                  seed: int = 0, mode: str = "fixed") -> dict:
     """Per-message CPU cost of the window node's work outside the executor, in microseconds.
@@ -197,28 +222,18 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
     best per-cell one.  Minimum over ``repeat`` runs of the thread's CPU time
     (this machine is shared).
     """
-    from rclpy.serialization import deserialize_message, serialize_message
+    from rclpy.serialization import deserialize_message
 
     from tactile_descriptors_msgs.msg import SkinPartFrames
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.core.windowing import Windower
     from tactile_descriptors_ros.nodes.conversions import (
-        ns_to_stamp,
         skin_part_msg_to_chunks,
         skin_part_msg_to_part_chunk,
     )
 
     desc = load_robot(robot)
-    probe = probe_frames(desc, batch_s, seed)
-    batch_ns = int(round(batch_s * 1e9))
-    t0 = probe.period_ns * (1_000_000_000_000 // probe.period_ns)
-    raws = []
-    for k in range(rounds):
-        round_raw = []
-        for _, msg in probe.templates[k % len(probe.templates)]:
-            msg.header.stamp = ns_to_stamp(t0 + k * batch_ns)
-            round_raw.append(serialize_message(msg))
-        raws.append(round_raw)
+    raws = _serialized_rounds(desc, batch_s, seed, rounds, 1_000_000_000_000)
     n = rounds * len(desc.body_parts)
     keys = ("deserialize", "convert_part", "add_part_poll", "convert", "add_poll", "add_many_poll")
     best = dict.fromkeys(keys, np.inf)
@@ -259,6 +274,61 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
                                                                                 per["add_many_poll"]),
             "note": "CPU time, minimum of the repeats; rclpy's executor adds its own cost per callback "
                     "(see window_cpu_us_per_message of the live run)"}
+
+
+def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s: float = 0.01, rounds: int = 1200,
+                      warm_rounds: int = 100, seed: int = 0) -> dict:
+    """CPU per message of the window node's own frames callback, called in this process without an executor.
+
+    A :class:`~tactile_descriptors_ros.nodes.window_node.WindowNode` (``robot``,
+    ``window.mode`` = ``mode``) takes ``rounds`` batches of the probe's
+    ``SkinPartFrames`` (one per body part, deserialised from CDR as rclpy gives
+    them, stamps ``batch_s`` apart, each cell's batch numbers in order, every
+    cell touching) through ``_on_frames``, one message and one poll a call:
+    conversion, the runs' checks, the windower's intake and poll, the node's
+    bookkeeping; not rclpy's executor nor the deserialisation.  The first
+    ``warm_rounds`` are not timed.  ``faults`` are the node's counters after
+    the run (the probe loses nothing: every one is 0 unless something is
+    wrong).  A thread's CPU time, so a shared machine slows it less than a
+    wall clock.
+    """
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # a node of its own: discovery stays on this machine
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    import rclpy
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import deserialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.nodes.window_node import WindowNode
+
+    if not 0 <= warm_rounds < rounds:
+        raise ValueError(f"warm_rounds must be in [0, rounds), got {warm_rounds} of {rounds}")
+    desc = load_robot(robot)
+    msgs = [deserialize_message(raw, SkinPartFrames)
+            for batch in _serialized_rounds(desc, batch_s, seed, rounds, 1_800_000_000_000_000_000, in_order=True)
+            for raw in batch]
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = WindowNode(context=context, parameter_overrides=[Parameter("robot", value=robot),
+                                                                Parameter("window.mode", value=mode)])
+        try:
+            n_warm = warm_rounds * len(desc.body_parts)
+            for msg in msgs[:n_warm]:
+                node._on_frames(msg)
+            started = time.thread_time()
+            for msg in msgs[n_warm:]:
+                node._on_frames(msg)
+            cpu_s = time.thread_time() - started
+            faults = {k: int(v) for k, v in node.faults.items()}
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    timed = len(msgs) - n_warm
+    return {"robot": robot, "mode": mode, "batch_s": batch_s, "messages_timed": timed,
+            "us_per_message": 1e6 * cpu_s / timed, "faults": faults}
 
 
 def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, lateness_s: float | None = None,

@@ -115,6 +115,19 @@ def test_message_cost_reports_each_step_per_message():
     assert set(res["windows_cut"].values()) == {1}, res["windows_cut"]
 
 
+@pytest.mark.ros
+@pytest.mark.parametrize("mode", ["fixed", "exploration"])
+def test_node_message_cost_times_the_window_nodes_own_callback(mode):
+    from tactile_descriptors_lab.bench.latency import node_message_cost
+
+    res = node_message_cost(mode=mode, rounds=60, warm_rounds=10)
+    assert res["messages_timed"] == 50 * 7 and res["us_per_message"] > 0
+    # the probe's messages are whole and in order: the node counts no fault
+    assert res["faults"] and not any(res["faults"].values()), res["faults"]
+    with pytest.raises(ValueError, match="warm_rounds"):
+        node_message_cost(rounds=10, warm_rounds=10)
+
+
 def test_the_shipped_graphs_fixed_windows_wait_only_the_margin_before_their_batch_ends():
     """The skin driver's batches end on whole multiples of ``batch_s`` in stamp time and fixed windows end
     1.5 accelerometer periods before a whole multiple of the hop: the batch with a window's last samples
