@@ -473,13 +473,11 @@ def _part_chunk_compiled(msg, extra_channels: Sequence[str]) -> PartChunk | None
     if kernel is None or any(c not in SKIN_PART_EXTRA_CHANNELS for c in extra_channels):
         return None
     arrays = [_view(getattr(msg, name), dtype) for name, dtype in _PART_ARRAYS]
-    if not all(a.flags.c_contiguous and a.flags.writeable for a in arrays):
+    proximity, temperature_c = _view(msg.proximity, np.uint16), _view(msg.temperature_c, np.float64)
+    if not all(a.flags.c_contiguous and a.flags.writeable for a in (*arrays, proximity, temperature_c)):
         return None  # e.g. a bag reader's read-only buffers: another compiled variant, not loaded ahead
     n = len(msg.cell_ids)
     if not (len(msg.sequence) == len(msg.bad_frames) == n):
-        return None
-    proximity, temperature_c = _view(msg.proximity, np.uint16), _view(msg.temperature_c, np.float64)
-    if not all(a.flags.c_contiguous and a.flags.writeable for a in (proximity, temperature_c)):
         return None
     codes = _EXTRA_CODES.get(tuple(extra_channels))
     if codes is None:

@@ -243,7 +243,7 @@ class SoakReport:
         CPU time over ``cells`` times the seconds of data the simulated bus sent (its share of the real rate
         times the wall time), so a machine that fell behind is not credited for data it never sent."""
         per_node = {n.name: n.cpu_percent() for n in self.nodes}
-        simulators = {n.name: n.simulator_percent() for n in self.nodes if n.simulator_percent() is not None}
+        simulators = {n.name: v for n in self.nodes if (v := n.simulator_percent()) is not None}
         known = [v for v in per_node.values() if v is not None]
         path = [per_node[n.name] for n in self.nodes if n.executable not in SEEING_EXECUTABLES]
         graph = sum(known) if known else None
