@@ -197,6 +197,21 @@ def exact_integer_ok(n: int, *peaks: float) -> bool:
     return n * p * p < _F64_EXACT and float(n) * n * p * p < _I64_SAFE
 
 
+def loaded_layout(*arrays: np.ndarray) -> bool:
+    """Whether every array has the layout of the compiled variants :func:`warm_up` loads: C-contiguous and
+    writeable.
+
+    numba compiles a function once per argument layout and read-only flag, so a strided view or a
+    read-only buffer (a bag reader's) would compile another variant (seconds) while a node runs; callers
+    take their numpy path for those instead.
+    """
+    for a in arrays:
+        flags = a.flags
+        if not (flags.c_contiguous and flags.writeable):
+            return False
+    return True
+
+
 def _compiled_int(x: np.ndarray) -> np.ndarray | None:
     """``x`` as C-contiguous int32 or int64 for the compiled kernel (None for non-integers and uint64)."""
     if x.dtype == np.int32 or x.dtype == np.int64:

@@ -2144,13 +2144,7 @@ def _intake_kernel():
 def _compiled_args(rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, *arrays: np.ndarray) -> bool:
     """Arrays the compiled intake takes as they are (one compiled variant): ``rows``, ``counts`` and ``t_ns``
     int64, and every array C-contiguous and writeable."""
-    if not (rows.dtype == counts.dtype == t_ns.dtype == _INDEX_DTYPE):
-        return False
-    for a in (rows, counts, t_ns) + arrays:
-        flags = a.flags
-        if not (flags.c_contiguous and flags.writeable):
-            return False
-    return True
+    return rows.dtype == counts.dtype == t_ns.dtype == _INDEX_DTYPE and fast.loaded_layout(rows, counts, t_ns, *arrays)
 
 
 def _in_order(t_ns: np.ndarray, counts: np.ndarray, rows: np.ndarray, bufs: tuple[_RowBuffer, ...] | None) -> bool:

@@ -474,7 +474,7 @@ def _part_chunk_compiled(msg, extra_channels: Sequence[str]) -> PartChunk | None
         return None
     arrays = [_view(getattr(msg, name), dtype) for name, dtype in _PART_ARRAYS]
     proximity, temperature_c = _view(msg.proximity, np.uint16), _view(msg.temperature_c, np.float64)
-    if not all(a.flags.c_contiguous and a.flags.writeable for a in (*arrays, proximity, temperature_c)):
+    if not fast.loaded_layout(*arrays, proximity, temperature_c):
         return None  # e.g. a bag reader's read-only buffers: another compiled variant, not loaded ahead
     n = len(msg.cell_ids)
     if not (len(msg.sequence) == len(msg.bad_frames) == n):

@@ -334,7 +334,7 @@ class RunChecker:
         code = self.part_code.get(part, -1)
         kernel = fast.kernel_module() if windowing.COMPILED_INTAKE else None
         if kernel is not None and ids.dtype == np.int64 and sequence.dtype == bad_frames.dtype == np.uint32 \
-                and all(a.flags.c_contiguous and a.flags.writeable for a in (ids, sequence, bad_frames)) \
+                and fast.loaded_layout(ids, sequence, bad_frames) \
                 and ids.size == sequence.size == bad_frames.size:
             mine = np.empty(ids.size, bool)
             out = self._out
