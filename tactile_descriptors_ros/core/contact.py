@@ -35,8 +35,8 @@ from ..errors import SignalError
 from ..markers import INVALID_ACCEL, INVALID_COUNT
 from .geometry import Taxels
 
-__all__ = ["CellReduction", "reduce_chunk", "RunReductions", "reduce_skin_runs", "ContactEstimate", "ContactWindow",
-           "locate_contact", "site_weights", "contact_wrench"]
+__all__ = ["CellReduction", "reduce_chunk", "RunReductions", "reduce_skin_runs", "load_compiled", "ContactEstimate",
+           "ContactWindow", "locate_contact", "site_weights", "contact_wrench"]
 
 
 @dataclass(frozen=True)
@@ -126,6 +126,73 @@ def _sum_runs(values: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return out
 
 
+def _run_sums(fc: np.ndarray, f: np.ndarray, tare: np.ndarray, off: np.ndarray, stamp_ns: int, ac: np.ndarray,
+              a: np.ndarray, a_scale: float, invalid_count: int, invalid_accel: int) -> tuple[np.ndarray, ...]:
+    """Each run's sums for :func:`reduce_skin_runs` with numpy: the sensors' tared sums (3, runs), the valid
+    force samples (float), the accelerometer's sums and sums of squares (3, runs), its valid samples (float),
+    the newest and oldest valid force stamps (-1 without one)."""
+    run_of_f = np.repeat(np.arange(fc.size), fc)
+    f_ok = np.all(f != invalid_count, axis=1)
+    dev = f.astype(float) - tare[run_of_f]  # (k, 3) counts from the tare
+    dev_ok = np.where(f_ok[:, None], dev, 0.0)
+    d_sum = _sum_runs(dev_ok.T, fc)  # (3, runs)
+    n_ok = _sum_runs(f_ok.astype(float)[None, :], fc)[0]
+    newest = np.full(fc.size, -1, dtype=np.int64)
+    oldest = np.full(fc.size, np.iinfo(np.int64).max, dtype=np.int64)
+    if f.shape[0]:
+        t = off + stamp_ns
+        np.maximum.at(newest, run_of_f, np.where(f_ok, t, -1))
+        np.minimum.at(oldest, run_of_f, np.where(f_ok, t, np.iinfo(np.int64).max))
+    oldest[newest < 0] = -1
+    a_ok = np.all(a != invalid_accel, axis=0)
+    x = np.where(a_ok[None, :], a.astype(float), 0.0) * a_scale
+    na = _sum_runs(a_ok.astype(float)[None, :], ac)[0]
+    return d_sum, n_ok, _sum_runs(x, ac), _sum_runs(x * x, ac), na, newest, oldest
+
+
+#: Whether :func:`reduce_skin_runs` sums with the compiled backend when it is loaded (the tests switch it off
+#: to compare both paths).
+COMPILED_SUMS = True
+
+
+def _run_sums_compiled(fc: np.ndarray, f: np.ndarray, tare: np.ndarray, off: np.ndarray, stamp_ns: int,
+                       ac: np.ndarray, a: np.ndarray, a_scale: float, invalid_count: int, invalid_accel: int
+                       ) -> tuple[np.ndarray, ...] | None:
+    """:func:`_run_sums` in one compiled pass (:func:`.numba_kernel.skin_run_sums`), equal to the bit; None
+    where it does not serve: no compiled backend, other dtypes than a ``SkinPartFrames``' (uint16 force,
+    int16 accelerometer, float64 tares), or arrays of another layout (:func:`.fast.loaded_layout`).
+
+    The numpy sums took 11 ``bincount`` calls and a dozen array operations a message, about 100 us of
+    the contact node's 390 us for a NAO body part's message.
+    """
+    from . import fast
+
+    kernel = fast.kernel_module() if COMPILED_SUMS else None
+    if kernel is None or f.dtype != np.uint16 or a.dtype != np.int16 or tare.dtype != np.float64 \
+            or not fast.loaded_layout(fc, f, tare, off, ac, a):
+        return None
+    runs = fc.size
+    d_sum, s1, s2 = np.empty((3, runs)), np.empty((3, runs)), np.empty((3, runs))
+    n_ok, na = np.empty(runs), np.empty(runs)
+    newest, oldest = np.empty(runs, np.int64), np.empty(runs, np.int64)
+    kernel.skin_run_sums(fc, f, tare, off, stamp_ns, ac, a, a_scale, invalid_count, invalid_accel, d_sum, n_ok,
+                         s1, s2, na, newest, oldest)
+    return d_sum, n_ok, s1, s2, na, newest, oldest
+
+
+def load_compiled() -> bool:
+    """Load the compiled sums of :func:`reduce_skin_runs` now (numba's import and its cache, about 0.3 s; a
+    compilation when the cache is empty), so that a node's first message does not wait for them; False where
+    numpy serves.  A contact node serving skin cells calls it when it starts."""
+    from . import fast
+
+    kernel = fast.kernel_module() if COMPILED_SUMS else None
+    if kernel is None:
+        return False
+    fast.warm_up_contact(kernel)
+    return True
+
+
 def reduce_skin_runs(cell_ids: np.ndarray, force: np.ndarray, force_count: np.ndarray, force_offset_ns: np.ndarray,
                      force_tare: np.ndarray, force_n_per_count: float, accel: np.ndarray, accel_count: np.ndarray,
                      accel_si_per_count: float, stamp_ns: int, *, invalid_count: int = INVALID_COUNT,
@@ -170,25 +237,15 @@ def reduce_skin_runs(cell_ids: np.ndarray, force: np.ndarray, force_count: np.nd
             or off.size != f.shape[0]:
         raise SignalError(f"skin runs do not add up: {ids.size} runs, {f.shape[0]} force samples for counts summing "
                           f"to {fc.sum()}, {a.shape[1]} accelerometer samples for {ac.sum()}")
-    run_of_f = np.repeat(np.arange(ids.size), fc)
-    f_ok = np.all(f != invalid_count, axis=1)
-    dev = f.astype(float) - tare[run_of_f]  # (k, 3) counts from the tare
-    dev_ok = np.where(f_ok[:, None], dev, 0.0)
-    d_sum = _sum_runs(dev_ok.T, fc).T  # (runs, 3)
-    n_ok = _sum_runs(f_ok.astype(float)[None, :], fc)[0].astype(np.int64)
+    sums = _run_sums_compiled(fc, f, tare, off, int(stamp_ns), ac, a, float(accel_si_per_count), invalid_count,
+                              invalid_accel)
+    if sums is None:
+        sums = _run_sums(fc, f, tare, off, int(stamp_ns), ac, a, float(accel_si_per_count), invalid_count,
+                         invalid_accel)
+    d_sum_3, n_ok_f, s1, s2, na, newest, oldest = sums
+    d_sum = d_sum_3.T  # (runs, 3)
+    n_ok = n_ok_f.astype(np.int64)
     force_sum = d_sum.mean(axis=1) * float(force_n_per_count)
-    newest = np.full(ids.size, -1, dtype=np.int64)
-    oldest = np.full(ids.size, np.iinfo(np.int64).max, dtype=np.int64)
-    if f.shape[0]:
-        t = off + int(stamp_ns)
-        np.maximum.at(newest, run_of_f, np.where(f_ok, t, -1))
-        np.minimum.at(oldest, run_of_f, np.where(f_ok, t, np.iinfo(np.int64).max))
-    oldest[newest < 0] = -1
-    a_ok = np.all(a != invalid_accel, axis=0)
-    x = np.where(a_ok[None, :], a.astype(float), 0.0) * float(accel_si_per_count)
-    s1 = _sum_runs(x, ac)  # (3, runs)
-    s2 = _sum_runs(x * x, ac)
-    na = _sum_runs(a_ok.astype(float)[None, :], ac)[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         ss = np.where(na >= 2, (s2 - s1 * s1 / np.maximum(na, 1)).sum(axis=0), 0.0)
     return RunReductions(ids, force_sum, n_ok, d_sum, n_ok.copy(), np.maximum(ss, 0.0),

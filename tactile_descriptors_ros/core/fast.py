@@ -375,6 +375,7 @@ def warm_up() -> dict:
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                            np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
     warm_up_codecs(kernel)
+    warm_up_contact(kernel)
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info
@@ -395,6 +396,17 @@ def warm_up_codecs(kernel: ModuleType) -> None:
                          np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
                          np.empty(2, dtype=np.int8), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
                          np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64))
+
+
+def warm_up_contact(kernel: ModuleType) -> None:
+    """Load (or compile) the contact node's sums of a body part's message (``skin_run_sums``) in the variant
+    :func:`~.contact.reduce_skin_runs` calls: a ``SkinPartFrames``' dtypes, C-contiguous writeable arrays.
+    :func:`warm_up` calls it for ``make setup``; a contact node serving skin cells calls it when it starts."""
+    i64 = np.zeros(1, dtype=np.int64)
+    kernel.skin_run_sums(i64, np.zeros((0, 3), dtype=np.uint16), np.zeros((1, 3)), np.zeros(0, dtype=np.int64), 0,
+                         i64, np.zeros((3, 0), dtype=np.int16), 1.0, 65535, -32768, np.empty((3, 1)), np.empty(1),
+                         np.empty((3, 1)), np.empty((3, 1)), np.empty(1), np.empty(1, dtype=np.int64),
+                         np.empty(1, dtype=np.int64))
 
 
 def main(argv: list[str] | None = None) -> int:

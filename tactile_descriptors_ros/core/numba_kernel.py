@@ -1026,6 +1026,99 @@ def check_runs(ids, seq, bad, served_ids, served_part, part_code, have, high, mi
     out[6] = bad_sum
 
 
+# ------------------------------------------------------------------ a body part's message, reduced (contact)
+@_jit
+def skin_run_sums(f_count, force, tare, f_off, stamp_ns, a_count, accel, a_scale, invalid_count, invalid_accel,
+                  d_sum, n_ok, s1, s2, n_a, newest, oldest):  # pragma: no cover - compiled
+    """Each run's sums for :func:`..core.contact.reduce_skin_runs`, in one pass over its samples.
+
+    ``f_count``, ``a_count`` (int64, one per run), ``force`` (uint16, (k, 3)), ``tare`` (float64, (runs,
+    3)), ``f_off`` (int64 offsets from ``stamp_ns``) and ``accel`` (int16, (3, n)) are a message's arrays.
+    Into ``d_sum`` (3, runs) goes each sensor's sum of ``count - tare`` over the run's samples with no
+    sensor at ``invalid_count`` (another sample adds 0.0, as numpy's masked sum does), into ``n_ok`` those
+    samples' number (float64), into ``newest`` and ``oldest`` their newest and oldest stamp (both -1
+    without one, or when none is at or after 0); into ``s1``, ``s2`` (3, runs) each axis's sum and sum of
+    squares of ``count * a_scale`` over the samples with no axis at ``invalid_accel`` (another adds
+    ``0.0 * a_scale``), into ``n_a`` their number.  Every sum runs from 0.0 in sample order, as
+    ``numpy.bincount`` adds its weights: the same operations in the same order, so the same bits.
+    """
+    runs = f_count.shape[0]
+    k = 0
+    for r in range(runs):
+        c0 = tare[r, 0]
+        c1 = tare[r, 1]
+        c2 = tare[r, 2]
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        ok_n = 0.0
+        hi = np.int64(-1)
+        lo = np.int64(9223372036854775807)
+        for _ in range(f_count[r]):
+            v0 = force[k, 0]
+            v1 = force[k, 1]
+            v2 = force[k, 2]
+            if v0 != invalid_count and v1 != invalid_count and v2 != invalid_count:
+                d0 += np.float64(v0) - c0
+                d1 += np.float64(v1) - c1
+                d2 += np.float64(v2) - c2
+                ok_n += 1.0
+                t = f_off[k] + stamp_ns
+                if t > hi:
+                    hi = t
+                if t < lo:
+                    lo = t
+            else:
+                d0 += 0.0
+                d1 += 0.0
+                d2 += 0.0
+                ok_n += 0.0
+            k += 1
+        d_sum[0, r] = d0
+        d_sum[1, r] = d1
+        d_sum[2, r] = d2
+        n_ok[r] = ok_n
+        newest[r] = hi
+        oldest[r] = lo if hi >= 0 else -1
+    i = 0
+    for r in range(runs):
+        x1 = 0.0
+        y1 = 0.0
+        z1 = 0.0
+        x2 = 0.0
+        y2 = 0.0
+        z2 = 0.0
+        m = 0.0
+        for _ in range(a_count[r]):
+            ax = accel[0, i]
+            ay = accel[1, i]
+            az = accel[2, i]
+            if ax != invalid_accel and ay != invalid_accel and az != invalid_accel:
+                x = np.float64(ax) * a_scale
+                y = np.float64(ay) * a_scale
+                z = np.float64(az) * a_scale
+                m += 1.0
+            else:
+                x = 0.0 * a_scale
+                y = 0.0 * a_scale
+                z = 0.0 * a_scale
+                m += 0.0
+            x1 += x
+            y1 += y
+            z1 += z
+            x2 += x * x
+            y2 += y * y
+            z2 += z * z
+            i += 1
+        s1[0, r] = x1
+        s1[1, r] = y1
+        s1[2, r] = z1
+        s2[0, r] = x2
+        s2[1, r] = y2
+        s2[2, r] = z2
+        n_a[r] = m
+
+
 # ------------------------------------------------------------------ windowing intake
 @_jit
 def runs_in_order(t, counts, rows, n_rows, has_a, last_a, has_b, last_b):  # pragma: no cover - compiled

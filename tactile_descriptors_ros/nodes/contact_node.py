@@ -41,7 +41,7 @@ import numpy as np
 from rclpy.node import Node
 
 from ..core.colormap import force_colours
-from ..core.contact import ContactWindow, reduce_chunk, reduce_skin_runs
+from ..core.contact import ContactWindow, load_compiled, reduce_chunk, reduce_skin_runs
 from ..core.display import PartDisplay, PredictionHistory
 from ..core.geometry import Taxels, layout_2d
 from ..core.robot import BodyPart, load_robot, select_body_parts
@@ -174,6 +174,8 @@ class ContactNode(StopsQuietly, Node):
             self.subs.append(sub)
             self._handlers[sub] = handler
         self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
+        if any(p.kind == "skin" for p in self.parts.values()):
+            load_compiled()  # the sums of a body part's message, before its first message
         self._sensor_cell = {(p.name, c.name): c.id for p in self.robot.body_parts for c in p.cells}
         self.history = PredictionHistory()
         self.contacts_pub = self.create_publisher(ContactArray, CONTACTS_TOPIC, qos_view) if self.rate_hz > 0 else None

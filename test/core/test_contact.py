@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tactile_descriptors_ros.core import contact, fast
 from tactile_descriptors_ros.core.contact import (
     ContactWindow,
     contact_wrench,
@@ -130,6 +131,67 @@ def test_vectorised_skin_runs_reduce_like_one_chunk_per_run():
         assert w.add_runs(runs) == int(np.isin(ids, foreign, invert=True).sum())
         assert w.force_count.tolist() == [int(runs.force_count[ids == c].sum()) for c in foreign]
         assert w.added == int(np.isin(ids, foreign).sum())
+
+
+def _random_message(rng: np.random.Generator, runs: int) -> dict:
+    """A body part's message as the contact node reads it: rclpy's field dtypes, invalid samples, tares far
+    from the counts, offsets on both sides of the stamp."""
+    fc = rng.integers(0, 7, runs).astype(np.uint32)
+    ac = rng.integers(0, 12, runs).astype(np.uint32)
+    force = rng.integers(0, 4096, (int(fc.sum()), 3)).astype(np.uint16)
+    force[rng.random(force.shape) < 0.05] = 65535
+    accel = rng.integers(-2048, 2048, (3, int(ac.sum()))).astype(np.int16)
+    accel[rng.random(accel.shape) < 0.05] = -32768
+    tare = rng.uniform(-1e5, 1e5, runs * 3) * rng.choice([1.0, 1e-3], runs * 3)
+    off = np.sort(rng.integers(-5_000_000, 20_000_000, int(fc.sum()))).astype(np.int64)
+    return dict(cell_ids=rng.integers(0, 1000, runs).astype(np.uint32), force=force.reshape(-1), force_count=fc,
+                force_offset_ns=off, force_tare=tare, force_n_per_count=float(rng.uniform(1e-4, 1e-2)),
+                accel=accel, accel_count=ac, accel_si_per_count=float(rng.choice([0.0383, 1.0, 1e-3])),
+                stamp_ns=int(rng.integers(0, 2**62)) * int(rng.choice([1, -1])) // 4)
+
+
+def _bits(runs) -> dict:
+    return {name: (np.asarray(getattr(runs, name)).dtype, np.asarray(getattr(runs, name)).shape,
+                   np.ascontiguousarray(getattr(runs, name)).tobytes()) for name in runs.__dataclass_fields__}
+
+
+@pytest.mark.skipif(fast.kernel_module() is None, reason="no compiled backend: numpy sums every message")
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 24), st.integers(0, 2**32 - 1))
+def test_compiled_run_sums_give_numpys_bits(runs, seed):
+    """The compiled sums of a message's runs equal numpy's to the bit (sums in the same order), and the
+    compiled path serves such a message."""
+    rng = np.random.default_rng(seed)
+    msg = _random_message(rng, runs)
+    args = (np.asarray(msg["force_count"], np.int64), msg["force"].reshape(-1, 3),
+            msg["force_tare"].reshape(-1, 3), msg["force_offset_ns"], msg["stamp_ns"],
+            np.asarray(msg["accel_count"], np.int64), msg["accel"], msg["accel_si_per_count"], 65535, -32768)
+    assert contact._run_sums_compiled(*args) is not None
+    compiled = reduce_skin_runs(**msg)
+    contact.COMPILED_SUMS = False
+    try:
+        reference = reduce_skin_runs(**msg)
+    finally:
+        contact.COMPILED_SUMS = True
+    assert _bits(compiled) == _bits(reference)
+
+
+@pytest.mark.skipif(fast.kernel_module() is None, reason="no compiled backend: numpy sums every message")
+def test_run_sums_of_other_layouts_and_dtypes_take_numpy():
+    """A bag reader's read-only fields, strided views or other dtypes take numpy (no other compiled variant
+    while a node runs), with the same result."""
+    msg = _random_message(np.random.default_rng(7), 9)
+    want = _bits(reduce_skin_runs(**msg))
+    read_only = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in msg.items()}
+    read_only["force"].flags.writeable = False
+    strided = dict(msg, accel=np.asfortranarray(msg["accel"]))
+    wide = dict(msg, force=msg["force"].astype(np.int64))
+    for other in (read_only, strided, wide):
+        f, a = np.asarray(other["force"]).reshape(-1, 3), np.asarray(other["accel"])
+        assert contact._run_sums_compiled(np.asarray(other["force_count"], np.int64), f,
+                                          other["force_tare"].reshape(-1, 3), other["force_offset_ns"], 0,
+                                          np.asarray(other["accel_count"], np.int64), a, 1.0, 65535, -32768) is None
+        assert _bits(reduce_skin_runs(**other)) == want
 
 
 @settings(max_examples=60, deadline=None)

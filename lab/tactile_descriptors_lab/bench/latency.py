@@ -51,8 +51,9 @@ import numpy as np
 
 from tactile_descriptors_ros.core.windowing import first_fixed_start, grid_margin_ns
 
-__all__ = ["measure_latency", "message_cost", "node_message_cost", "shipped_latency_settings", "ProbeFrames", "probe_frames",
-           "set_sequence", "TARGET_MS", "DESIGN_WAIT_TARGET_MS", "EXPLORATION_RELEASED_S", "EXPLORATION_TOUCH_S"]
+__all__ = ["measure_latency", "message_cost", "node_message_cost", "contact_message_cost", "shipped_latency_settings",
+           "ProbeFrames", "probe_frames", "set_sequence", "TARGET_MS", "DESIGN_WAIT_TARGET_MS", "EXPLORATION_RELEASED_S",
+           "EXPLORATION_TOUCH_S"]
 
 #: Target: sensor stamp (fixed: window end; exploration: release decision) -> prediction, p95, at NAO full rate.
 TARGET_MS = 20.0
@@ -276,6 +277,48 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
                     "(see window_cpu_us_per_message of the live run)"}
 
 
+def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_rounds: int, seed: int
+                   ) -> tuple[float, int, dict[str, int], int]:
+    """A node made by ``make_node(context)`` takes ``rounds`` batches of the probe's ``SkinPartFrames`` (one per
+    body part, deserialised from CDR as rclpy gives them, stamps ``batch_s`` apart, each cell's batch numbers in
+    order, every cell touching) through its ``_on_frames``, one message a call, in this process, without an
+    executor; the CPU of those after the first ``warm_rounds``, how many they were, the node's faults and its
+    ``contacts_published`` (0 for a node without)."""
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # a node of its own: discovery stays on this machine
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
+    import rclpy
+    from rclpy.serialization import deserialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.core.robot import load_robot
+
+    if not 0 <= warm_rounds < rounds:
+        raise ValueError(f"warm_rounds must be in [0, rounds), got {warm_rounds} of {rounds}")
+    desc = load_robot(robot)
+    msgs = [deserialize_message(raw, SkinPartFrames)
+            for batch in _serialized_rounds(desc, batch_s, seed, rounds, 1_800_000_000_000_000_000, in_order=True)
+            for raw in batch]
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = make_node(context)
+        try:
+            n_warm = warm_rounds * len(desc.body_parts)
+            for msg in msgs[:n_warm]:
+                node._on_frames(msg)
+            started = time.thread_time()
+            for msg in msgs[n_warm:]:
+                node._on_frames(msg)
+            cpu_s = time.thread_time() - started
+            faults = {k: int(v) for k, v in node.faults.items()}
+            contacts = int(getattr(node, "contacts_published", 0))
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    return cpu_s, len(msgs) - n_warm, faults, contacts
+
+
 def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s: float = 0.01, rounds: int = 1200,
                       warm_rounds: int = 100, seed: int = 0) -> dict:
     """CPU per message of the window node's own frames callback, called in this process without an executor.
@@ -292,43 +335,47 @@ def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s:
     wrong).  A thread's CPU time, so a shared machine slows it less than a
     wall clock.
     """
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # a node of its own: discovery stays on this machine
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
-    import rclpy
     from rclpy.parameter import Parameter
-    from rclpy.serialization import deserialize_message
 
-    from tactile_descriptors_msgs.msg import SkinPartFrames
-    from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.nodes.window_node import WindowNode
 
-    if not 0 <= warm_rounds < rounds:
-        raise ValueError(f"warm_rounds must be in [0, rounds), got {warm_rounds} of {rounds}")
-    desc = load_robot(robot)
-    msgs = [deserialize_message(raw, SkinPartFrames)
-            for batch in _serialized_rounds(desc, batch_s, seed, rounds, 1_800_000_000_000_000_000, in_order=True)
-            for raw in batch]
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    try:
-        node = WindowNode(context=context, parameter_overrides=[Parameter("robot", value=robot),
-                                                                Parameter("window.mode", value=mode)])
-        try:
-            n_warm = warm_rounds * len(desc.body_parts)
-            for msg in msgs[:n_warm]:
-                node._on_frames(msg)
-            started = time.thread_time()
-            for msg in msgs[n_warm:]:
-                node._on_frames(msg)
-            cpu_s = time.thread_time() - started
-            faults = {k: int(v) for k, v in node.faults.items()}
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.shutdown(context=context)
-    timed = len(msgs) - n_warm
+    cpu_s, timed, faults, _ = _callback_cost(
+        lambda context: WindowNode(context=context, parameter_overrides=[
+            Parameter("robot", value=robot), Parameter("window.mode", value=mode)]),
+        robot, batch_s, rounds, warm_rounds, seed)
     return {"robot": robot, "mode": mode, "batch_s": batch_s, "messages_timed": timed,
             "us_per_message": 1e6 * cpu_s / timed, "faults": faults}
+
+
+def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: int = 1200, warm_rounds: int = 100,
+                         seed: int = 0, compiled: bool = True) -> dict:
+    """CPU per message of the contact node's own frames callback, called in this process without an executor.
+
+    A :class:`~tactile_descriptors_ros.nodes.contact_node.ContactNode` of
+    ``robot`` takes the probe's messages as :func:`node_message_cost` gives
+    them to the window node: each body part's message reduced, its contact
+    located, its ``Contact`` and ``WrenchStamped`` built and published (no
+    subscriber), the display's bookkeeping and its ticks at 10 Hz of wall time;
+    not rclpy's executor nor the deserialisation.  ``compiled`` False sums the
+    messages' runs with numpy (:data:`~tactile_descriptors_ros.core.contact.COMPILED_SUMS`)
+    for a comparison in one session.  ``contacts_published`` counts every message's contact, warm-up
+    included; ``faults`` are the node's counters after the run.
+    """
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.core import contact
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+    before = contact.COMPILED_SUMS
+    contact.COMPILED_SUMS = compiled
+    try:
+        cpu_s, timed, faults, contacts = _callback_cost(
+            lambda context: ContactNode(context=context, parameter_overrides=[Parameter("robot", value=robot)]),
+            robot, batch_s, rounds, warm_rounds, seed)
+    finally:
+        contact.COMPILED_SUMS = before
+    return {"robot": robot, "batch_s": batch_s, "compiled": compiled, "messages_timed": timed,
+            "us_per_message": 1e6 * cpu_s / timed, "contacts_published": contacts, "faults": faults}
 
 
 def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, lateness_s: float | None = None,

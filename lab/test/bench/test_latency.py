@@ -128,6 +128,19 @@ def test_node_message_cost_times_the_window_nodes_own_callback(mode):
         node_message_cost(rounds=10, warm_rounds=10)
 
 
+@pytest.mark.ros
+def test_contact_message_cost_times_the_contact_nodes_own_callback():
+    from tactile_descriptors_lab.bench.latency import contact_message_cost
+    from tactile_descriptors_ros.core import contact
+
+    for compiled in (True, False):
+        res = contact_message_cost(rounds=30, warm_rounds=10, compiled=compiled)
+        assert res["messages_timed"] == 20 * 7 and res["us_per_message"] > 0 and res["compiled"] is compiled
+        # every cell touches in every message: a contact each, and no fault
+        assert res["contacts_published"] == 30 * 7 and res["faults"] == {}, res
+    assert contact.COMPILED_SUMS is True  # switched back
+
+
 def test_the_shipped_graphs_fixed_windows_wait_only_the_margin_before_their_batch_ends():
     """The skin driver's batches end on whole multiples of ``batch_s`` in stamp time and fixed windows end
     1.5 accelerometer periods before a whole multiple of the hop: the batch with a window's last samples
