@@ -34,17 +34,18 @@ import numpy as np
 __all__ = ["read_cost", "format_read_cost"]
 
 
-def _reads(n_cells: int, read_period_s: float | None, batch_s: float | None, seconds: float, out_dir: str
-           ) -> tuple[list[np.ndarray], object, float, float]:
+def _reads(n_cells: int, read_period_s: float | None, batch_s: float | None, seconds: float, out_dir: str,
+           parts: int = 1) -> tuple[list[np.ndarray], object, float, float]:
     """The frame arrays the driver would read, a read period of scene time each (the first second left out: the
-    grids settle), the scene's robot, and the driver's read period and batch (the NAO graph's unless given)."""
+    grids settle), the scene's robot (``parts`` body parts on one bus), and the driver's read period and batch
+    (the NAO graph's unless given)."""
     import yaml
 
     from tactile_descriptors_ros.sim.scene import load_scene
     from tactile_descriptors_ros.sim.sources import LoopedSkinCanSource
     from tactile_descriptors_ros.sim.synthetic import scale_robot_files
 
-    path = scale_robot_files(n_cells, 1, out_dir, batch_s=batch_s, read_period_s=read_period_s)
+    path = scale_robot_files(n_cells, parts, out_dir, batch_s=batch_s, read_period_s=read_period_s, one_driver=True)
     with open(path, encoding="utf-8") as fh:
         driver = next(n for n in yaml.safe_load(fh)["nodes"].values() if n["executable"] == "skin_driver")
     params = driver["parameters"]
@@ -118,14 +119,16 @@ def _same(a, b) -> bool:
     return True
 
 
-def read_cost(n_cells: int = 200, *, read_period_s: float | None = None, batch_s: float | None = None,
-              seconds: float = 4.0, repeat: int = 3) -> dict:
+def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None = None,
+              batch_s: float | None = None, seconds: float = 4.0, repeat: int = 3) -> dict:
     """CPU per read of the skin driver's read path, compiled and numpy (module docstring).
 
     Parameters
     ----------
     n_cells : int
-        Skin cells on the bus (one body part).
+        Skin cells on the bus.
+    parts : int
+        Body parts they make (the NAO's 116 cells make 7): a message per body part and batch.
     read_period_s : float, optional
         Scene time between reads (default: the NAO graph's drivers').
     batch_s : float, optional
@@ -138,7 +141,7 @@ def read_cost(n_cells: int = 200, *, read_period_s: float | None = None, batch_s
     Returns
     -------
     dict
-        ``cells``, ``reads``, ``frames``, ``messages``, ``ms_per_read`` and
+        ``cells``, ``parts``, ``reads``, ``frames``, ``messages``, ``ms_per_read`` and
         ``ms_per_cell_second`` per path (``compiled``, ``numpy``), ``speedup``
         (numpy over compiled) and ``same_messages`` (checked before timing).
 
@@ -153,7 +156,7 @@ def read_cost(n_cells: int = 200, *, read_period_s: float | None = None, batch_s
     if fast.kernel_module() is None:
         raise RuntimeError("the compiled backend is not loaded (TACTILE_NO_NUMBA or numba missing)")
     with tempfile.TemporaryDirectory() as tmp:
-        reads, robot, read_period_s, batch_s = _reads(n_cells, read_period_s, batch_s, seconds, tmp)
+        reads, robot, read_period_s, batch_s = _reads(n_cells, read_period_s, batch_s, seconds, tmp, parts)
     _, want, want_counters = _run(robot, reads, batch_s, compiled=False)
     _, got, got_counters = _run(robot, reads, batch_s, compiled=True)
     if len(got) != len(want) or not all(_same(a, b) for a, b in zip(got, want)) or got_counters != want_counters:
@@ -163,7 +166,7 @@ def read_cost(n_cells: int = 200, *, read_period_s: float | None = None, batch_s
         for key in best:
             best[key] = min(best[key], _run(robot, reads, batch_s, compiled=key == "compiled")[0])
     data_s = len(reads) * read_period_s
-    return {"cells": n_cells, "read_period_s": read_period_s, "batch_s": batch_s, "reads": len(reads),
+    return {"cells": n_cells, "parts": parts, "read_period_s": read_period_s, "batch_s": batch_s, "reads": len(reads),
             "frames": int(sum(r.size for r in reads)), "messages": len(want), "same_messages": True,
             "ms_per_read": {k: 1e3 * v / len(reads) for k, v in best.items()},
             "ms_per_cell_second": {k: 1e3 * v / (n_cells * data_s) for k, v in best.items()},
@@ -174,7 +177,8 @@ def format_read_cost(r: dict) -> str:
     """The result as text."""
     per, cell = r["ms_per_read"], r["ms_per_cell_second"]
     return "\n".join([
-        f"skin driver read path, {r['cells']} cells, a read every {1e3 * r['read_period_s']:g} ms of scene time "
+        f"skin driver read path, {r['cells']} cells in {r['parts']} body part(s), a read every "
+        f"{1e3 * r['read_period_s']:g} ms of scene time "
         f"({r['reads']} reads, {r['frames']} CAN frames, {r['messages']} body part messages; both paths gave the "
         "same messages and counters):",
         f"  compiled decoding and tracking: {per['compiled']:.3f} ms per read, {cell['compiled']:.3f} ms per cell "

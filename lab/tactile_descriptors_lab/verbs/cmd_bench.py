@@ -114,6 +114,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "the compiled decoding and with numpy's, checked equal first, --rounds alternating runs "
                         "each (lab/docs/performance.md, section Scale)")
     p.add_argument("--read-cost-cells", type=int, default=200, help="skin cells of --read-cost (default 200)")
+    p.add_argument("--read-cost-parts", type=int, default=1,
+                   help="body parts the cells of --read-cost make, a message each per batch (default 1; the NAO: 7)")
     p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead, "
                    "runs of each executor of --executor-overhead, of each path of --read-cost (default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
@@ -326,14 +328,16 @@ def _view_overhead(args: argparse.Namespace) -> int:
 def _read_cost(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.bench.read_cost import format_read_cost, read_cost
 
-    if args.read_cost_cells < 1 or args.rounds < 1 or (args.batch_s is not None and not args.batch_s > 0):
-        print("tactile bench: error: --read-cost-cells, --rounds and --batch-s must be positive", file=sys.stderr)
+    if min(args.read_cost_cells, args.read_cost_parts, args.rounds) < 1 \
+            or (args.batch_s is not None and not args.batch_s > 0):
+        print("tactile bench: error: --read-cost-cells, --read-cost-parts, --rounds and --batch-s must be positive",
+              file=sys.stderr)
         return 2
-    print(f"tactile bench: the skin driver's read path, {args.read_cost_cells} cells, {args.rounds} run(s) of each "
-          "path ...", file=sys.stderr)
+    print(f"tactile bench: the skin driver's read path, {args.read_cost_cells} cells in {args.read_cost_parts} body "
+          f"part(s), {args.rounds} run(s) of each path ...", file=sys.stderr)
     try:
-        report = read_cost(args.read_cost_cells, read_period_s=args.read_period_s, batch_s=args.batch_s,
-                           repeat=args.rounds)
+        report = read_cost(args.read_cost_cells, parts=args.read_cost_parts, read_period_s=args.read_period_s,
+                           batch_s=args.batch_s, repeat=args.rounds)
     except RuntimeError as exc:
         print(f"tactile bench: error: read cost: {exc}", file=sys.stderr)
         return 1

@@ -32,6 +32,13 @@ def test_bench_read_cost_times_both_paths_of_the_same_reads():
     assert r["speedup"] == pytest.approx(r["ms_per_read"]["numpy"] / r["ms_per_read"]["compiled"])
 
 
+def test_read_cost_of_several_body_parts_builds_a_message_per_part_and_batch():
+    """The NAO's cells make 7 body parts on one bus: a message each per batch, both paths the same."""
+    r = read_cost(21, parts=3, seconds=1.0, repeat=1)
+    assert r["same_messages"] is True and (r["cells"], r["parts"]) == (21, 3)
+    assert r["reads"] == 200 and r["messages"] == 3 * 100
+
+
 def test_read_cost_times_nothing_when_the_paths_disagree(monkeypatch):
     compiled = SkinCanDecoder._decode_compiled
 
