@@ -28,6 +28,7 @@ impedance falls near the contact locates it as one that rises.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 
@@ -167,7 +168,7 @@ def _run_sums_compiled(fc: np.ndarray, f: np.ndarray, tare: np.ndarray, off: np.
     """
     from . import fast
 
-    kernel = fast.kernel_module() if COMPILED_SUMS else None
+    kernel = _sums_kernel()
     if kernel is None or f.dtype != np.uint16 or a.dtype != np.int16 or tare.dtype != np.float64 \
             or not fast.loaded_layout(fc, f, tare, off, ac, a):
         return None
@@ -186,11 +187,18 @@ def load_compiled() -> bool:
     numpy serves.  A contact node serving skin cells calls it when it starts."""
     from . import fast
 
-    kernel = fast.kernel_module() if COMPILED_SUMS else None
+    kernel = _sums_kernel()
     if kernel is None:
         return False
     fast.warm_up_contact(kernel)
     return True
+
+
+def _sums_kernel() -> ModuleType | None:
+    """The compiled backend's module when :func:`reduce_skin_runs` may use it (:data:`COMPILED_SUMS`), else None."""
+    from . import fast
+
+    return fast.kernel_module() if COMPILED_SUMS else None
 
 
 def reduce_skin_runs(cell_ids: np.ndarray, force: np.ndarray, force_count: np.ndarray, force_offset_ns: np.ndarray,
@@ -237,11 +245,10 @@ def reduce_skin_runs(cell_ids: np.ndarray, force: np.ndarray, force_count: np.nd
             or off.size != f.shape[0]:
         raise SignalError(f"skin runs do not add up: {ids.size} runs, {f.shape[0]} force samples for counts summing "
                           f"to {fc.sum()}, {a.shape[1]} accelerometer samples for {ac.sum()}")
-    sums = _run_sums_compiled(fc, f, tare, off, int(stamp_ns), ac, a, float(accel_si_per_count), invalid_count,
-                              invalid_accel)
+    args = (fc, f, tare, off, int(stamp_ns), ac, a, float(accel_si_per_count), invalid_count, invalid_accel)
+    sums = _run_sums_compiled(*args)
     if sums is None:
-        sums = _run_sums(fc, f, tare, off, int(stamp_ns), ac, a, float(accel_si_per_count), invalid_count,
-                         invalid_accel)
+        sums = _run_sums(*args)
     d_sum_3, n_ok_f, s1, s2, na, newest, oldest = sums
     d_sum = d_sum_3.T  # (runs, 3)
     n_ok = n_ok_f.astype(np.int64)

@@ -1072,7 +1072,6 @@ def skin_run_sums(f_count, force, tare, f_off, stamp_ns, a_count, accel, a_scale
                 d0 += 0.0
                 d1 += 0.0
                 d2 += 0.0
-                ok_n += 0.0
             k += 1
         d_sum[0, r] = d0
         d_sum[1, r] = d1
@@ -1102,7 +1101,6 @@ def skin_run_sums(f_count, force, tare, f_off, stamp_ns, a_count, accel, a_scale
                 x = 0.0 * a_scale
                 y = 0.0 * a_scale
                 z = 0.0 * a_scale
-                m += 0.0
             x1 += x
             y1 += y
             z1 += z
