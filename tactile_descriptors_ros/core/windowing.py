@@ -373,6 +373,9 @@ class _RowBuffer:
         self.last = np.zeros(n_rows, np.int64)  # newest stamp of each row (valid where ``has``)
         self.has = np.zeros(n_rows, bool)
         self.added = np.zeros(n_rows, np.int64)  # samples appended to each row so far (Windower._held_since)
+        #: Changes with every call that may move ``lo``, ``hi`` or ``last``: a body part whose force buffer kept
+        #: its version kept its rows holding samples and their newest stamps (:meth:`_Part.held_force`).
+        self.version = 0
 
     @property
     def capacity(self) -> int:
@@ -384,6 +387,7 @@ class _RowBuffer:
 
     def _make_room(self, need: np.ndarray) -> None:
         """Room for ``need[r]`` more samples in every row: rows moved down, or all arrays grown."""
+        self.version += 1
         cap = self.capacity
         size = self.hi - self.lo
         if np.any(size + need > cap - cap // 4):
@@ -410,6 +414,7 @@ class _RowBuffer:
             raise SignalError(f"expected samples of shape ({self.n_channels}, {n}), got {values.shape}")
         if n == 0:
             return
+        self.version += 1
         if int(self.hi[row]) + n > self.capacity:
             need = np.zeros(self.t.shape[0], np.int64)
             need[row] = n
@@ -436,6 +441,7 @@ class _RowBuffer:
             raise SignalError(f"expected samples of shape ({self.n_channels}, {total}), got {values.shape}")
         if total == 0:
             return
+        self.version += 1
         if self._append_compiled(rows, counts, t_ns, values, valid):
             return
         if like is not None and like._plan is not None and like.capacity == self.capacity \
@@ -525,6 +531,8 @@ class _RowBuffer:
         if not live.size:
             return
         old = live[self.t[live, self.lo[live]] < t_ns]
+        if old.size:
+            self.version += 1
         for r in old.tolist():
             lo, hi = int(self.lo[r]), int(self.hi[r])
             lo += int(np.searchsorted(self.t[r, lo:hi], t_ns, side="left"))
@@ -533,6 +541,7 @@ class _RowBuffer:
                 self.has[r] = False
 
     def clear(self, row: int) -> None:
+        self.version += 1
         self.lo[row] = self.hi[row] = 0
         self.has[row] = False
 
@@ -599,6 +608,7 @@ class _RowView:
             return
         lo += int(np.searchsorted(buf.t[r, lo:hi], t_ns, side="left"))
         buf.lo[r] = lo
+        buf.version += 1
         if lo == hi:
             buf.has[r] = False
 
@@ -631,7 +641,28 @@ class _Part:
         # extra channels ride on the deformation stamps (one value per deformation sample)
         self.extra = _RowBuffer(n, n_extra, np.float64, cap_v, touch=True) if n_extra else None
         self.force = _RowBuffer(n, 1, np.float64, cap_f, touch=True)
+        #: :meth:`held_force` at ``force.version``: (version, the rows holding force samples (read-only), their
+        #: newest stamps, the largest and the smallest of those)
+        self._held: tuple[int, np.ndarray, np.ndarray, int, int] | None = None
         self.buffers = [b for b in (self.vib, self.dfm, self.extra, self.force) if b is not None]
+
+    def held_force(self) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+        """The rows holding force samples (a read-only array), their newest stamps, the largest and the smallest
+        of those; None when no row holds one.
+
+        Worked out again only when the force buffer changed since the last call (its ``version``): a poll after
+        another body part's message finds this part's rows as they were, the same array object.
+        """
+        buf = self.force
+        if self._held is None or self._held[0] != buf.version:
+            rows = np.flatnonzero(buf.hi > buf.lo)
+            rows.flags.writeable = False
+            last = buf.last[rows]
+            last.flags.writeable = False
+            self._held = (buf.version, rows, last, int(last.max()) if rows.size else 0,
+                          int(last.min()) if rows.size else 0)
+        _, rows, last, newest, oldest = self._held
+        return (rows, last, newest, oldest) if rows.size else None
 
 
 class _CellState:
@@ -1379,23 +1410,17 @@ class Windower:
         The live cells are kept as each body part's rows (``_live_rows``);
         every step looks at a part's cells together.
         """
-        held = []  # (part, rows holding force samples, their newest stamps)
-        for part in self._parts.values():
-            buf = part.force
-            rows = np.flatnonzero(buf.hi > buf.lo)
-            if rows.size:
-                held.append((part, rows, buf.last[rows]))
+        held = [(part, h) for part in self._parts.values() if (h := part.held_force()) is not None]
         if not held:
             self._live_rows = []
             return None
-        floor = self._stall_floor(max(int(last.max()) for _, _, last in held))
+        floor = self._stall_floor(max(newest for _, (_, _, newest, _) in held))
         self._live_rows, lows = [], []
-        for part, rows, last in held:
-            keep = last >= floor
-            if keep.all():
+        for part, (rows, last, _, oldest) in held:
+            if oldest >= floor:  # every held cell is live: the rows as held, the same array while they last
                 self._live_rows.append((part, rows))
-                lows.append(int(last.min()))
-            elif keep.any():
+                lows.append(oldest)
+            elif (keep := last >= floor).any():
                 self._live_rows.append((part, rows[keep]))
                 lows.append(int(last[keep].min()))
         return min(lows)
@@ -1481,7 +1506,8 @@ class Windower:
         # left it: with the same live cells and settings, the forces up to it and so the step are the same.
         key = (now, self.onset_n, self.release_n, self.release_ns, self.min_ns, self.max_ns)
         if key == self._swept_key and len(self._live_rows) == len(self._swept_rows) and all(
-                p is q and np.array_equal(a, b) for (p, a), (q, b) in zip(self._live_rows, self._swept_rows)):
+                p is q and (a is b or np.array_equal(a, b))
+                for (p, a), (q, b) in zip(self._live_rows, self._swept_rows)):
             return out
         self._swept_key, self._swept_rows = key, self._live_rows
         if self._swept_ns is None:  # from the first force sample held

@@ -350,3 +350,39 @@ def test_windows_are_cut_by_the_compiled_cut(monkeypatch):
     assert len(calls) == 4 * len(windows)  # vibration, deformation, extra and force of the one body part
     assert not per_cell
     assert len(kernel.cut_rows.signatures) == 1  # the one variant make setup compiles (fast.warm_up)
+
+
+OTHER = [c.id for c in NAO.body_part("right_hand").cells][:4]
+
+
+def _watermark_as_fresh(w: Windower) -> None:
+    """The watermark and live rows from each body part's remembered held rows equal those worked out afresh."""
+    got = w._watermark()
+    live = [(p, rows.tolist()) for p, rows in w._live_rows]
+    for p in w._parts.values():
+        p._held = None
+    assert w._watermark() == got
+    assert [(p, rows.tolist()) for p, rows in w._live_rows] == live
+
+
+@settings(max_examples=100, deadline=None)
+@given(messages, st.integers(0, 2**16), st.booleans())
+def test_the_watermark_from_remembered_rows_equals_one_worked_out_afresh(spec, seed, part):
+    """Each body part remembers its rows holding force and their newest stamps while its force buffer keeps its
+    version; through two body parts' messages in turn, every fault, polls that trim rows empty and stalls,
+    the watermark and live rows are those of a windower that forgets them."""
+    chunks = []
+    for c in _messages(spec, seed):
+        other = np.array([OTHER[CELLS.index(i)] if i in CELLS else i for i in c.cell_ids.tolist()], np.int64)
+        chunks += [c, PartChunk(**{**c.__dict__, "cell_ids": other})]
+    w = Windower(NAO, mode="exploration", length_s=0.02, hop_s=0.01, min_duration_s=0.0, release_s=0.005,
+                 lateness_s=0.0, force_threshold_n=1.0, release_threshold_n=0.5, clock_jump_s=1.0,
+                 smooth_s=0.004)
+    for chunk in chunks:
+        if part:
+            w.add_part(chunk)
+        else:
+            w.add_many(chunk.chunks())
+        _watermark_as_fresh(w)
+        w.poll()
+        _watermark_as_fresh(w)
