@@ -3,7 +3,8 @@
 Subscribes to the frames of the body parts it serves (``BioTacFrameBatch`` or
 ``SkinPartFrames``) and, for every frames message (the drivers' batch: the
 frame rate, not the descriptor rate), publishes the body part's contact
-(:mod:`~..core.contact`):
+(:mod:`~..core.contact`) while either of its topics has a subscriber
+(``contact.lazy``; false: whether or not):
 
 * ``tactile/<body part>/contact`` (``Contact``): in contact, total normal
   force, centre of pressure and normal in the body part's link frame, the
@@ -121,6 +122,7 @@ class ContactNode(StopsQuietly, Node):
                                                        "view.stale_s": view.stale_s})
         self.threshold_n = params["contact.force_threshold_n"]
         self.floor_n = params["contact.floor_n"]
+        self.lazy = params["contact.lazy"]
         self.rate_hz = params["view.rate_hz"]
         self.force_max_n = params["view.force_max_n"]
         stale_s = params["view.stale_s"]
@@ -133,6 +135,7 @@ class ContactNode(StopsQuietly, Node):
         params.on_set("threshold", lambda values, _names: lambda: self._set_threshold(
             values["contact.force_threshold_n"]))
         params.on_set("floor", lambda values, _names: lambda: self._set_floor(values["contact.floor_n"]))
+        params.on_set("lazy", lambda values, _names: lambda: setattr(self, "lazy", values["contact.lazy"]))
         params.on_set("scale", lambda values, _names: lambda: setattr(self, "force_max_n", values["view.force_max_n"]))
         params.on_set("drain", lambda values, _names: lambda: setattr(self, "drain_max", values["frames.drain_max"]))
         qos_frames = qos_of(params, "frames")
@@ -184,6 +187,7 @@ class ContactNode(StopsQuietly, Node):
         self.faults: Counter[str] = Counter()
         self.newest_ns = -1
         self.contacts_published = 0
+        self.contacts_unsubscribed = 0  # frames messages whose contact nobody subscribed to (contact.lazy)
         self.display_ticks = 0
         self.markers_published = 0
         self.images_published = 0
@@ -300,6 +304,12 @@ class ContactNode(StopsQuietly, Node):
         if window.end_ns < 0:
             self.faults["no_valid_force"] += 1
             return
+        if self.lazy and not (p.pubs["contact"].get_subscription_count() or p.pubs["wrench"].get_subscription_count()):
+            # locating the contact and building and publishing its two messages were most of a skin message's
+            # cost in this node; the display merged the message already
+            self.contacts_unsubscribed += 1
+            self.newest_ns = max(self.newest_ns, window.end_ns)
+            return
         est = window.contact(p.taxels, threshold_n=self.threshold_n, floor_n=self.floor_n)
         p.pubs["contact"].publish(contact_to_msg(
             est, body_part=p.part.name, frame_id=p.frame_id, cell_ids=p.cell_ids, start_ns=window.start_ns,
@@ -380,7 +390,8 @@ class ContactNode(StopsQuietly, Node):
         return ns_to_stamp(max(t_ns, 0))
 
     def _status(self) -> Status:
-        values: dict = {"contacts_published": self.contacts_published, "display_ticks": self.display_ticks,
+        values: dict = {"contacts_published": self.contacts_published,
+                        "contacts_unsubscribed": self.contacts_unsubscribed, "display_ticks": self.display_ticks,
                         "markers_published": self.markers_published, "images_published": self.images_published,
                         "display_tick_cpu_ms": round(1e3 * self.display_tick_cpu_s, 3),
                         "display_merges": self.display_merges,
@@ -398,7 +409,8 @@ class ContactNode(StopsQuietly, Node):
         bad = {k: v for k, v in self.faults.items() if v}
         if bad:
             return Status("warn", "faults: " + ", ".join(f"{k}={v}" for k, v in sorted(bad.items())), values)
-        return Status("ok", f"{self.contacts_published} contacts", values)
+        return Status("ok", f"{self.contacts_published} contacts, {self.contacts_unsubscribed} with no subscriber",
+                      values)
 
 
 def _np(values, dtype) -> np.ndarray:

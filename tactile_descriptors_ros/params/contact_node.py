@@ -19,6 +19,9 @@ CONTACT_NODE = NodeSchema("contact_node", join(
     Param("contact.floor_n", "double", "cells below this force carry none (their noise stays out of the total and "
           "the centre of pressure)", default=0.05, unit="N", range=(0.0, _MAX_FORCE_N), tunable=True,
           apply="floor"),
+    Param("contact.lazy", "bool", "work out and publish tactile/<body part>/contact and wrench only while one of "
+          "them has a subscriber (false: for every frames message, subscribed or not)", default=True, tunable=True,
+          apply="lazy"),
     Param("view.rate_hz", "double", "display rate of markers, images and tactile/contacts (0 = none of them)",
           derived="the robot description's view.rate_hz", unit="Hz", range=(0.0, 1000.0)),
     Param("view.force_max_n", "double", "top of the colour scale", derived="the robot description's "

@@ -380,8 +380,66 @@ def test_a_flood_of_frames_does_not_hold_off_the_display(ros_context):
         while node.display_ticks < 3 and time.monotonic() < deadline:
             node._on_frames(_chest_frames(t, seq))  # as the executor would call it, back to back
             t, seq = t + 10_000_000, seq + 1
-        assert node.display_ticks >= 3 and node.contacts_published == seq
+        # nobody subscribes to the chest's contact or wrench: each message's contact is counted, not published
+        assert node.display_ticks >= 3 and node.contacts_unsubscribed == seq and node.contacts_published == 0
         # a period apart at most ~20 Hz: ticks come from due periods, not from every message
         assert node.display_ticks <= 1 + (time.monotonic() - (deadline - 30.0)) / (0.9 / 20.0)
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("lazy", [True, False])
+def test_a_contact_is_worked_out_for_its_subscribers(ros_context, lazy):
+    """``contact.lazy``: with no subscriber to a body part's contact or wrench, a frames message's contact is
+    counted (``contacts_unsubscribed``) and neither built nor published; from the moment one subscribes to either,
+    every message's is.  ``contact.lazy`` false publishes every message's, subscribed or not."""
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+    node = ContactNode(context=ros_context, parameter_overrides=[
+        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=0.0),
+        Parameter("contact.lazy", value=lazy)])
+    io = rclpy.create_node("contact_lazy_io", context=ros_context)
+    try:
+        t, seq = 5_000_000_000, 0
+        for _ in range(5):
+            node._on_frames(_chest_frames(t, seq))
+            t, seq = t + 10_000_000, seq + 1
+        assert (node.contacts_published, node.contacts_unsubscribed) == ((0, 5) if lazy else (5, 0))
+        assert node._status().values["contacts_unsubscribed"] == node.contacts_unsubscribed
+        io.create_subscription(WrenchStamped, "tactile/chest/wrench", lambda _msg: None, 10)
+        pub = node.parts["chest"].pubs["wrench"]
+        ex = SingleThreadedExecutor(context=ros_context)
+        ex.add_node(io)
+        try:
+            assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, timeout_s=30.0)
+        finally:
+            ex.shutdown()
+        for _ in range(5):
+            node._on_frames(_chest_frames(t, seq))
+            t, seq = t + 10_000_000, seq + 1
+        assert (node.contacts_published, node.contacts_unsubscribed) == ((5, 5) if lazy else (10, 0))
+        assert node.parts["chest"].messages == node.contacts_published
+    finally:
+        node.destroy_node()
+        io.destroy_node()
+
+
+def test_contact_lazy_is_set_while_the_node_runs(ros_context):
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+    node = ContactNode(context=ros_context, parameter_overrides=[
+        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=0.0)])
+    try:
+        assert node.lazy is True
+        assert node.set_parameters([Parameter("contact.lazy", value=False)])[0].successful
+        node._on_frames(_chest_frames(5_000_000_000, 0))
+        assert (node.lazy, node.contacts_published, node.contacts_unsubscribed) == (False, 1, 0)
     finally:
         node.destroy_node()

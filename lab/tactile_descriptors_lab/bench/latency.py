@@ -278,12 +278,12 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
 
 
 def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_rounds: int, seed: int
-                   ) -> tuple[float, int, dict[str, int], int]:
+                   ) -> tuple[float, int, dict[str, int], tuple[int, int]]:
     """A node made by ``make_node(context)`` takes ``rounds`` batches of the probe's ``SkinPartFrames`` (one per
     body part, deserialised from CDR as rclpy gives them, stamps ``batch_s`` apart, each cell's batch numbers in
     order, every cell touching) through its ``_on_frames``, one message a call, in this process, without an
     executor; the CPU of those after the first ``warm_rounds``, how many they were, the node's faults and its
-    ``contacts_published`` (0 for a node without)."""
+    ``contacts_published`` and ``contacts_unsubscribed`` (0 for a node without)."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # a node of its own: discovery stays on this machine
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     import rclpy
@@ -311,7 +311,7 @@ def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_roun
                 node._on_frames(msg)
             cpu_s = time.thread_time() - started
             faults = {k: int(v) for k, v in node.faults.items()}
-            contacts = int(getattr(node, "contacts_published", 0))
+            contacts = (int(getattr(node, "contacts_published", 0)), int(getattr(node, "contacts_unsubscribed", 0)))
         finally:
             node.destroy_node()
     finally:
@@ -348,18 +348,22 @@ def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s:
 
 
 def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: int = 1200, warm_rounds: int = 100,
-                         seed: int = 0, compiled: bool = True) -> dict:
+                         seed: int = 0, compiled: bool = True, lazy: bool = False) -> dict:
     """CPU per message of the contact node's own frames callback, called in this process without an executor.
 
     A :class:`~tactile_descriptors_ros.nodes.contact_node.ContactNode` of
     ``robot`` takes the probe's messages as :func:`node_message_cost` gives
     them to the window node: each body part's message reduced, its contact
     located, its ``Contact`` and ``WrenchStamped`` built and published (no
-    subscriber), the display's bookkeeping and its ticks at 10 Hz of wall time;
-    not rclpy's executor nor the deserialisation.  ``compiled`` False sums the
-    messages' runs with numpy (:data:`~tactile_descriptors_ros.core.contact.COMPILED_SUMS`)
-    for a comparison in one session.  ``contacts_published`` counts every message's contact, warm-up
-    included; ``faults`` are the node's counters after the run.
+    subscriber: ``contact.lazy`` is false unless ``lazy``), the display's
+    bookkeeping and its ticks at 10 Hz of wall time; not rclpy's executor nor
+    the deserialisation.  ``lazy`` True runs the node as shipped with nobody
+    subscribed to its contacts: each is counted, not located nor published.
+    ``compiled`` False sums the messages' runs with numpy
+    (:data:`~tactile_descriptors_ros.core.contact.COMPILED_SUMS`) for a
+    comparison in one session.  ``contacts_published`` and
+    ``contacts_unsubscribed`` count every message's contact, warm-up included;
+    ``faults`` are the node's counters after the run.
     """
     from rclpy.parameter import Parameter
 
@@ -369,13 +373,15 @@ def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: i
     before = contact.COMPILED_SUMS
     contact.COMPILED_SUMS = compiled
     try:
-        cpu_s, timed, faults, contacts = _callback_cost(
-            lambda context: ContactNode(context=context, parameter_overrides=[Parameter("robot", value=robot)]),
+        cpu_s, timed, faults, (contacts, unsubscribed) = _callback_cost(
+            lambda context: ContactNode(context=context, parameter_overrides=[
+                Parameter("robot", value=robot), Parameter("contact.lazy", value=lazy)]),
             robot, batch_s, rounds, warm_rounds, seed)
     finally:
         contact.COMPILED_SUMS = before
-    return {"robot": robot, "batch_s": batch_s, "compiled": compiled, "messages_timed": timed,
-            "us_per_message": 1e6 * cpu_s / timed, "contacts_published": contacts, "faults": faults}
+    return {"robot": robot, "batch_s": batch_s, "compiled": compiled, "lazy": lazy, "messages_timed": timed,
+            "us_per_message": 1e6 * cpu_s / timed, "contacts_published": contacts,
+            "contacts_unsubscribed": unsubscribed, "faults": faults}
 
 
 def measure_latency(*, duration_s: float = 8.0, batch_s: float | None = None, lateness_s: float | None = None,

@@ -28,7 +28,9 @@ text, the view's history).  Each run is one of:
 until the contact node answers (its first contacts, and the page's first
 frame), lets it settle ``settle_s``, then measures ``seconds``: the CPU
 (user + system, psutil) of the contact node and of ``tactile view``, the
-contacts the node published per second, the display's own CPU the node
+contacts the node published per second (or counted: nobody subscribes to
+them here, and ``contact.lazy`` neither builds nor publishes them), the
+display's own CPU the node
 counts (thread time of its display ticks and of its bookkeeping per
 message, in its ``/diagnostics``), and how late the probe published.
 
@@ -150,7 +152,9 @@ class _Probe:
                     self.diagnostics.append((time.monotonic(), values))
 
     def contacts(self) -> int:
-        return int(self.diagnostics[-1][1]["contacts_published"]) if self.diagnostics else 0
+        """The frames messages whose contact the node published or, with nobody subscribed to it
+        (``contact.lazy``), counted, by its last report."""
+        return int(_contacts(self.diagnostics[-1][1])) if self.diagnostics else 0
 
     def subscribed(self) -> bool:
         return all(p.get_subscription_count() > 0 for p in self.frames.values())
@@ -219,6 +223,11 @@ class _Probe:
     def close(self) -> None:
         self.ex.shutdown()
         self.node.destroy_node()
+
+
+def _contacts(values: dict[str, float]) -> float:
+    """A contact node's report (or a change of it): contacts published plus those nobody subscribed to."""
+    return values["contacts_published"] + values.get("contacts_unsubscribed", 0.0)
 
 
 def _pressed(template, rng: np.random.Generator):
@@ -308,7 +317,7 @@ def _run(display: bool, seconds: float, settle_s: float, context, seed: int,
         change = probe.change(t0, t1)
         if change is not None:
             span_s, d = change
-            out["contacts_per_s"] = d["contacts_published"] / span_s
+            out["contacts_per_s"] = _contacts(d) / span_s
             if display and d.get("display_ticks") and d.get("display_merges"):
                 out["display_tick_cpu_ms"] = d["display_tick_cpu_ms"] / d["display_ticks"]
                 out["display_merge_cpu_us"] = 1e3 * d["display_merge_cpu_ms"] / d["display_merges"]

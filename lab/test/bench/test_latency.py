@@ -137,8 +137,12 @@ def test_contact_message_cost_times_the_contact_nodes_own_callback():
         res = contact_message_cost(rounds=30, warm_rounds=10, compiled=compiled)
         assert res["messages_timed"] == 20 * 7 and res["us_per_message"] > 0 and res["compiled"] is compiled
         # every cell touches in every message: a contact each, and no fault
-        assert res["contacts_published"] == 30 * 7 and res["faults"] == {}, res
+        assert (res["contacts_published"], res["contacts_unsubscribed"]) == (30 * 7, 0) and res["faults"] == {}, res
     assert contact.COMPILED_SUMS is True  # switched back
+    # as shipped (contact.lazy), with nobody subscribed: every message's contact counted, none published
+    res = contact_message_cost(rounds=30, warm_rounds=10, lazy=True)
+    assert res["lazy"] is True and res["messages_timed"] == 20 * 7
+    assert (res["contacts_published"], res["contacts_unsubscribed"]) == (0, 30 * 7) and res["faults"] == {}, res
 
 
 def test_the_shipped_graphs_fixed_windows_wait_only_the_margin_before_their_batch_ends():
