@@ -362,6 +362,7 @@ def warm_up() -> dict:
     i64 = np.zeros(1, dtype=np.int64)
     kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, 2,
                     i64.copy(), i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
+    kernel.trim_rows(np.zeros((1, 1), dtype=np.int64), i64.copy(), i64.copy(), np.zeros(1, dtype=bool), 0)  # trims
     # a body part's message converted (nodes.conversions: rclpy's array fields as writeable contiguous views)
     one_u32, one_f64 = np.ones(1, dtype=np.uint32), np.zeros(3)
     kernel.skin_part_arrays(one_u32, one_u32, one_f64, np.zeros(1, dtype=np.int16), np.zeros(1, dtype=np.int16),

@@ -48,7 +48,8 @@ import numba
 import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
-           "runs_in_order", "append_runs", "explore_runs", "cut_rows", "decode_can_rows", "track_forward", "CACHE_DIR",
+           "runs_in_order", "append_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows", "track_forward",
+           "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -1200,6 +1201,30 @@ def _left_of(t, a, b, value):  # pragma: no cover - compiled
         else:
             b = m
     return a
+
+
+@_jit
+def trim_rows(t_buf, lo, hi, has, t_ns):  # pragma: no cover - compiled
+    """Drop every row's samples older than ``t_ns``; how many rows lost any.
+
+    The compiled form of :meth:`.windowing._RowBuffer.trim_before`: a row
+    (samples between ``lo[r]`` and ``hi[r]``, in time order) whose oldest
+    sample is older starts at its first sample not older (``searchsorted``
+    left), and a row left with none loses ``has[r]``.  The window node trims
+    its 28 buffers of NAO cells (7 body parts) every 100 ms of data: a search
+    per row in Python took 2 % of a core.
+    """
+    moved = 0
+    for r in range(lo.shape[0]):
+        a = lo[r]
+        b = hi[r]
+        if b > a and t_buf[r, a] < t_ns:
+            i = _left_of(t_buf[r], a, b, t_ns)
+            lo[r] = i
+            if i == b:
+                has[r] = False
+            moved += 1
+    return moved
 
 
 @_jit

@@ -526,7 +526,13 @@ class _RowBuffer:
         return self.t[rows[:, None], idx], self.v[0][rows[:, None], idx], held
 
     def trim_before(self, t_ns: int) -> None:
-        """Drop every row's samples older than ``t_ns``."""
+        """Drop every row's samples older than ``t_ns`` (in one compiled pass where the intake is compiled:
+        :func:`.numba_kernel.trim_rows`; the buffer's own arrays are its one compiled variant's layout)."""
+        kernel = _intake_kernel()
+        if kernel is not None:
+            if kernel.trim_rows(self.t, self.lo, self.hi, self.has, int(t_ns)):
+                self.version += 1
+            return
         live = np.flatnonzero(self.hi > self.lo)
         if not live.size:
             return

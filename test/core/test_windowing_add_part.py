@@ -162,7 +162,8 @@ class _Counting:
 
     def __init__(self, module) -> None:
         self.module = module
-        self.results: dict[str, list[bool]] = {"runs_in_order": [], "append_runs": [], "explore_runs": []}
+        self.results: dict[str, list[bool]] = {"runs_in_order": [], "append_runs": [], "explore_runs": [],
+                                               "trim_rows": []}
 
     def __getattr__(self, name: str):
         func = getattr(self.module, name)
@@ -386,3 +387,36 @@ def test_the_watermark_from_remembered_rows_equals_one_worked_out_afresh(spec, s
         _watermark_as_fresh(w)
         w.poll()
         _watermark_as_fresh(w)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.integers(0, 5), max_size=12), min_size=1, max_size=6),
+       st.lists(st.integers(-5, 70), min_size=1, max_size=4))
+def test_a_compiled_trim_equals_numpys(steps, cuts):
+    """``_RowBuffer.trim_before`` by the compiled pass (``numba_kernel.trim_rows``) and by numpy: the same rows'
+    starts, ends and ``has`` flags after each of several trims, rows with repeated stamps, empty rows and rows
+    trimmed empty among them, and the buffer's version moved exactly when a row lost samples."""
+    if fast.kernel_module() is None:
+        pytest.skip("no compiled backend (TACTILE_NO_NUMBA or numba missing)")
+    bufs = []
+    for _ in range(2):
+        buf = windowing._RowBuffer(len(steps), 1, np.float64, 4)
+        for r, row in enumerate(steps):
+            if row:
+                t = np.cumsum(np.array(row, np.int64))  # non-decreasing: a stamp may repeat
+                buf.append(r, t, np.zeros((1, t.size)))
+        bufs.append(buf)
+    for t_ns in sorted(cuts):
+        got = []
+        for buf, compiled in zip(bufs, (True, False)):
+            before = buf.version
+            with mock.patch.object(windowing, "COMPILED_INTAKE", compiled):
+                buf.trim_before(t_ns)
+            got.append((buf.lo.tolist(), buf.hi.tolist(), buf.has.tolist(), buf.version != before))
+        assert got[0] == got[1], t_ns
+    # every sample left is not older than the last trim; every one dropped was
+    for r in range(len(steps)):
+        kept = bufs[0].t[r, bufs[0].lo[r]:bufs[0].hi[r]]
+        assert (kept >= max(cuts)).all()
+        dropped = bufs[0].t[r, :bufs[0].lo[r]]
+        assert (dropped < max(cuts)).all()
