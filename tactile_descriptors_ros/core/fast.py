@@ -363,6 +363,17 @@ def warm_up() -> dict:
     kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, 2,
                     i64.copy(), i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
     kernel.trim_rows(np.zeros((1, 1), dtype=np.int64), i64.copy(), i64.copy(), np.zeros(1, dtype=bool), 0)  # trims
+    # a skin body part's message in one call (windowing._FUSED_DTYPES: int32 counts), written to a row with room
+
+    def buffer(dtype, lo=False):
+        return (np.zeros((1, 2), dtype=np.int64), np.zeros((1, 1, 2), dtype=dtype), np.zeros((1, 2), dtype=bool)) \
+            + ((np.zeros(1, dtype=np.int64),) if lo else ()) + (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
+                                                                np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64))
+    one32 = np.ones((1, 1), dtype=np.int32)
+    kernel.add_part_runs(rows, counts, counts.copy(), t, one32, flags, False, t.copy(), one32.copy(), flags, False,
+                         np.zeros((1, 1)), True, np.zeros(1), *buffer(np.int32), *buffer(np.int32),
+                         *buffer(np.float64), *buffer(np.float64, lo=True), True, 1.0, np.zeros(1, dtype=np.int64),
+                         np.zeros(1, dtype=bool), 1, np.zeros(1))
     # a body part's message converted (nodes.conversions: rclpy's array fields as writeable contiguous views)
     one_u32, one_f64 = np.ones(1, dtype=np.uint32), np.zeros(3)
     kernel.skin_part_arrays(one_u32, one_u32, one_f64, np.zeros(1, dtype=np.int16), np.zeros(1, dtype=np.int16),

@@ -48,7 +48,8 @@ import numba
 import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
-           "runs_in_order", "append_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows", "track_forward",
+           "runs_in_order", "append_runs", "add_part_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows",
+           "track_forward",
            "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
@@ -1201,6 +1202,81 @@ def _left_of(t, a, b, value):  # pragma: no cover - compiled
         else:
             b = m
     return a
+
+
+@_jit
+def _room(hi, cap, rows, counts):  # pragma: no cover - compiled
+    """Whether every run ``i`` (``counts[i]`` samples) fits after row ``rows[i]``'s end in a capacity ``cap``."""
+    for i in range(counts.shape[0]):
+        if hi[rows[i]] + counts[i] > cap:
+            return False
+    return True
+
+
+@_jit
+def _add_counts(added, rows, counts):  # pragma: no cover - compiled
+    for i in range(counts.shape[0]):
+        added[rows[i]] += counts[i]
+
+
+@_jit
+def add_part_runs(rows, vc, dc, t_v, vib, vib_valid, use_vib_valid, t_d, dfm, dfm_valid, use_dfm_valid, extra,
+                  use_extra, force_n, vt, vv, vok, vhi, vlast, vhas, vadded, dt, dv, dok, dhi, dlast, dhas, dadded,
+                  et, ev, eok, ehi, elast, ehas, eadded, ft, fv, fok, flo, fhi, flast, fhas, fadded, explore,
+                  release_n, hot_until, hot, smooth_ns, last_force):  # pragma: no cover - compiled
+    """A body part's message into its four buffers in one call: 0 written, 1 not in order, 2 out of room.
+
+    The compiled form of :meth:`.windowing.Windower.add_part`'s array path
+    for a body part that has buffers: the checks of ``_fast_ok`` (the runs'
+    lengths agree with the arrays, every run has vibration samples, each
+    row takes at most one run, stamps increase from where the row's buffers
+    end: :func:`runs_in_order`), then :func:`append_runs` into the
+    vibration (``v*``), deformation (``d*``), extra (``e*``, when
+    ``use_extra``; no validity) and force (``f*``; no validity) buffers,
+    each buffer's ``added`` counts, and in exploration mode
+    :func:`explore_runs`.  Returns 1 (nothing written) where the message
+    must go run by run, 2 (nothing written) where a row lacks room (the
+    caller makes room with numpy).  One call instead of five and their
+    Python checks: the Python around them took three quarters of the intake.
+    """
+    n = rows.shape[0]
+    if vc.shape[0] != n or dc.shape[0] != n or n == 0:
+        return 1
+    n_a = 0
+    n_d = 0
+    for i in range(n):
+        if vc[i] <= 0 or dc[i] < 0:
+            return 1
+        n_a += vc[i]
+        n_d += dc[i]
+    if vib.shape[0] != vv.shape[0] or vib.shape[1] != n_a or t_v.shape[0] != n_a:
+        return 1
+    if dfm.shape[0] != dv.shape[0] or dfm.shape[1] != n_d or t_d.shape[0] != n_d or force_n.shape[0] != n_d:
+        return 1
+    if (use_vib_valid and vib_valid.shape[0] != n_a) or (use_dfm_valid and dfm_valid.shape[0] != n_d):
+        return 1
+    if use_extra and (extra.shape[0] != ev.shape[0] or extra.shape[1] != n_d):
+        return 1
+    n_rows = vt.shape[0]
+    if not (runs_in_order(t_v, vc, rows, n_rows, vhas, vlast, vhas, vlast)
+            and runs_in_order(t_d, dc, rows, n_rows, dhas, dlast, fhas, flast)):
+        return 1
+    if not (_room(vhi, vt.shape[1], rows, vc) and _room(dhi, dt.shape[1], rows, dc)
+            and _room(fhi, ft.shape[1], rows, dc) and (not use_extra or _room(ehi, et.shape[1], rows, dc))):
+        return 2
+    append_runs(vt, vv, vok, vhi, vlast, vhas, rows, vc, t_v, vib, vib_valid, use_vib_valid)
+    _add_counts(vadded, rows, vc)
+    if n_d:
+        append_runs(dt, dv, dok, dhi, dlast, dhas, rows, dc, t_d, dfm, dfm_valid, use_dfm_valid)
+        _add_counts(dadded, rows, dc)
+        if use_extra:
+            append_runs(et, ev, eok, ehi, elast, ehas, rows, dc, t_d, extra, dfm_valid, False)
+            _add_counts(eadded, rows, dc)
+        append_runs(ft, fv, fok, fhi, flast, fhas, rows, dc, t_d, force_n.reshape((1, n_d)), dfm_valid, False)
+        _add_counts(fadded, rows, dc)
+    if explore:
+        explore_runs(rows, dc, t_d, force_n, release_n, hot_until, hot, ft, fv, flo, fhi, smooth_ns, last_force)
+    return 0
 
 
 @_jit

@@ -909,10 +909,64 @@ class Windower:
                 ok[known] = self.add_part(chunk.take(known))
             return ok
         part_code = self._id_part[pos]
-        if (part_code != part_code[0]).any() or not self._fast_ok(chunk, int(part_code[0]), self._id_row[pos]):
+        if (part_code != part_code[0]).any():
             return np.array(self.add_many(chunk.chunks()), bool)
-        self._add_runs(chunk, self._part_names[int(part_code[0])], self._id_row[pos])
+        name = self._part_names[int(part_code[0])]
+        rows = self._id_row[pos]
+        fused = self._add_fused(chunk, name, rows)
+        if fused == _WRITTEN:
+            return np.ones(n, bool)
+        if fused == _RUN_BY_RUN or not self._fast_ok(chunk, int(part_code[0]), rows):
+            return np.array(self.add_many(chunk.chunks()), bool)
+        self._add_runs(chunk, name, rows)
         return np.ones(n, bool)
+
+    def _add_fused(self, chunk: PartChunk, part_name: str, rows: np.ndarray) -> int | None:
+        """:meth:`add_part`'s array path in one compiled call (:func:`.numba_kernel.add_part_runs`) for a body part
+        that has buffers: ``_WRITTEN``, ``_RUN_BY_RUN`` (nothing written), 2 (nothing written: a row out of room)
+        or None (not served: no compiled backend, the part's first message, other dtypes or layouts)."""
+        kernel = _intake_kernel()
+        part = self._parts.get(part_name)
+        if kernel is None or part is None:
+            return None
+        vib, dfm, f = chunk.vibration, chunk.deformation, chunk.force_n
+        vc, dc, t_v, t_d = chunk.vibration_count, chunk.deformation_count, chunk.vibration_t_ns, chunk.deformation_t_ns
+        vv, fv = chunk.vibration_valid, chunk.deformation_valid
+        tare = chunk.deformation_tare
+        if not (isinstance(vib, np.ndarray) and isinstance(dfm, np.ndarray) and isinstance(f, np.ndarray)
+                and vib.dtype == part.vib.v.dtype == dfm.dtype == part.dfm.v.dtype and vib.dtype in _FUSED_DTYPES
+                and f.dtype == np.float64 and vib.ndim == dfm.ndim == 2 and f.ndim == 1
+                and (vv is None or (isinstance(vv, np.ndarray) and vv.dtype == np.bool_))
+                and (fv is None or (isinstance(fv, np.ndarray) and fv.dtype == np.bool_))
+                and (tare is None or len(tare) == rows.size)):
+            return None
+        ext = part.extra
+        extra = _NO_EXTRA
+        if ext is not None:
+            extra = chunk.extra if chunk.extra is not None else np.full((ext.n_channels, t_d.size), np.nan)
+            if not (isinstance(extra, np.ndarray) and extra.dtype == np.float64 and extra.ndim == 2):
+                return None
+        arrays = (vib, dfm, f, extra) + tuple(a for a in (vv, fv) if a is not None)
+        if not _compiled_args(rows, vc, t_v, dc, t_d, *arrays) or dc.dtype != _INDEX_DTYPE \
+                or t_d.dtype != _INDEX_DTYPE:
+            return None
+        e = ext if ext is not None else part.force  # a buffer of the right types, not written without extra
+        status = kernel.add_part_runs(
+            rows, vc, dc, t_v, vib, _NO_VALID if vv is None else vv, vv is not None, t_d, dfm,
+            _NO_VALID if fv is None else fv, fv is not None, extra, ext is not None, f,
+            *_buffer_args(part.vib), *_buffer_args(part.dfm), *_buffer_args(e), *_buffer_args(part.force, lo=True),
+            self._exploration, float(self.release_n), part.hot_until, part.hot, int(self.smooth_ns), part.last_force)
+        if status != _WRITTEN:
+            return int(status)
+        for buf in part.buffers:
+            buf.version += 1
+            buf._plan = None
+        ids = np.asarray(chunk.cell_ids, np.int64).tolist()
+        for c in ids:
+            if c not in self._cells:  # a cell's first chunk of a body part that has buffers: its state
+                self._new_cell(c, vib.dtype, dfm.dtype)
+        self._after_runs(chunk, ids, vc, t_v)
+        return _WRITTEN
 
     def _fast_ok(self, chunk: PartChunk, part_code: int, rows: np.ndarray) -> bool:
         """Whether :meth:`add_part` may take ``chunk`` in one piece (see there)."""
@@ -971,10 +1025,6 @@ class Windower:
             part.extra.append_runs(rows, dc, t_d, extra, like=part.dfm)
         f = np.asarray(chunk.force_n, np.float64)
         part.force.append_runs(rows, dc, t_d, f[None, :], like=part.dfm)
-        if chunk.deformation_tare is not None:
-            tare = np.asarray(chunk.deformation_tare, np.float64)
-            for i, c in enumerate(ids.tolist()):  # a copy per run: messages own their arrays
-                self._cells[c].tare = tare[i].copy()
         if self._exploration and not self._explore_compiled(part, rows, dc, t_d, f):
             with_f = np.flatnonzero(dc > 0)
             if with_f.size:
@@ -987,6 +1037,15 @@ class Windower:
                     part.hot_until[rr] = t_d[starts[run] + dc[run] - 1]
                     part.hot[rr] = True
                 self._update_last_force_rows(part, np.unique(rows[with_f]))
+        self._after_runs(chunk, ids.tolist(), vc, t_v)
+
+    def _after_runs(self, chunk: PartChunk, ids: list[int], vc: np.ndarray, t_v: np.ndarray) -> None:
+        """What :meth:`add_part` keeps besides the buffers: the cells' tares and the newest stamp (and a stall's
+        end, as :meth:`add_many` would find it run by run)."""
+        if chunk.deformation_tare is not None:
+            tare = np.array(chunk.deformation_tare, np.float64)  # one copy: messages own their arrays
+            for i, c in enumerate(ids):
+                self._cells[c].tare = tare[i]
         ends = np.cumsum(vc)
         firsts, lasts = t_v[ends - vc], t_v[ends - 1]
         if self._latest_ns is None:  # the first run only sets the newest stamp, as add_many's first chunk does
@@ -1976,6 +2035,13 @@ INTAKE_DTYPES = (np.dtype(np.int32), np.dtype(np.int64), np.dtype(np.float64))
 _INTAKE_DTYPES = frozenset(INTAKE_DTYPES)
 _INDEX_DTYPE = np.dtype(np.int64)
 _NO_VALID = np.ones(1, dtype=bool)
+#: The extra channels' values where a body part has none (:meth:`Windower._add_fused`; never written).
+_NO_EXTRA = np.zeros((0, 0))
+#: :meth:`Windower._add_fused`: the message written; to go run by run (:meth:`Windower.add_many`).
+_WRITTEN, _RUN_BY_RUN = 0, 1
+#: The sample types the fused intake is compiled for (``make setup``): the skin cells' counts as the window
+#: node converts them.  Others take the intake pass by pass, whose variants are compiled as well.
+_FUSED_DTYPES = frozenset({np.dtype(np.int32)})
 #: Whether the windower may use the compiled intake when the compiled backend is loaded (the tests switch it
 #: off to compare both paths).
 COMPILED_INTAKE = True
@@ -2171,6 +2237,12 @@ def _rows(dst: np.ndarray, src: np.ndarray, first: np.ndarray, width: int) -> No
 def _intake_kernel():
     """The compiled backend's module when the intake may use it (:data:`COMPILED_INTAKE`), else None."""
     return fast.kernel_module() if COMPILED_INTAKE else None
+
+
+def _buffer_args(buf: _RowBuffer, lo: bool = False) -> tuple[np.ndarray, ...]:
+    """A row buffer's arrays as :func:`.numba_kernel.add_part_runs` takes them (``lo`` too for the force)."""
+    head = (buf.t, buf.v, buf.ok) + ((buf.lo,) if lo else ())
+    return head + (buf.hi, buf.last, buf.has, buf.added)
 
 
 def _compiled_args(rows: np.ndarray, counts: np.ndarray, t_ns: np.ndarray, *arrays: np.ndarray) -> bool:

@@ -109,7 +109,9 @@ def _state(w: Windower) -> dict:
         streams = [x.between(-(2**62), 2**62) for x in (s.vib, s.dfm, s.force, s.extra)]
         cells[cid] = ([_plain(a) for trip in streams for a in trip], s.last_force_n, s.hot_until_ns,
                       None if s.tare is None else s.tare.tolist())
-    return {"faults": dict(w.faults), "latest": w._latest_ns, "cells": list(cells.items())}
+    # the samples each buffer row took (what cutting ahead compares against its marks)
+    added = {name: [b.added.tolist() for b in part.buffers] for name, part in w._parts.items()}
+    return {"faults": dict(w.faults), "latest": w._latest_ns, "cells": list(cells.items()), "added": added}
 
 
 def _windows(ws) -> list:
@@ -162,15 +164,15 @@ class _Counting:
 
     def __init__(self, module) -> None:
         self.module = module
-        self.results: dict[str, list[bool]] = {"runs_in_order": [], "append_runs": [], "explore_runs": [],
-                                               "trim_rows": []}
+        self.results: dict[str, list] = {"runs_in_order": [], "append_runs": [], "explore_runs": [],
+                                         "trim_rows": [], "add_part_runs": []}
 
     def __getattr__(self, name: str):
         func = getattr(self.module, name)
 
         def call(*args):
             out = func(*args)
-            self.results[name].append(bool(out))
+            self.results[name].append(out)
             return out
         return call
 
@@ -185,18 +187,22 @@ def _counting_kernel(monkeypatch) -> _Counting:
 
 
 def test_in_order_messages_take_the_compiled_intake(monkeypatch):
-    """Once a body part has buffers, an in-order message is checked and written by the compiled intake alone."""
+    """Once a body part has buffers, an in-order message is checked and written by the compiled intake alone, in
+    one call (``add_part_runs``: the checks, the four buffers and, in exploration mode, the hot cells and
+    smoothed forces)."""
     counting = _counting_kernel(monkeypatch)
     chunks = _messages([[(0, "ok", 10, 2.0), (1, "ok", 12, 0.5), (2, "ok", 9, 0.0)]] * 3, 7)
     for mode in ("fixed", "exploration"):
         for calls in counting.results.values():
             calls.clear()
         got = _run(chunks, mode, part=True)
-        # the first message finds no buffers (numpy checks it); every message writes four buffers compiled
-        assert counting.results["runs_in_order"] == [True] * 4
-        assert counting.results["append_runs"] == [True] * 12
-        # hot cells and smoothed forces: compiled in exploration mode, not needed in fixed mode
-        assert len(counting.results["explore_runs"]) == (3 if mode == "exploration" else 0)
+        # the first message finds no buffers (numpy checks it, the pass-by-pass intake writes its four buffers
+        # compiled); the two after it are written in one call each
+        assert counting.results["runs_in_order"] == []
+        assert counting.results["append_runs"] == [True] * 4
+        assert counting.results["add_part_runs"] == [windowing._WRITTEN] * 2
+        # the first message's hot cells and smoothed forces: compiled in exploration mode, none in fixed mode
+        assert len(counting.results["explore_runs"]) == (1 if mode == "exploration" else 0)
         assert got == _run(chunks, mode, part=False)
 
 
@@ -206,7 +212,9 @@ def test_a_run_past_its_rows_capacity_is_written_by_numpy_after_making_room(monk
     cap = w.buffer_capacity(CELLS[0])[0]
     chunks = _messages([[(0, "ok", 24, 2.0)], [(0, "ok", 24, 2.0), (1, "ok", cap + 50, 2.0)]], 3)
     got = _run(chunks, "fixed", part=True)
-    assert False in counting.results["append_runs"]  # the long run did not fit: numpy grew the rows
+    # the long run did not fit: nothing written in one call, nor pass by pass, and numpy grew the rows
+    assert counting.results["add_part_runs"] == [2]
+    assert False in counting.results["append_runs"]
     assert got == _run(chunks, "fixed", part=False)
 
 
