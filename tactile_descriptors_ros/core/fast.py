@@ -363,12 +363,12 @@ def warm_up() -> dict:
     kernel.cut_rows(np.zeros((1, 1), dtype=np.int64), np.zeros((1, 1), dtype=bool), i64, i64, 0, 1, 2,
                     i64.copy(), i64.copy(), i64.copy(), i64.copy())  # the window cut (windowing.Windower._make_window)
     kernel.trim_rows(np.zeros((1, 1), dtype=np.int64), i64.copy(), i64.copy(), np.zeros(1, dtype=bool), 0)  # trims
-    # a skin body part's message in one call (windowing._FUSED_DTYPES: int32 counts), written to a row with room
 
-    def buffer(dtype, lo=False):
+    def buffer(dtype, lo=False):  # a row buffer's arrays (windowing._buffer_args): one row, room for two samples
         return (np.zeros((1, 2), dtype=np.int64), np.zeros((1, 1, 2), dtype=dtype), np.zeros((1, 2), dtype=bool)) \
             + ((np.zeros(1, dtype=np.int64),) if lo else ()) + (np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                                                                 np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64))
+    # a skin body part's message in one call (windowing._FUSED_DTYPES: int32 counts)
     one32 = np.ones((1, 1), dtype=np.int32)
     kernel.add_part_runs(rows, counts, counts.copy(), t, one32, flags, False, t.copy(), one32.copy(), flags, False,
                          np.zeros((1, 1)), True, np.zeros(1), *buffer(np.int32), *buffer(np.int32),

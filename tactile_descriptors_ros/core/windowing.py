@@ -923,8 +923,9 @@ class Windower:
 
     def _add_fused(self, chunk: PartChunk, part_name: str, rows: np.ndarray) -> int | None:
         """:meth:`add_part`'s array path in one compiled call (:func:`.numba_kernel.add_part_runs`) for a body part
-        that has buffers: ``_WRITTEN``, ``_RUN_BY_RUN`` (nothing written), 2 (nothing written: a row out of room)
-        or None (not served: no compiled backend, the part's first message, other dtypes or layouts)."""
+        that has buffers: ``_WRITTEN``, ``_RUN_BY_RUN`` (nothing written), ``_NO_ROOM`` (nothing written: the
+        pass-by-pass intake makes room) or None (not served: no compiled backend, the part's first message, other
+        dtypes or layouts)."""
         kernel = _intake_kernel()
         part = self._parts.get(part_name)
         if kernel is None or part is None:
@@ -2037,8 +2038,9 @@ _INDEX_DTYPE = np.dtype(np.int64)
 _NO_VALID = np.ones(1, dtype=bool)
 #: The extra channels' values where a body part has none (:meth:`Windower._add_fused`; never written).
 _NO_EXTRA = np.zeros((0, 0))
-#: :meth:`Windower._add_fused`: the message written; to go run by run (:meth:`Windower.add_many`).
-_WRITTEN, _RUN_BY_RUN = 0, 1
+#: :meth:`Windower._add_fused` (:func:`.numba_kernel.add_part_runs`): the message written; to go run by run
+#: (:meth:`Windower.add_many`); a row out of room.
+_WRITTEN, _RUN_BY_RUN, _NO_ROOM = 0, 1, 2
 #: The sample types the fused intake is compiled for (``make setup``): the skin cells' counts as the window
 #: node converts them.  Others take the intake pass by pass, whose variants are compiled as well.
 _FUSED_DTYPES = frozenset({np.dtype(np.int32)})
