@@ -49,8 +49,7 @@ import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
            "runs_in_order", "append_runs", "add_part_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows",
-           "track_forward",
-           "CACHE_DIR",
+           "track_forward", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -1152,6 +1151,15 @@ def runs_in_order(t, counts, rows, n_rows, has_a, last_a, has_b, last_b):  # pra
 
 
 @_jit
+def _room(hi, cap, rows, counts):  # pragma: no cover - compiled
+    """Whether every run ``i`` (``counts[i]`` samples) fits after row ``rows[i]``'s end in a capacity ``cap``."""
+    for i in range(counts.shape[0]):
+        if hi[rows[i]] + counts[i] > cap:
+            return False
+    return True
+
+
+@_jit
 def append_runs(t_buf, v_buf, ok_buf, hi, last, has, rows, counts, t, values, valid, use_valid
                 ):  # pragma: no cover - compiled
     """Write run ``i`` (``counts[i]`` samples of ``t``, ``values``, ``valid``) after row ``rows[i]``'s end.
@@ -1162,11 +1170,9 @@ def append_runs(t_buf, v_buf, ok_buf, hi, last, has, rows, counts, t, values, va
     False, having written nothing, when a run does not fit in its row's
     remaining capacity (the caller makes room and writes it itself).
     """
-    cap = t_buf.shape[1]
+    if not _room(hi, t_buf.shape[1], rows, counts):
+        return False
     n_ch = v_buf.shape[0]
-    for i in range(counts.shape[0]):
-        if hi[rows[i]] + counts[i] > cap:
-            return False
     pos = 0
     for i in range(counts.shape[0]):
         r = rows[i]
@@ -1205,16 +1211,8 @@ def _left_of(t, a, b, value):  # pragma: no cover - compiled
 
 
 @_jit
-def _room(hi, cap, rows, counts):  # pragma: no cover - compiled
-    """Whether every run ``i`` (``counts[i]`` samples) fits after row ``rows[i]``'s end in a capacity ``cap``."""
-    for i in range(counts.shape[0]):
-        if hi[rows[i]] + counts[i] > cap:
-            return False
-    return True
-
-
-@_jit
 def _add_counts(added, rows, counts):  # pragma: no cover - compiled
+    """Count run ``i``'s ``counts[i]`` samples in ``added[rows[i]]`` (a row buffer's appended samples)."""
     for i in range(counts.shape[0]):
         added[rows[i]] += counts[i]
 
