@@ -56,6 +56,26 @@ def _chest_frames(t_ns: int, seq: int):
     return msg
 
 
+def _chest_node(ros_context, **params):
+    """A contact node of the NAO's chest alone, called directly (no executor), with ``params`` (dotted names
+    spelt with ``__``: ``view__rate_hz``)."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.nodes.contact_node import ContactNode
+
+    return ContactNode(context=ros_context, parameter_overrides=[
+        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]),
+        *(Parameter(k.replace("__", "."), value=v) for k, v in params.items())])
+
+
+def _feed(node, n: int, t_ns: int, seq: int) -> tuple[int, int]:
+    """``n`` chest messages 10 ms apart into the node's frames callback; the next stamp and batch number."""
+    for _ in range(n):
+        node._on_frames(_chest_frames(t_ns, seq))
+        t_ns, seq = t_ns + 10_000_000, seq + 1
+    return t_ns, seq
+
+
 @pytest.fixture
 def graph(ros_context):
     import rclpy
@@ -369,12 +389,7 @@ def test_unchanged_parts_are_sent_again_once_per_refresh(ros_context):
 
 def test_a_flood_of_frames_does_not_hold_off_the_display(ros_context):
     """The frames callback closes a display period when one is due: no executor spins the timer here."""
-    from rclpy.parameter import Parameter
-
-    from tactile_descriptors_ros.nodes.contact_node import ContactNode
-
-    node = ContactNode(context=ros_context, parameter_overrides=[
-        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=20.0)])
+    node = _chest_node(ros_context, view__rate_hz=20.0)
     try:
         t, seq, deadline = 5_000_000_000, 0, time.monotonic() + 30.0
         while node.display_ticks < 3 and time.monotonic() < deadline:
@@ -396,19 +411,11 @@ def test_a_contact_is_worked_out_for_its_subscribers(ros_context, lazy):
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
 
-    from tactile_descriptors_ros.nodes.contact_node import ContactNode
-
-    node = ContactNode(context=ros_context, parameter_overrides=[
-        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=0.0),
-        Parameter("contact.lazy", value=lazy)])
+    node = _chest_node(ros_context, view__rate_hz=0.0, contact__lazy=lazy)
     io = rclpy.create_node("contact_lazy_io", context=ros_context)
     try:
-        t, seq = 5_000_000_000, 0
-        for _ in range(5):
-            node._on_frames(_chest_frames(t, seq))
-            t, seq = t + 10_000_000, seq + 1
+        t, seq = _feed(node, 5, 5_000_000_000, 0)
         assert (node.contacts_published, node.contacts_unsubscribed) == ((0, 5) if lazy else (5, 0))
         assert node._status().values["contacts_unsubscribed"] == node.contacts_unsubscribed
         io.create_subscription(WrenchStamped, "tactile/chest/wrench", lambda _msg: None, 10)
@@ -419,9 +426,7 @@ def test_a_contact_is_worked_out_for_its_subscribers(ros_context, lazy):
             assert spin_until(ex, lambda: pub.get_subscription_count() >= 1, timeout_s=30.0)
         finally:
             ex.shutdown()
-        for _ in range(5):
-            node._on_frames(_chest_frames(t, seq))
-            t, seq = t + 10_000_000, seq + 1
+        _feed(node, 5, t, seq)
         assert (node.contacts_published, node.contacts_unsubscribed) == ((5, 5) if lazy else (10, 0))
         assert node.parts["chest"].messages == node.contacts_published
     finally:
@@ -432,14 +437,11 @@ def test_a_contact_is_worked_out_for_its_subscribers(ros_context, lazy):
 def test_contact_lazy_is_set_while_the_node_runs(ros_context):
     from rclpy.parameter import Parameter
 
-    from tactile_descriptors_ros.nodes.contact_node import ContactNode
-
-    node = ContactNode(context=ros_context, parameter_overrides=[
-        Parameter("robot", value="nao"), Parameter("body_parts", value=["chest"]), Parameter("view.rate_hz", value=0.0)])
+    node = _chest_node(ros_context, view__rate_hz=0.0)
     try:
         assert node.lazy is True
         assert node.set_parameters([Parameter("contact.lazy", value=False)])[0].successful
-        node._on_frames(_chest_frames(5_000_000_000, 0))
+        _feed(node, 1, 5_000_000_000, 0)
         assert (node.lazy, node.contacts_published, node.contacts_unsubscribed) == (False, 1, 0)
     finally:
         node.destroy_node()
