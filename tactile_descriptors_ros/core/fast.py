@@ -379,6 +379,8 @@ def warm_up() -> dict:
     kernel.skin_part_arrays(one_u32, one_u32, one_f64, np.zeros(1, dtype=np.int16), np.zeros(1, dtype=np.int16),
                             np.zeros(1, dtype=np.int16), t, np.zeros(3, dtype=np.uint16), t, 0, 1.0, -32768, 65535,
                             np.zeros(1, dtype=np.uint16), one_f64[:1].copy(), np.zeros(1, dtype=np.int64))
+    # a body part's message read from its serialised bytes (codecs.cdr: a C-contiguous uint8 copy)
+    kernel.skin_part_cdr(np.zeros(16, dtype=np.uint8))
     # its runs checked against the served cells (streams.skin_parts.RunChecker)
     kernel.check_runs(t, one_u32, one_u32, t, t, 0, np.zeros(1, dtype=bool), t.copy(), np.zeros(1, dtype=bool),
                       np.zeros(7, dtype=np.int64))

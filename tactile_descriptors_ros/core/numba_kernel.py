@@ -49,7 +49,7 @@ import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
            "runs_in_order", "append_runs", "add_part_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows",
-           "track_forward", "CACHE_DIR",
+           "track_forward", "skin_part_cdr", "SKIN_PART_CDR_PLAN", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -961,6 +961,110 @@ def skin_part_arrays(a_count, f_count, tare, ax, ay, az, a_off, force, f_off, st
                     extra[e, k] = np.nan
             k += 1
     return ok, a_cnt, f_cnt, acc, vib_ok, t_a, forces, f_ok, force_n, t_f, extra
+
+
+# ------------------------------------------------------------------ a body part's message, read from its CDR bytes
+#: Where a ``SkinPartFrames``' fields lie in its CDR payload, after the header's stamp, in order: a sequence's
+#: element size in bytes (1: a string), or -8 for a float64 field (see :func:`skin_part_cdr`).
+SKIN_PART_CDR_PLAN = (1, 1, 4, 4, 4, 4, 8, 8, 4, 2, 2, 2, 8, -8, 2, 8, -8, 2, -8)
+
+
+@_jit
+def _cdr_align(pos, size):  # pragma: no cover - compiled
+    """``pos`` moved up to the next multiple of ``size`` counted from the payload (after the 4-byte header)."""
+    r = (pos - 4) % size
+    return pos if r == 0 else pos + size - r
+
+
+@_jit
+def _cdr_u32(buf, pos):  # pragma: no cover - compiled
+    """The little-endian uint32 at ``pos``."""
+    return (np.int64(buf[pos]) | (np.int64(buf[pos + 1]) << 8) | (np.int64(buf[pos + 2]) << 16)
+            | (np.int64(buf[pos + 3]) << 24))
+
+
+@_jit
+def skin_part_cdr(buf):  # pragma: no cover - compiled
+    """A ``SkinPartFrames`` read from its CDR bytes: where each field lies, and its arrays as views of ``buf``.
+
+    ``buf`` (uint8) is the serialised message as rmw hands it: a 4-byte encapsulation header, then the
+    fields in order, each aligned to its size counted from the end of the header, a sequence (or string)
+    as its uint32 length then its elements (aligned only when there are any), a string's length counting
+    its closing NUL.  :data:`SKIN_PART_CDR_PLAN` lists the fields after the stamp.  Only little-endian
+    plain CDR (header ``00 01``, what Fast DDS writes) is read.  Every length is checked against the
+    buffer's size before it is used, so bytes of any kind never read outside it.
+
+    Returns ``ok`` (False: not little-endian CDR, or a length past the end), the stamp's ``sec`` and
+    ``nanosec``, each field's byte offset and length (``starts``, ``counts``: elements, a string's
+    bytes with its NUL), then the 14 arrays as views of ``buf`` (empty where not ``ok``) and the three
+    float64 fields, in the message's order.  The views are aligned where the payload is aligned to 8
+    bytes in memory.
+    """
+    n_buf = buf.shape[0]
+    n_plan = len(SKIN_PART_CDR_PLAN)
+    starts = np.zeros(n_plan, dtype=np.int64)
+    counts = np.zeros(n_plan, dtype=np.int64)
+    scalars = np.zeros(3)
+    ok = n_buf >= 12 and buf[0] == 0 and buf[1] == 1
+    sec = np.int64(0)
+    nanosec = np.int64(0)
+    if ok:
+        sec = _cdr_u32(buf, 4)
+        if sec >= 2**31:
+            sec -= 2**32
+        nanosec = _cdr_u32(buf, 8)
+    pos = 12
+    k = 0
+    for i in range(n_plan):
+        if not ok:
+            break
+        size = SKIN_PART_CDR_PLAN[i]
+        if size < 0:
+            pos = _cdr_align(pos, 8)
+            if pos + 8 > n_buf:
+                ok = False
+                break
+            starts[i] = pos
+            counts[i] = 1
+            scalars[k] = buf[pos:pos + 8].view(np.float64)[0]
+            k += 1
+            pos += 8
+            continue
+        pos = _cdr_align(pos, 4)
+        if pos + 4 > n_buf:
+            ok = False
+            break
+        n = _cdr_u32(buf, pos)
+        pos += 4
+        if n:
+            pos = _cdr_align(pos, size)
+        if pos + n * size > n_buf:
+            ok = False
+            break
+        starts[i] = pos
+        counts[i] = n
+        pos += n * size
+    if not ok:
+        starts[:] = 0
+        counts[:] = 0
+    return (ok, sec, nanosec, starts, counts,
+            buf[starts[2]:starts[2] + 4 * counts[2]].view(np.uint32),
+            buf[starts[3]:starts[3] + 4 * counts[3]].view(np.uint32),
+            buf[starts[4]:starts[4] + 4 * counts[4]].view(np.uint32),
+            buf[starts[5]:starts[5] + 4 * counts[5]].view(np.uint32),
+            buf[starts[6]:starts[6] + 8 * counts[6]].view(np.float64),
+            buf[starts[7]:starts[7] + 8 * counts[7]].view(np.float64),
+            buf[starts[8]:starts[8] + 4 * counts[8]].view(np.uint32),
+            buf[starts[9]:starts[9] + 2 * counts[9]].view(np.int16),
+            buf[starts[10]:starts[10] + 2 * counts[10]].view(np.int16),
+            buf[starts[11]:starts[11] + 2 * counts[11]].view(np.int16),
+            buf[starts[12]:starts[12] + 8 * counts[12]].view(np.int64),
+            scalars[0],
+            buf[starts[14]:starts[14] + 2 * counts[14]].view(np.uint16),
+            buf[starts[15]:starts[15] + 8 * counts[15]].view(np.int64),
+            scalars[1],
+            buf[starts[17]:starts[17] + 2 * counts[17]].view(np.uint16),
+            scalars[2])
 
 
 @_jit

@@ -40,6 +40,7 @@ __all__ = [
     "default_executor",
     "events_resume_coroutines",
     "take_waiting",
+    "take_frames",
     "keep_freed_memory",
     "StopsQuietly",
     "quiet_after_shutdown",
@@ -126,6 +127,30 @@ def take_waiting(subs: Sequence[Any], handlers: dict[Any, Callable], budget: int
         if not took:
             break
     return out
+
+
+def take_frames(first: object, subs: Sequence[Any], handlers: dict[Any, Callable], by_type: dict[type, Callable],
+                budget: int, on_unreadable: Callable[[Exception], None]) -> tuple[list[tuple[object, Callable]], int]:
+    """The frames callback's message ``first`` and those waiting on ``subs`` (:func:`take_waiting`), each with its
+    handler, and how many were taken.
+
+    A message taken serialised (``bytes``, from a ``raw`` subscription: the frames of skin cells) is read
+    first (:func:`~.conversions.skin_part_from_serialized`); bytes that cannot be read go to
+    ``on_unreadable`` with rclpy's error and are left out.  ``first``'s handler is its type's in ``by_type``.
+    """
+    from .conversions import skin_part_from_serialized
+
+    taken = [(first, None)] + take_waiting(subs, handlers, budget)
+    out: list[tuple[object, Callable]] = []
+    for msg, handler in taken:
+        if isinstance(msg, bytes):
+            try:
+                msg = skin_part_from_serialized(msg)
+            except Exception as exc:  # noqa: BLE001 - rclpy's error type for bytes it cannot read is not public
+                on_unreadable(exc)
+                continue
+        out.append((msg, handler or by_type[type(msg)]))
+    return out, len(taken)
 
 
 @dataclass

@@ -41,6 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 
+from ..codecs.cdr import SkinPartFramesCdr
+from ..codecs.cdr import load_compiled as load_cdr
 from ..core.colormap import force_colours
 from ..core.contact import ContactWindow, load_compiled, reduce_chunk, reduce_skin_runs
 from ..core.display import PartDisplay, PredictionHistory
@@ -58,7 +60,7 @@ from ..topics import (
     PREDICTION_TOPIC,
     WRENCH_TOPIC,
 )
-from .common import Diagnostics, Status, StopsQuietly, host_age_ms, run_node, steady_clock, take_waiting
+from .common import Diagnostics, Status, StopsQuietly, host_age_ms, run_node, steady_clock, take_frames
 from .contact_msgs import MarkerStyle, PartMarkers, contact_to_msg, image_to_msg, wrench_to_msg
 from .conversions import biotac_msg_to_chunk, message_kind, stamp_to_ns
 from .parameters import NodeParameters
@@ -132,6 +134,8 @@ class ContactNode(StopsQuietly, Node):
         self.images_on = params["view.images"]
         topic_fmt = params["frames_topic"]
         self.drain_max = params["frames.drain_max"]
+        # skin cells' frames taken serialised and read in one compiled pass (codecs/cdr.py)
+        self.frames_serialized = params["frames.serialized"] and load_cdr()
         params.on_set("threshold", lambda values, _names: lambda: self._set_threshold(
             values["contact.force_threshold_n"]))
         params.on_set("floor", lambda values, _names: lambda: self._set_floor(values["contact.floor_n"]))
@@ -173,10 +177,12 @@ class ContactNode(StopsQuietly, Node):
                 ContactWindow(ids, len(ct.deformation.channels)))
             mtype, handler = (BioTacFrameBatch, self._on_biotac) if kind == "biotac" else \
                 (SkinPartFrames, self._on_skin_part)
-            sub = self.create_subscription(mtype, topic_fmt.format(body_part=part.name), self._on_frames, qos_frames)
+            sub = self.create_subscription(mtype, topic_fmt.format(body_part=part.name), self._on_frames, qos_frames,
+                                           raw=self.frames_serialized and kind != "biotac")
             self.subs.append(sub)
             self._handlers[sub] = handler
-        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
+        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part,
+                         SkinPartFramesCdr: self._on_skin_part}
         if any(p.kind == "skin" for p in self.parts.values()):
             load_compiled()  # the sums of a body part's message, before its first message
         self._sensor_cell = {(p.name, c.name): c.id for p in self.robot.body_parts for c in p.cells}
@@ -238,10 +244,14 @@ class ContactNode(StopsQuietly, Node):
             self._tick_if_due()
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
-        out = [(first, self._by_type[type(first)])]
-        out += take_waiting(self.subs, self._handlers, self.drain_max)
-        self.frames_taken += len(out)
+        out, taken = take_frames(first, self.subs, self._handlers, self._by_type, self.drain_max, self._unreadable)
+        self.frames_taken += taken
         return out
+
+    def _unreadable(self, exc: Exception) -> None:
+        """Serialised frames that neither the compiled pass nor rclpy could read: counted, dropped."""
+        self.faults["malformed"] += 1
+        self.get_logger().warning(f"unreadable SkinPartFrames bytes dropped: {exc}", throttle_duration_sec=5.0)
 
     def _on_biotac(self, msg, now_ns: int) -> None:
         p = self.parts.get(msg.body_part)
@@ -397,6 +407,7 @@ class ContactNode(StopsQuietly, Node):
                         "display_merges": self.display_merges,
                         "display_merge_cpu_ms": round(1e3 * self.display_merge_cpu_s, 3),
                         "frames_messages_taken": self.frames_taken,
+                        "frames_serialized": self.frames_serialized,
                         "contacts_not_host_time": self.contacts_not_host_time}
         for name, samples in (("contact_age", self._age_ms), ("display_tick", self._tick_ms)):
             if samples:

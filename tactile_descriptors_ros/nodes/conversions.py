@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..codecs.cdr import read_skin_part
 from ..core.aggregation import RobotDescriptor
 from ..core.robot import CellType
 from ..core.windowing import CellChunk, PartChunk, Window
@@ -41,6 +42,7 @@ __all__ = [
     "skin_msg_to_chunk",
     "skin_part_to_msg",
     "skin_part_from_msg",
+    "skin_part_from_serialized",
     "skin_part_msg_to_chunks",
     "skin_part_msg_to_part_chunk",
     "BIOTAC_EXTRA_CHANNELS",
@@ -411,6 +413,20 @@ def skin_part_from_msg(msg):
         proximity_per_count=float(msg.proximity_per_count),
         frame_id=str(msg.header.frame_id),
     )
+
+
+def skin_part_from_serialized(raw: bytes):
+    """A ``SkinPartFrames`` taken serialised, as a message: read in one compiled pass
+    (:func:`~..codecs.cdr.read_skin_part`, a :class:`~..codecs.cdr.SkinPartFramesCdr`), or deserialised by
+    rclpy where that pass does not serve (an rclpy message; rclpy's error for bytes it cannot read either)."""
+    msg = read_skin_part(raw)
+    if msg is None:
+        from rclpy.serialization import deserialize_message
+
+        from tactile_descriptors_msgs.msg import SkinPartFrames
+
+        msg = deserialize_message(raw, SkinPartFrames)
+    return msg
 
 
 def skin_part_msg_to_chunks(msg, extra_channels: Sequence[str] = ()) -> list[tuple[int, CellChunk]]:

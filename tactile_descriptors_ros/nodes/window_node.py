@@ -62,6 +62,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from rclpy.node import Node
 
+from ..codecs.cdr import SkinPartFramesCdr
+from ..codecs.cdr import load_compiled as load_cdr
 from ..codecs.sequence import SequenceEvent, SequenceTracker
 from ..core.aggregation import RobotDescriptor
 from ..core.ahead import DescribeAhead
@@ -83,7 +85,7 @@ from .common import (
     keep_freed_memory,
     run_node,
     steady_clock,
-    take_waiting,
+    take_frames,
 )
 from .conversions import (
     biotac_msg_to_chunk,
@@ -163,6 +165,8 @@ class WindowNode(StopsQuietly, Node):
         self._cells_by_name: dict[tuple[str, str], int] = {}
         self._extra: dict[str, tuple[str, ...]] = {}  # body part -> its cell type's extra channels
         self.subs = []
+        # skin cells' frames taken serialised and read in one compiled pass (codecs/cdr.py)
+        self.frames_serialized = params["frames.serialized"] and load_cdr()
         self._part_sub: dict[str, object] = {}  # body part -> its frames subscription
         self._handlers: dict[object, object] = {}
         for part in self.robot.body_parts:
@@ -178,11 +182,13 @@ class WindowNode(StopsQuietly, Node):
             else:
                 cb = self._on_skin_part
                 mtype = SkinPartFrames
-            sub = self.create_subscription(mtype, topic, self._on_frames, qos_frames)
+            sub = self.create_subscription(mtype, topic, self._on_frames, qos_frames,
+                                           raw=self.frames_serialized and kind != "biotac")
             self.subs.append(sub)
             self._part_sub[part.name] = sub
             self._handlers[sub] = cb
-        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part}
+        self._by_type = {BioTacFrameBatch: self._on_biotac, SkinPartFrames: self._on_skin_part,
+                         SkinPartFramesCdr: self._on_skin_part}
         self.frames_taken = 0
         self.batches = 0
         self.largest_batch = 0
@@ -342,12 +348,17 @@ class WindowNode(StopsQuietly, Node):
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
-        out = [(first, self._by_type[type(first)])]
-        out += take_waiting(self.subs, self._handlers, self.params["frames.drain_max"])
-        self.frames_taken += len(out)
+        out, taken = take_frames(first, self.subs, self._handlers, self._by_type, self.params["frames.drain_max"],
+                                 self._unreadable)
+        self.frames_taken += taken
         self.batches += 1
-        self.largest_batch = max(self.largest_batch, len(out))
+        self.largest_batch = max(self.largest_batch, taken)
         return out
+
+    def _unreadable(self, exc: Exception) -> None:
+        """Serialised frames that neither the compiled pass nor rclpy could read: counted, dropped."""
+        self.faults["malformed"] += 1
+        self.get_logger().warning(f"unreadable SkinPartFrames bytes dropped: {exc}", throttle_duration_sec=5.0)
 
     def _on_biotac(self, msg) -> list[tuple[int, CellChunk]]:
         part = msg.body_part
@@ -513,6 +524,7 @@ class WindowNode(StopsQuietly, Node):
                         "messages_received": self.frames_taken,
                         "frames_per_callback": self.frames_taken / self.batches if self.batches else 0.0,
                         "frames_messages_taken": self.frames_taken,
+                        "frames_serialized": self.frames_serialized,
                         "windower_buffer_mb": round(self.windower.buffer_bytes / 2**20, 3),
                         "largest_frames_batch": self.largest_batch,
                         "frames_not_host_time": self.frames_not_host_time,

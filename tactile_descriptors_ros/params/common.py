@@ -6,6 +6,7 @@ from ..errors import ConfigError
 from .schema import Param
 
 __all__ = [
+    "frames_serialized",
     "RELIABILITIES",
     "DURABILITIES",
     "HISTORIES",
@@ -99,3 +100,9 @@ def diagnostics_period() -> Param:
     """``diagnostics_period_s``: period of ``/diagnostics`` (wall time)."""
     return Param("diagnostics_period_s", "double", "period of the node's /diagnostics (wall time)", default=1.0,
                  unit="s", range=(0.01, 3600.0))
+
+
+def frames_serialized() -> Param:
+    """``frames.serialized``: take skin cells' frames serialised and read them in one compiled pass."""
+    return Param("frames.serialized", "bool", "take SkinPartFrames serialised and read them in one compiled pass "
+                 "(false: rclpy builds each message; lab/docs/performance.md#latency)", default=True)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..topics import FRAMES_TOPIC
-from .common import body_parts, diagnostics_period, qos, robot, topic_pattern
+from .common import body_parts, diagnostics_period, frames_serialized, qos, robot, topic_pattern
 from .schema import NodeSchema, Param, join
 
 __all__ = ["CONTACT_NODE"]
@@ -35,6 +35,7 @@ CONTACT_NODE = NodeSchema("contact_node", join(
     Param("view.markers", "bool", "publish tactile/<body part>/markers", default=True),
     Param("view.images", "bool", "publish tactile/<body part>/image", default=True),
     topic_pattern(FRAMES_TOPIC),
+    frames_serialized(),
     Param("frames.drain_max", "integer", "frames taken from the queues per callback besides its own (0 = one per "
           "callback)", default=100, range=(0, 1_000_000), unit="messages", tunable=True, apply="drain"),
     diagnostics_period(),

@@ -5,7 +5,16 @@ from __future__ import annotations
 from ..core.robot import CHANNEL_MODES, LAYOUT_MODES, WINDOW_MODES
 from ..core.windowing import CUT_AHEAD_S
 from ..topics import FRAMES_TOPIC
-from .common import body_parts, check_not_empty, diagnostics_period, frame_id, qos, robot, topic_pattern
+from .common import (
+    body_parts,
+    check_not_empty,
+    diagnostics_period,
+    frame_id,
+    frames_serialized,
+    qos,
+    robot,
+    topic_pattern,
+)
 from .schema import NodeSchema, Param, join
 
 __all__ = ["WINDOW_NODE"]
@@ -66,6 +75,7 @@ WINDOW_NODE = NodeSchema("window_node", join(
     Param("exploration_id_offset", "integer", "see exploration_id_stride (this node's index, below the stride)",
           default=0, range=(0, 999_999)),
     topic_pattern(FRAMES_TOPIC),
+    frames_serialized(),
     Param("frames.drain_max", "integer", "frames messages taken from the queues per callback besides its own, "
           "handed to the windower at once (0 = one per callback; lab/docs/performance.md#latency)", default=1000,
           range=(0, 1_000_000), unit="messages", tunable=True),

@@ -445,3 +445,31 @@ def test_contact_lazy_is_set_while_the_node_runs(ros_context):
         assert (node.lazy, node.contacts_published, node.contacts_unsubscribed) == (False, 1, 0)
     finally:
         node.destroy_node()
+
+
+def test_frames_read_from_their_bytes_give_the_contacts_rclpys_messages_give(ros_context):
+    """The same chest messages, handed to one node as the bytes a serialised subscription takes and to another as
+    rclpy's messages, give the same contacts and wrenches, field for field."""
+    from rclpy.serialization import serialize_message
+
+    from tactile_descriptors_ros.codecs import cdr
+
+    if not cdr.available():
+        pytest.skip("no compiled backend: the bytes are read by rclpy")
+    nodes = [_chest_node(ros_context, view__rate_hz=0.0, contact__lazy=False) for _ in range(2)]
+    got: list[list] = [[], []]
+    try:
+        for node, out in zip(nodes, got):
+            for kind in ("contact", "wrench"):
+                node.parts["chest"].pubs[kind].publish = out.append
+        for k in range(6):
+            msg = _chest_frames(5_000_000_000 + k * 10_000_000, k)
+            nodes[0]._on_frames(serialize_message(msg))
+            nodes[1]._on_frames(msg)
+        assert len(got[0]) == len(got[1]) == 12 and not +nodes[0].faults and not +nodes[1].faults
+        assert got[0][0].in_contact and got[0][0].force_n == pytest.approx(1.5, abs=0.01)
+        for a, b in zip(*got):
+            assert a == b  # rclpy messages compare field by field
+    finally:
+        for node in nodes:
+            node.destroy_node()

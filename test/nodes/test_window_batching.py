@@ -242,24 +242,15 @@ def test_part_message_with_inconsistent_lengths_is_rejected(field, value, match)
         skin_part_msg_to_part_chunk(msg)
 
 
-def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):
-    """A node behind its input takes every waiting frame in one callback; the windows are those of one-by-one."""
-    from rclpy.parameter import Parameter
-
+def _publish_left_hand(pub, t0: int, rounds: int = 24) -> int:
+    """``rounds`` 50 ms batches of every left-hand cell from ``t0``, each in two messages; how many."""
     from tactile_descriptors_ros.core.robot import load_robot
     from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
     from tactile_descriptors_ros.streams.frames import SkinFrame
     from tactile_descriptors_ros.streams.skin_parts import SkinRun, pack_skin_part
 
     part = load_robot("nao").body_part("left_hand")
-    common = left_hand_fixed_parameters()
-    nodes, io, pub, out, ex = window_nodes_side_by_side(
-        ros_context, common, {"batched": [], "single": [Parameter("frames.drain_max", value=0)]})
-    batched, single = nodes["batched"], nodes["single"]
-
     rng = np.random.default_rng(0)
-    # 1.2 s of 50 ms batches from the start of a window on the windows' grid: windows end at 0.5, 0.75, 1.0 s
-    rounds, t0 = 24, 5_000_000_000 - batched.windower.grid_margin_ns
     off_a = np.arange(50, dtype=np.int64) * 1_000_000
     off_f = np.arange(12, dtype=np.int64) * 4_000_000
     half = len(part.cells) // 2
@@ -272,7 +263,27 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
             runs.append(SkinRun(cell.id, frame, np.zeros(3)))
         for piece in (runs[:half], runs[half:]):  # a body part's cells in two messages per batch
             pub.publish(skin_part_to_msg(pack_skin_part("left_hand", piece, force_n_per_count=0.0024)))
-    n_msgs = rounds * 2
+    return 2 * rounds
+
+
+def _assert_same_descriptors(a_list, b_list, n_cells: int) -> None:
+    for a, b in zip(a_list, b_list, strict=True):
+        assert (a.window_start, a.window_end) == (b.window_start, b.window_end)
+        assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
+        assert list(a.cells_total) == [n_cells]
+
+
+def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descriptors(ros_context):
+    """A node behind its input takes every waiting frame in one callback; the windows are those of one-by-one."""
+    from rclpy.parameter import Parameter
+
+    common = left_hand_fixed_parameters()
+    nodes, io, pub, out, ex = window_nodes_side_by_side(
+        ros_context, common, {"batched": [], "single": [Parameter("frames.drain_max", value=0)]})
+    batched, single = nodes["batched"], nodes["single"]
+
+    # 1.2 s of 50 ms batches from the start of a window on the windows' grid: windows end at 0.5, 0.75, 1.0 s
+    n_msgs = _publish_left_hand(pub, 5_000_000_000 - batched.windower.grid_margin_ns)
     assert spin_until(ex, lambda: batched.frames_taken == n_msgs and single.frames_taken == n_msgs
                       and len(out["desc_batched"]) == len(out["desc_single"]) == 3, 20)
     assert batched.largest_batch > 1 and batched.batches < n_msgs  # it caught up in batches
@@ -282,11 +293,39 @@ def test_window_node_takes_waiting_frames_in_one_callback_with_the_same_descript
     # each rehearsed its describing path at its first frames (kernel ready), and published nothing for it
     assert batched.rehearsal_ms is not None and single.rehearsal_ms is not None
     assert batched.descriptors_published == single.descriptors_published == 3
-    for a, b in zip(out["desc_batched"], out["desc_single"]):
-        assert (a.window_start, a.window_end) == (b.window_start, b.window_end)
-        assert list(a.values) == list(b.values) and all(math.isfinite(v) for v in a.values)
-        assert list(a.cells_total) == [len(part.cells)]
+    _assert_same_descriptors(out["desc_batched"], out["desc_single"], len(batched.robot.body_part("left_hand").cells))
     for n in (batched, single, io):
+        n.destroy_node()
+
+
+def test_frames_read_from_their_bytes_give_the_descriptors_rclpys_messages_give(ros_context):
+    """A node that takes the frames serialised (the default) and one that lets rclpy build them
+    (``frames.serialized`` false) publish the same descriptors; bytes that are no SkinPartFrames are counted
+    as malformed by the first, which goes on."""
+    from rclpy.parameter import Parameter
+
+    from tactile_descriptors_ros.codecs import cdr
+
+    if not cdr.available():
+        pytest.skip("no compiled backend: both nodes let rclpy build the messages")
+    nodes, io, pub, out, ex = window_nodes_side_by_side(
+        ros_context, left_hand_fixed_parameters(),
+        {"bytes": [], "rclpy": [Parameter("frames.serialized", value=False)]})
+    by_bytes, by_rclpy = nodes["bytes"], nodes["rclpy"]
+    assert by_bytes.frames_serialized and not by_rclpy.frames_serialized
+    assert by_bytes.subs[0].raw and not by_rclpy.subs[0].raw
+    n_msgs = _publish_left_hand(pub, 5_000_000_000 - by_bytes.windower.grid_margin_ns)
+    assert spin_until(ex, lambda: by_bytes.frames_taken == by_rclpy.frames_taken == n_msgs
+                      and len(out["desc_bytes"]) == len(out["desc_rclpy"]) == 3, 20)
+    assert not +by_bytes.faults and not +by_rclpy.faults
+    assert by_bytes.windower.faults == by_rclpy.windower.faults
+    _assert_same_descriptors(out["desc_bytes"], out["desc_rclpy"], len(by_bytes.robot.body_part("left_hand").cells))
+    by_rclpy.destroy_node()  # rclpy's take would raise on the bytes below
+    assert spin_until(ex, lambda: pub.get_subscription_count() == 1, 10)
+    pub.publish(b"\x00\x01\x00\x00" + b"\xff" * 8)  # a length past the end: rclpy cannot read it either
+    assert spin_until(ex, lambda: by_bytes.faults["malformed"] == 1, 10)
+    assert by_bytes.frames_taken == n_msgs + 1
+    for n in (by_bytes, io):
         n.destroy_node()
 
 

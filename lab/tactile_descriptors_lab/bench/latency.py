@@ -277,13 +277,21 @@ def message_cost(*, robot: str = "nao", batch_s: float = 0.05, rounds: int = 40,
                     "(see window_cpu_us_per_message of the live run)"}
 
 
-def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_rounds: int, seed: int
-                   ) -> tuple[float, int, dict[str, int], tuple[int, int]]:
+#: How :func:`node_message_cost` and :func:`contact_message_cost` hand the node its messages: deserialised
+#: before the timing (the callback's own cost), the CDR bytes deserialised by rclpy inside it, or the bytes
+#: themselves (a serialised subscription's: the node reads them, ``frames.serialized``).
+TAKEN = ("message", "rclpy", "bytes")
+
+
+def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_rounds: int, seed: int,
+                   taken: str = "message") -> tuple[float, int, dict[str, int], tuple[int, int]]:
     """A node made by ``make_node(context)`` takes ``rounds`` batches of the probe's ``SkinPartFrames`` (one per
-    body part, deserialised from CDR as rclpy gives them, stamps ``batch_s`` apart, each cell's batch numbers in
-    order, every cell touching) through its ``_on_frames``, one message a call, in this process, without an
-    executor; the CPU of those after the first ``warm_rounds``, how many they were, the node's faults and its
-    ``contacts_published`` and ``contacts_unsubscribed`` (0 for a node without)."""
+    body part, stamps ``batch_s`` apart, each cell's batch numbers in order, every cell touching) through its
+    ``_on_frames``, one message a call, in this process, without an executor; the CPU of those after the first
+    ``warm_rounds``, how many they were, the node's faults and its ``contacts_published`` and
+    ``contacts_unsubscribed`` (0 for a node without).  ``taken`` (:data:`TAKEN`): the messages deserialised
+    from CDR as rclpy gives them before the timing, the CDR deserialised by rclpy in it, or the CDR bytes
+    handed to the callback."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # a node of its own: discovery stays on this machine
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     import rclpy
@@ -294,21 +302,25 @@ def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_roun
 
     if not 0 <= warm_rounds < rounds:
         raise ValueError(f"warm_rounds must be in [0, rounds), got {warm_rounds} of {rounds}")
+    if taken not in TAKEN:
+        raise ValueError(f"taken must be one of {TAKEN}, got {taken!r}")
     desc = load_robot(robot)
-    msgs = [deserialize_message(raw, SkinPartFrames)
-            for batch in _serialized_rounds(desc, batch_s, seed, rounds, 1_800_000_000_000_000_000, in_order=True)
+    msgs = [raw for batch in _serialized_rounds(desc, batch_s, seed, rounds, 1_800_000_000_000_000_000, in_order=True)
             for raw in batch]
+    if taken == "message":
+        msgs = [deserialize_message(raw, SkinPartFrames) for raw in msgs]
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
         node = make_node(context)
         try:
             n_warm = warm_rounds * len(desc.body_parts)
+            deserialize = taken == "rclpy"
             for msg in msgs[:n_warm]:
-                node._on_frames(msg)
+                node._on_frames(deserialize_message(msg, SkinPartFrames) if deserialize else msg)
             started = time.thread_time()
             for msg in msgs[n_warm:]:
-                node._on_frames(msg)
+                node._on_frames(deserialize_message(msg, SkinPartFrames) if deserialize else msg)
             cpu_s = time.thread_time() - started
             faults = {k: int(v) for k, v in node.faults.items()}
             contacts = (int(getattr(node, "contacts_published", 0)), int(getattr(node, "contacts_unsubscribed", 0)))
@@ -320,7 +332,7 @@ def _callback_cost(make_node, robot: str, batch_s: float, rounds: int, warm_roun
 
 
 def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s: float = 0.01, rounds: int = 1200,
-                      warm_rounds: int = 100, seed: int = 0) -> dict:
+                      warm_rounds: int = 100, seed: int = 0, taken: str = "message") -> dict:
     """CPU per message of the window node's own frames callback, called in this process without an executor.
 
     A :class:`~tactile_descriptors_ros.nodes.window_node.WindowNode` (``robot``,
@@ -329,8 +341,10 @@ def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s:
     them, stamps ``batch_s`` apart, each cell's batch numbers in order, every
     cell touching) through ``_on_frames``, one message and one poll a call:
     conversion, the runs' checks, the windower's intake and poll, the node's
-    bookkeeping; not rclpy's executor nor the deserialisation.  The first
-    ``warm_rounds`` are not timed.  ``faults`` are the node's counters after
+    bookkeeping; not rclpy's executor, nor the deserialisation unless
+    ``taken`` says (:data:`TAKEN`: ``rclpy`` times rclpy's deserialisation
+    with the callback, ``bytes`` hands the callback the CDR bytes, which the
+    node reads).  The first ``warm_rounds`` are not timed.  ``faults`` are the node's counters after
     the run (the probe loses nothing: every one is 0 unless something is
     wrong).  A thread's CPU time, so a shared machine slows it less than a
     wall clock.
@@ -342,13 +356,13 @@ def node_message_cost(*, robot: str = "nao", mode: str = "exploration", batch_s:
     cpu_s, timed, faults, _ = _callback_cost(
         lambda context: WindowNode(context=context, parameter_overrides=[
             Parameter("robot", value=robot), Parameter("window.mode", value=mode)]),
-        robot, batch_s, rounds, warm_rounds, seed)
-    return {"robot": robot, "mode": mode, "batch_s": batch_s, "messages_timed": timed,
+        robot, batch_s, rounds, warm_rounds, seed, taken)
+    return {"robot": robot, "mode": mode, "batch_s": batch_s, "taken": taken, "messages_timed": timed,
             "us_per_message": 1e6 * cpu_s / timed, "faults": faults}
 
 
 def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: int = 1200, warm_rounds: int = 100,
-                         seed: int = 0, compiled: bool = True, lazy: bool = False) -> dict:
+                         seed: int = 0, compiled: bool = True, lazy: bool = False, taken: str = "message") -> dict:
     """CPU per message of the contact node's own frames callback, called in this process without an executor.
 
     A :class:`~tactile_descriptors_ros.nodes.contact_node.ContactNode` of
@@ -356,8 +370,8 @@ def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: i
     them to the window node: each body part's message reduced, its contact
     located, its ``Contact`` and ``WrenchStamped`` built and published (no
     subscriber: ``contact.lazy`` is false unless ``lazy``), the display's
-    bookkeeping and its ticks at 10 Hz of wall time; not rclpy's executor nor
-    the deserialisation.  ``lazy`` True runs the node as shipped with nobody
+    bookkeeping and its ticks at 10 Hz of wall time; not rclpy's executor, nor
+    the deserialisation unless ``taken`` says (as there).  ``lazy`` True runs the node as shipped with nobody
     subscribed to its contacts: each is counted, not located nor published.
     ``compiled`` False sums the messages' runs with numpy
     (:data:`~tactile_descriptors_ros.core.contact.COMPILED_SUMS`) for a
@@ -376,10 +390,11 @@ def contact_message_cost(*, robot: str = "nao", batch_s: float = 0.01, rounds: i
         cpu_s, timed, faults, (contacts, unsubscribed) = _callback_cost(
             lambda context: ContactNode(context=context, parameter_overrides=[
                 Parameter("robot", value=robot), Parameter("contact.lazy", value=lazy)]),
-            robot, batch_s, rounds, warm_rounds, seed)
+            robot, batch_s, rounds, warm_rounds, seed, taken)
     finally:
         contact.COMPILED_SUMS = before
-    return {"robot": robot, "batch_s": batch_s, "compiled": compiled, "lazy": lazy, "messages_timed": timed,
+    return {"robot": robot, "batch_s": batch_s, "compiled": compiled, "lazy": lazy, "taken": taken,
+            "messages_timed": timed,
             "us_per_message": 1e6 * cpu_s / timed, "contacts_published": contacts,
             "contacts_unsubscribed": unsubscribed, "faults": faults}
 

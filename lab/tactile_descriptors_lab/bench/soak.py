@@ -46,7 +46,7 @@ import random
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -173,6 +173,8 @@ class SoakReport:
     cells: int = 0  # the robot's skin cells (and fingertips)
     #: (seconds from the start, status name, frames) each time a driver's ``bus_lost_frames`` grew
     loss_events: list[tuple[float, str, int]] = field(default_factory=list)
+    #: node name -> the parameters the soak set on top of the robot's (``run_soak``'s ``overrides``)
+    overrides: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def warmup_s(self) -> float:
@@ -314,7 +316,7 @@ class SoakReport:
                    if n.split(": ")[-1] == "windows" and "windower_buffer_mb" in v]
         cpu = self.cpu()
         return {"robot": self.robot, "seconds": self.seconds, "scene_s": self.scene_s, "cycle_s": self.cycle_s,
-                "warmup_s": self.warmup_s, "sample_s": self.sample_s,
+                "warmup_s": self.warmup_s, "sample_s": self.sample_s, "overrides": self.overrides,
                 "cpus": self.cpus, "nice": self.nice, "load_avg_start": list(self.load_avg_start),
                 "load_avg_end": list(self.load_avg_end), "nodes": nodes, "rss_per_minute_mb": self.rss_per_minute(),
                 "windower_buffer_mb": sum(buffers) if buffers else None, "scene_frames_per_s": self.scene_frames_per_s,
@@ -378,8 +380,12 @@ def scene_frames_per_s(scene: str | os.PathLike[str], first_s: float = 10.0) -> 
 
 
 def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
-             progress: Callable[[float, str], None] | None = None, verbose: bool = False) -> SoakReport:
+             progress: Callable[[float, str], None] | None = None, verbose: bool = False,
+             overrides: Mapping[str, Mapping[str, Any]] | None = None) -> SoakReport:
     """Run the robot's graph at full rate for ``seconds`` and sample it (see the module docstring).
+
+    ``overrides``: node name -> parameters set on top of the robot's (``tactile bench --soak-set
+    NODE.PARAM=VALUE``), e.g. to soak two settings of one parameter one after the other.
 
     Raises
     ------
@@ -402,9 +408,11 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
     scene, scene_s, cycle_s = soak_scene(seconds, rob.name, tmp.name)
     # device stamps (the simulator's sample times), as the demo: on a loaded machine the simulator can
     # fall behind real time, and clock stamps would then be re-anchored instead of measuring the graph
-    overrides = {name: {"sim.speed": 1.0, "stamp_source": "device"} for name, e in rob.nodes.items()
-                 if e.get("executable") in DRIVER_EXECUTABLES}
-    specs = build_graph(rob, sim_scene=scene, model_path=str(Path(tmp.name) / "model.json"), overrides=overrides)
+    settings = {name: {"sim.speed": 1.0, "stamp_source": "device"} for name, e in rob.nodes.items()
+                if e.get("executable") in DRIVER_EXECUTABLES}
+    for name, params in (overrides or {}).items():
+        settings.setdefault(name, {}).update(params)
+    specs = build_graph(rob, sim_scene=scene, model_path=str(Path(tmp.name) / "model.json"), overrides=settings)
     procs = GraphProcesses(specs, env=localhost_environment(), output=sys.stderr if verbose else None)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -490,7 +498,7 @@ def run_soak(seconds: float, robot: str = "nao", sample_s: float = 5.0,
                       exit_codes={r.spec.name: r.returncode for r in procs.nodes},
                       scene_frames_per_s=frames_per_s, driver_run_s=run_s,
                       frames_sent_in_run=sum(n for _, n in runs), cycle_s=cycle_s, cells=rob.n_cells,
-                      loss_events=loss_events)
+                      loss_events=loss_events, overrides={k: dict(v) for k, v in (overrides or {}).items()})
 
 
 def format_soak(report: SoakReport) -> str:

@@ -96,6 +96,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "over time, CPU, lost and late frames (docs/hardcases.md)")
     p.add_argument("--soak-robot", default="nao", help="robot whose graph --soak runs (default nao)")
     p.add_argument("--soak-sample-s", type=float, default=5.0, help="sampling period of --soak [s] (default 5)")
+    p.add_argument("--soak-set", action="append", metavar="NODE.PARAM=VALUE",
+                   help="a parameter of one of --soak's nodes, on top of the robot's (repeatable)")
     p.add_argument("--scale-graph", action="store_true",
                    help="instead of timing: run a synthetic skin of --cells cells through skin drivers and one "
                         "window node per body part, each its own process, and report CPU per process, lost "
@@ -241,13 +243,15 @@ def _seconds_bar(total_s: float, desc: str):
 
 def _soak(args: argparse.Namespace) -> int:
     from tactile_descriptors_lab.bench.soak import format_soak, run_soak
+    from tactile_descriptors_ros.tools.cmd_launch import parse_set
 
     if not args.soak > 0 or not args.soak_sample_s > 0:
         print("tactile bench: error: --soak and --soak-sample-s must be positive", file=sys.stderr)
         return 2
     bar, progress = _seconds_bar(args.soak, "soak")
     try:
-        report = run_soak(args.soak, robot=args.soak_robot, sample_s=args.soak_sample_s, progress=progress)
+        report = run_soak(args.soak, robot=args.soak_robot, sample_s=args.soak_sample_s, progress=progress,
+                          overrides=parse_set(args.soak_set))
     except (RuntimeError, ImportError) as exc:
         bar.close()
         print(f"tactile bench: error: soak failed: {exc}", file=sys.stderr)

@@ -129,6 +129,21 @@ def test_node_message_cost_times_the_window_nodes_own_callback(mode):
 
 
 @pytest.mark.ros
+def test_node_message_cost_hands_over_bytes_or_rclpys_messages():
+    """``taken``: the CDR deserialised by rclpy inside the timing, or the bytes read by the node; either way
+    every message is taken without a fault."""
+    from tactile_descriptors_lab.bench.latency import contact_message_cost, node_message_cost
+
+    for taken in ("rclpy", "bytes"):
+        for res in (node_message_cost(rounds=30, warm_rounds=10, taken=taken),
+                    contact_message_cost(rounds=30, warm_rounds=10, taken=taken)):
+            assert res["taken"] == taken and res["messages_timed"] == 20 * 7 and res["us_per_message"] > 0
+            assert not any(res["faults"].values()), res["faults"]
+    with pytest.raises(ValueError, match="taken"):
+        node_message_cost(rounds=30, warm_rounds=10, taken="serialised")
+
+
+@pytest.mark.ros
 def test_contact_message_cost_times_the_contact_nodes_own_callback():
     from tactile_descriptors_lab.bench.latency import contact_message_cost
     from tactile_descriptors_ros.core import contact

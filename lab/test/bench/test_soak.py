@@ -65,9 +65,14 @@ def test_rss_growth_is_measured_after_one_cycle_of_the_scene_when_that_is_longer
 @pytest.mark.ros
 def test_bench_soak_command_reports_every_node(tmp_path):
     out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--soak", "8",
-                          "--soak-sample-s", "1", "--json"], capture_output=True, text=True, timeout=240)
+                          "--soak-sample-s", "1", "--soak-set", "contact_node.frames.serialized=false", "--json"],
+                         capture_output=True, text=True, timeout=240)
     assert out.returncode == 0, out.stderr[-2000:]
     d = json.loads(out.stdout)
+    # the report says what was set for the soak; the node, once it reported, took it
+    assert d["overrides"] == {"contact_node": {"frames.serialized": False}}
+    if "contact_node: contact" in d["diagnostics"]:
+        assert d["diagnostics"]["contact_node: contact"]["frames_serialized"] == "False"
     # tf_publisher is left out where its tf2_msgs is not installed (not on PyPI), and the soak says so
     has_tf = importlib.util.find_spec("tf2_msgs") is not None
     assert set(d["nodes"]) == {"skin_driver", "window_node", "contact_node", "classifier_node"} | (
@@ -103,6 +108,13 @@ def test_bench_soak_command_reports_every_node(tmp_path):
     else:
         assert c["recognition_path_ms_per_cell_second_without_simulator"] == \
             c["recognition_path_ms_per_cell_second"]
+
+
+def test_bench_soak_refuses_a_parameter_of_no_node_before_it_starts():
+    out = subprocess.run([sys.executable, "-m", "tactile_descriptors_ros.tools.cli", "bench", "--soak", "8",
+                          "--soak-set", "no_such_node.frames.serialized=false"], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 2 and "no node named 'no_such_node'" in out.stderr, out.stderr[-2000:]
 
 
 def test_frames_are_split_into_never_sent_lost_on_the_bus_and_sent_and_lost():
