@@ -29,8 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import fast
+from ..errors import SignalError
 
-__all__ = ["COMPILED_CDR", "Time", "Header", "SkinPartFramesCdr", "available", "load_compiled", "read_skin_part"]
+__all__ = ["COMPILED_CDR", "Time", "Header", "SkinPartFramesCdr", "available", "load_compiled", "read_skin_part",
+           "write_skin_part"]
 
 #: Read serialised ``SkinPartFrames`` with the compiled pass where the compiled backend is loaded (tests switch
 #: it off to compare).
@@ -89,11 +91,11 @@ def available() -> bool:
 
 
 def load_compiled() -> bool:
-    """Load the compiled pass now (from the cache ``make setup`` fills) rather than at the first message; whether
-    it serves.  A node that takes frames serialised calls it when it starts."""
+    """Load the compiled passes now (from the cache ``make setup`` fills) rather than at the first message;
+    whether they serve.  A node that takes or writes frames serialised calls it when it starts."""
     if not available():
         return False
-    fast.kernel_module().skin_part_cdr(_aligned(b""))
+    fast.warm_up_cdr(fast.kernel_module())
     return True
 
 
@@ -133,3 +135,40 @@ def read_skin_part(raw: bytes) -> SkinPartFramesCdr | None:
         _text(raw, int(starts[1]), int(counts[1])), cell_ids, sequence, accel_count, force_count, temperature_c,
         force_tare_counts, bad_frames, accel_x, accel_y, accel_z, accel_offset_ns, float(accel_mps2_per_count),
         force, force_offset_ns, float(force_n_per_count), proximity, float(proximity_per_count))
+
+
+def _utf8(text: str) -> np.ndarray:
+    """A string field's bytes as rclpy writes them: UTF-8, up to its first NUL (rclpy copies a C string)."""
+    return np.frombuffer(text.split("\0", 1)[0].encode("utf-8"), dtype=np.uint8)
+
+
+def write_skin_part(part, frame_id: str) -> bytes | None:
+    """The CDR bytes of the ``SkinPartFrames`` message of ``part`` (the arrays of
+    :class:`~..streams.skin_parts.SkinPartFrames`) with ``header.frame_id`` = ``frame_id``, in one compiled pass
+    (:func:`~..core.numba_kernel.skin_part_cdr_bytes`): the bytes rclpy serialises from the message
+    ``nodes.conversions.skin_part_to_msg`` builds of it, which a publisher sends as they are.  None where the
+    compiled pass does not serve (:func:`available`).
+
+    Raises
+    ------
+    SignalError
+        For a stamp before the epoch or past ``builtin_interfaces/Time``'s int32 seconds.
+    """
+    if not available():
+        return None
+    sec, nanosec = divmod(int(part.stamp_ns), 1_000_000_000)
+    if not 0 <= sec < 2**31:
+        raise SignalError(f"cannot represent {int(part.stamp_ns)} ns as builtin_interfaces/Time (int32 seconds "
+                          "from the epoch)")
+    i64 = np.int64
+    buf = fast.kernel_module().skin_part_cdr_bytes(
+        sec, nanosec, _utf8(frame_id), _utf8(part.body_part), np.ascontiguousarray(part.cell_ids, i64),
+        np.ascontiguousarray(part.sequence, i64), np.ascontiguousarray(part.accel_count, i64),
+        np.ascontiguousarray(part.force_count, i64), np.ascontiguousarray(part.temperature_c, np.float64),
+        np.ascontiguousarray(np.reshape(part.force_tare_counts, (-1, 3)), np.float64),
+        np.minimum(np.asarray(part.bad_frames, i64), 0xFFFFFFFF), np.ascontiguousarray(part.accel, np.int16),
+        np.ascontiguousarray(part.accel_offset_ns, i64), float(part.accel_mps2_per_count),
+        np.ascontiguousarray(part.force, np.uint16), np.ascontiguousarray(part.force_offset_ns, i64),
+        float(part.force_n_per_count), np.ascontiguousarray(part.proximity, np.uint16),
+        float(part.proximity_per_count))
+    return buf.tobytes()

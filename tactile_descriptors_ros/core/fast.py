@@ -379,8 +379,6 @@ def warm_up() -> dict:
     kernel.skin_part_arrays(one_u32, one_u32, one_f64, np.zeros(1, dtype=np.int16), np.zeros(1, dtype=np.int16),
                             np.zeros(1, dtype=np.int16), t, np.zeros(3, dtype=np.uint16), t, 0, 1.0, -32768, 65535,
                             np.zeros(1, dtype=np.uint16), one_f64[:1].copy(), np.zeros(1, dtype=np.int64))
-    # a body part's message read from its serialised bytes (codecs.cdr: a C-contiguous uint8 copy)
-    kernel.skin_part_cdr(np.zeros(16, dtype=np.uint8))
     # its runs checked against the served cells (streams.skin_parts.RunChecker)
     kernel.check_runs(t, one_u32, one_u32, t, t, 0, np.zeros(1, dtype=bool), t.copy(), np.zeros(1, dtype=bool),
                       np.zeros(7, dtype=np.int64))
@@ -390,6 +388,7 @@ def warm_up() -> dict:
                            np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
     warm_up_codecs(kernel)
     warm_up_contact(kernel)
+    warm_up_cdr(kernel)
     info["first_call_s"] = time.perf_counter() - t1
     info["cache_dir"] = kernel.CACHE_DIR
     return info
@@ -410,6 +409,19 @@ def warm_up_codecs(kernel: ModuleType) -> None:
                          np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
                          np.empty(2, dtype=np.int8), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
                          np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64))
+
+
+def warm_up_cdr(kernel: ModuleType) -> None:
+    """Load (or compile) the reading and the writing of a ``SkinPartFrames``' CDR bytes (``skin_part_cdr``,
+    ``skin_part_cdr_bytes``) in the variants :mod:`..codecs.cdr` calls: a C-contiguous writeable copy of the
+    bytes; text as read-only bytes, the arrays C-contiguous in the dtypes it converts them to.  :func:`warm_up`
+    calls it for ``make setup``; the nodes that read or write the bytes call it when they start."""
+    kernel.skin_part_cdr(np.zeros(16, dtype=np.uint8))
+    text = np.frombuffer(b"", dtype=np.uint8)
+    i64 = np.zeros(0, dtype=np.int64)
+    kernel.skin_part_cdr_bytes(0, 0, text, text, i64, i64, i64, i64, np.zeros(0), np.zeros((0, 3)), i64,
+                               np.zeros((3, 0), dtype=np.int16), i64, 0.0, np.zeros((3, 0), dtype=np.uint16), i64,
+                               0.0, np.zeros(0, dtype=np.uint16), 0.0)
 
 
 def warm_up_contact(kernel: ModuleType) -> None:

@@ -49,7 +49,7 @@ import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
            "runs_in_order", "append_runs", "add_part_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows",
-           "track_forward", "skin_part_cdr", "SKIN_PART_CDR_PLAN", "CACHE_DIR",
+           "track_forward", "skin_part_cdr", "skin_part_cdr_bytes", "SKIN_PART_CDR_PLAN", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -1065,6 +1065,100 @@ def skin_part_cdr(buf):  # pragma: no cover - compiled
             scalars[1],
             buf[starts[17]:starts[17] + 2 * counts[17]].view(np.uint16),
             scalars[2])
+
+
+@_jit
+def _cdr_seq_at(pos, n, size):  # pragma: no cover - compiled
+    """Where a sequence of ``n`` elements of ``size`` bytes written at ``pos`` puts its length, its first element
+    and its end (its elements aligned only when there are any, as Fast CDR writes them)."""
+    at = _cdr_align(pos, 4)
+    first = at + 4
+    if n:
+        first = _cdr_align(first, size)
+    return at, first, first + n * size
+
+
+@_jit
+def _cdr_put_u32(buf, pos, value):  # pragma: no cover - compiled
+    buf[pos] = value & 0xFF
+    buf[pos + 1] = (value >> 8) & 0xFF
+    buf[pos + 2] = (value >> 16) & 0xFF
+    buf[pos + 3] = (value >> 24) & 0xFF
+
+
+@_jit
+def skin_part_cdr_bytes(sec, nanosec, frame_id, body_part, cell_ids, sequence, accel_count, force_count,
+                        temperature_c, tare, bad_frames, accel, a_off, a_scale, force, f_off, f_scale, proximity,
+                        p_scale):  # pragma: no cover - compiled
+    """A ``SkinPartFrames``' CDR bytes, as rclpy serialises the message the skin driver builds of the same arrays.
+
+    The layout :func:`skin_part_cdr` reads (little-endian plain CDR, header ``00 01 00 00``; padding zero).
+    ``frame_id`` and ``body_part`` are UTF-8 bytes without NUL (uint8); ``cell_ids``, ``sequence``,
+    ``accel_count``, ``force_count`` and ``bad_frames`` (int64) are written as uint32 (their low 32 bits, as
+    numpy casts them), ``tare`` (n, 3) run-major, ``accel`` (3, n_a) int16 as its three axes, ``force``
+    (3, n_f) uint16 sample-major (``force[k * 3 + sensor]``).  Returns the bytes as a uint8 array whose
+    payload starts 8 bytes aligned in memory.
+    """
+    n = cell_ids.shape[0]
+    n_a = accel.shape[1]
+    n_f = force.shape[1]
+    seqs = (frame_id.shape[0] + 1, body_part.shape[0] + 1, n, n, n, n, n, 3 * n, n, n_a, n_a, n_a, n_a, -1, 3 * n_f,
+            n_f, -1, proximity.shape[0], -1)
+    pos = 12
+    for i in range(len(SKIN_PART_CDR_PLAN)):
+        size = SKIN_PART_CDR_PLAN[i]
+        if size < 0:
+            pos = _cdr_align(pos, 8) + 8
+        else:
+            pos = _cdr_seq_at(pos, seqs[i], size)[2]
+    mem = np.zeros(pos // 8 + 2, dtype=np.float64).view(np.uint8)  # zeros: the padding bytes
+    buf = mem[4:4 + pos]
+    buf[1] = 1
+    _cdr_put_u32(buf, 4, sec & 0xFFFFFFFF)
+    _cdr_put_u32(buf, 8, nanosec)
+    pos = 12
+    for i in range(len(SKIN_PART_CDR_PLAN)):
+        size = SKIN_PART_CDR_PLAN[i]
+        if size < 0:
+            pos = _cdr_align(pos, 8)
+            v = buf[pos:pos + 8].view(np.float64)
+            v[0] = a_scale if i == 13 else (f_scale if i == 16 else p_scale)
+            pos += 8
+            continue
+        at, first, end = _cdr_seq_at(pos, seqs[i], size)
+        _cdr_put_u32(buf, at, seqs[i])
+        if i == 0 or i == 1:
+            text = frame_id if i == 0 else body_part
+            for k in range(text.shape[0]):
+                buf[first + k] = text[k]
+        elif i == 2 or i == 3 or i == 4 or i == 5 or i == 8:
+            src = cell_ids if i == 2 else (sequence if i == 3 else (accel_count if i == 4 else
+                                                                     (force_count if i == 5 else bad_frames)))
+            out32 = buf[first:end].view(np.uint32)
+            for k in range(n):
+                out32[k] = np.uint32(src[k] & 0xFFFFFFFF)
+        elif i == 6:
+            buf[first:end].view(np.float64)[:] = temperature_c
+        elif i == 7:
+            out64 = buf[first:end].view(np.float64)
+            for r in range(n):
+                for c in range(3):
+                    out64[3 * r + c] = tare[r, c]
+        elif i == 9 or i == 10 or i == 11:
+            buf[first:end].view(np.int16)[:] = accel[i - 9]
+        elif i == 12:
+            buf[first:end].view(np.int64)[:] = a_off
+        elif i == 14:
+            out16 = buf[first:end].view(np.uint16)
+            for k in range(n_f):
+                for c in range(3):
+                    out16[3 * k + c] = force[c, k]
+        elif i == 15:
+            buf[first:end].view(np.int64)[:] = f_off
+        else:
+            buf[first:end].view(np.uint16)[:] = proximity
+        pos = end
+    return buf
 
 
 @_jit

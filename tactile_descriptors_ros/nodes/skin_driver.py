@@ -41,6 +41,8 @@ from collections.abc import Sequence
 import numpy as np
 from rclpy.lifecycle import TransitionCallbackReturn
 
+from ..codecs.cdr import load_compiled as load_cdr
+from ..codecs.cdr import write_skin_part
 from ..codecs.skin import ACCEL_MPS2_PER_COUNT, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
 from ..codecs.skin_can import SkinCanDecoder, load_compiled
 from ..codecs.skin_serial import SkinSerialDecoder
@@ -75,6 +77,8 @@ class SkinDriver(DriverBase):
         if params["can.bitrate"]:
             self.tp["can"]["bitrate"] = params["can.bitrate"]
         self.sim_wire = params["sim.wire"]
+        # each message's CDR bytes written in one compiled pass (codecs/cdr.py), published as they are
+        self.frames_serialized = params["frames.serialized"] and load_cdr()
         self.sim_loop = params["sim.loop"]
         self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
         if self.is_can:
@@ -189,8 +193,11 @@ class SkinDriver(DriverBase):
             self.stream.resume()
 
     def _publish(self, part: SkinPartFrames) -> None:
-        msg = skin_part_to_msg(part)
-        msg.header.frame_id = self.part_frames[part.body_part]  # the body part's link in the TF tree
+        frame_id = self.part_frames[part.body_part]  # the body part's link in the TF tree
+        msg = write_skin_part(part, frame_id) if self.frames_serialized else None
+        if msg is None:
+            msg = skin_part_to_msg(part)
+            msg.header.frame_id = frame_id
         self.part_publishers[part.body_part].publish(msg)
         self.part_messages[part.body_part] += 1
 
@@ -243,7 +250,7 @@ class SkinDriver(DriverBase):
 
     # ------------------------------------------------------------ diagnostics
     def _bus_status(self) -> Status:
-        values = self._transport_values({})
+        values = self._transport_values({"frames_serialized": self.frames_serialized})
         unknown: dict = {}
         if self.decoder is not None:
             if isinstance(self.decoder, SkinCanDecoder):

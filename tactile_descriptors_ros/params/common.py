@@ -102,7 +102,7 @@ def diagnostics_period() -> Param:
                  unit="s", range=(0.01, 3600.0))
 
 
-def frames_serialized() -> Param:
-    """``frames.serialized``: take skin cells' frames serialised and read them in one compiled pass."""
-    return Param("frames.serialized", "bool", "take SkinPartFrames serialised and read them in one compiled pass "
-                 "(false: rclpy builds each message; lab/docs/performance.md#latency)", default=True)
+def frames_serialized(what: str = "take SkinPartFrames serialised and read them") -> Param:
+    """``frames.serialized``: skin cells' frames handled as their CDR bytes, in one compiled pass (``what``)."""
+    return Param("frames.serialized", "bool", f"{what} in one compiled pass (false: rclpy builds each message; "
+                 "lab/docs/performance.md#latency)", default=True)

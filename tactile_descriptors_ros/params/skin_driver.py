@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from .common import frames_serialized
 from .driver import driver_params
 from .schema import NodeSchema, Param
 
@@ -26,6 +27,7 @@ SKIN_DRIVER = NodeSchema("skin_driver", driver_params(
               range=(0, 10_000_000), unit="bit/s"),
         Param("sim.wire", "string", "framing of the simulated bus: can (skin CAN layout) or serial (skin serial "
               "framing)", default="can", choices=("can", "serial")),
+        frames_serialized("write SkinPartFrames as their CDR bytes"),
         Param("sim.loop", "bool", "play the scene over and over, simulated once (CAN only): a large skin at full "
               "rate for as long as wanted", default=False),
     ),

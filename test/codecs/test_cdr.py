@@ -157,3 +157,62 @@ def test_without_the_compiled_backend_rclpy_reads_the_bytes(cdr, monkeypatch):
     assert not cdr.available() and cdr.read_skin_part(raw) is None
     back = skin_part_from_serialized(raw)
     assert isinstance(back, SkinPartFrames) and back.body_part == "chest"
+
+
+def _part(data):
+    """A body part's arrays (``streams.skin_parts.SkinPartFrames``) of any counts and values, and a frame id."""
+    from tactile_descriptors_ros.streams.skin_parts import SkinPartFrames
+
+    n = data.draw(st.integers(0, 5))
+    a_count = np.array(data.draw(st.lists(st.integers(0, 6), min_size=n, max_size=n)), dtype=np.int64)
+    f_count = np.array(data.draw(st.lists(st.integers(0, 4), min_size=n, max_size=n)), dtype=np.int64)
+    n_a, n_f = int(a_count.sum()), int(f_count.sum())
+    text = st.text(st.characters(blacklist_categories=("Cs",)), max_size=10)  # NUL included: rclpy cuts there
+    part = SkinPartFrames(
+        stamp_ns=data.draw(st.integers(0, 2**31 * 1_000_000_000 - 1)), body_part=data.draw(text),
+        cell_ids=_values(data, np.uint32, n).astype(np.int64), sequence=_values(data, np.uint32, n).astype(np.int64),
+        accel_count=a_count, force_count=f_count, temperature_c=_values(data, np.float64, n),
+        force_tare_counts=_values(data, np.float64, 3 * n).reshape(n, 3),
+        bad_frames=np.array(data.draw(st.lists(st.integers(0, 2**40), min_size=n, max_size=n)), dtype=np.int64),
+        accel=_values(data, np.int16, 3 * n_a).reshape(3, n_a), accel_offset_ns=_values(data, np.int64, n_a),
+        force=_values(data, np.uint16, 3 * n_f).reshape(3, n_f), force_offset_ns=_values(data, np.int64, n_f),
+        proximity=_values(data, np.uint16, n_f if data.draw(st.booleans()) else 0),
+        accel_mps2_per_count=data.draw(st.floats()), force_n_per_count=data.draw(st.floats()),
+        proximity_per_count=data.draw(st.floats()))
+    return part, data.draw(text)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_a_body_parts_bytes_written_at_once_are_the_message_rclpy_writes(cdr, data):
+    """The bytes the skin driver publishes (``write_skin_part``) carry the message ``skin_part_to_msg`` builds
+    of the same arrays as rclpy serialises it: rclpy reads them into the same fields (every bit; text cut at a
+    NUL as rclpy cuts it), and so does the compiled reader.  They are compared through their fields: Fast CDR
+    leaves padding bytes as it finds them, and its length counts the alignment of empty arrays and garbage
+    after the last field (8 bytes of a message with every array empty), which is why it is never shorter."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
+
+    part, frame_id = _part(data)
+    msg = skin_part_to_msg(part)
+    msg.header.frame_id = frame_id
+    theirs = serialize_message(msg)
+    want = deserialize_message(theirs, SkinPartFrames)
+    raw = cdr.write_skin_part(part, frame_id)
+    assert raw is not None and len(raw) <= len(theirs)
+    _assert_same(cdr.read_skin_part(serialize_message(deserialize_message(raw, SkinPartFrames))), want)
+    _assert_same(cdr.read_skin_part(raw), want)
+
+
+def test_a_stamp_builtin_interfaces_cannot_hold_is_refused(cdr):
+    from tactile_descriptors_ros.errors import SignalError
+    from tactile_descriptors_ros.streams.skin_parts import SkinPartFrames
+
+    empty = np.zeros(0, dtype=np.int64)
+    for stamp_ns in (-1, 2**31 * 1_000_000_000):
+        part = SkinPartFrames(stamp_ns, "chest", empty, empty, empty, empty, np.zeros(0), np.zeros((0, 3)), empty,
+                              np.zeros((3, 0), dtype=np.int16), empty, np.zeros((3, 0), dtype=np.uint16), empty)
+        with pytest.raises(SignalError, match="builtin_interfaces/Time"):
+            cdr.write_skin_part(part, "torso")
