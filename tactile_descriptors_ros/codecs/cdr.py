@@ -1,11 +1,14 @@
-"""A body part's ``SkinPartFrames`` read from its serialised (CDR) bytes in one compiled pass.
+"""A body part's ``SkinPartFrames`` read from and written as its serialised (CDR) bytes in one compiled pass.
 
 A subscription that takes its messages serialised (rclpy's ``raw=True``) is
 handed the bytes rmw received; otherwise rclpy first builds a Python message
 of them, an ``array.array`` per array field.  On the NAO graph's frames
 (seven body parts at 100 Hz, about 4 kB a message) a bare subscriber spent
 about 110 us of CPU per message it took deserialised and 45 us serialised
-(``lab/docs/performance.md``, "A body part's message read from its bytes").
+(``lab/docs/performance.md``, "A body part's message read and written as its
+bytes").  :func:`write_skin_part` is the skin driver's side: the bytes
+written from a batch's arrays in one compiled pass instead of an rclpy
+message that rclpy then serialises.
 :func:`read_skin_part` reads the bytes in one compiled pass
 (:func:`~..core.numba_kernel.skin_part_cdr`) into a
 :class:`SkinPartFramesCdr`: the message's fields under the message's names,

@@ -4,7 +4,9 @@ Subscribes to the frames of the body parts it serves (``BioTacFrameBatch`` or
 ``SkinPartFrames``) and, for every frames message (the drivers' batch: the
 frame rate, not the descriptor rate), publishes the body part's contact
 (:mod:`~..core.contact`) while either of its topics has a subscriber
-(``contact.lazy``; false: whether or not):
+(``contact.lazy``; false: whether or not).  A skin body part's frames are
+taken as their serialised bytes and read in one compiled pass
+(:mod:`~..codecs.cdr`, ``frames.serialized``), as the window node takes them:
 
 * ``tactile/<body part>/contact`` (``Contact``): in contact, total normal
   force, centre of pressure and normal in the body part's link frame, the

@@ -15,7 +15,10 @@ already waiting on all the node's frames subscriptions (at most
 polls for finished windows once.  rclpy's executor costs about 0.2 ms of CPU
 per callback here, more than the conversion and the windowing together, so a
 node that has fallen behind catches up instead of paying that per message
-(``lab/docs/performance.md, section Latency``).
+(``lab/docs/performance.md, section Latency``).  A skin body part's frames are
+taken as their serialised bytes and read in one compiled pass
+(:mod:`~tactile_descriptors_ros.codecs.cdr`, ``frames.serialized``): rclpy
+building each message took more CPU than the node's whole intake of it.
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
 its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a

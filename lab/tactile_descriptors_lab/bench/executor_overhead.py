@@ -13,6 +13,11 @@ taking one message per callback, as a node that keeps up does.  Correct
 first: every message must arrive once, in order, and equal to what was sent
 (its arrays' sums), else the run fails.  Runs alternate between the
 executors, ``rounds`` times each, so drifting load falls on both.
+
+``taken`` adds the way the nodes take skin frames (``frames.serialized``):
+``bytes`` subscribes to the serialised message and reads it in one compiled
+pass (:func:`~tactile_descriptors_ros.nodes.conversions.skin_part_from_serialized`),
+where ``message`` lets rclpy build it; each executor runs each way in turn.
 """
 
 from __future__ import annotations
@@ -27,13 +32,15 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 
-__all__ = ["measure", "format_executor_overhead", "subscribe"]
+__all__ = ["TAKEN", "measure", "format_executor_overhead", "subscribe"]
 
 #: Messages a second: the NAO graph's frames messages (7 body parts x 100 batches a second).
 RATE_HZ = 700.0
 #: Wait for the subscriber to match before publishing [s] (a bound, not a delay).
 MATCH_S = 60.0
 _TOPIC = "executor_overhead/frames"
+#: How the subscriber takes the messages: built by rclpy, or as their bytes read by the compiled pass.
+TAKEN = ("message", "bytes")
 
 
 def _qos():
@@ -52,20 +59,29 @@ def _checksum(msg) -> int:
                    for a in (msg.accel_x, msg.accel_y, msg.accel_z, msg.force)))
 
 
-def subscribe(kind: str, expected: int, checksums: Sequence[int]) -> dict:
-    """The subscriber process's work: spin in ``kind`` until ``expected`` messages came or 60 s of silence."""
+def subscribe(kind: str, expected: int, checksums: Sequence[int], taken: str = "message") -> dict:
+    """The subscriber process's work: spin in ``kind`` until ``expected`` messages came or 60 s of silence;
+    ``taken`` as :data:`TAKEN`."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.node import Node
 
     from tactile_descriptors_msgs.msg import SkinPartFrames
+    from tactile_descriptors_ros.codecs.cdr import load_compiled
     from tactile_descriptors_ros.nodes.common import spin
+    from tactile_descriptors_ros.nodes.conversions import skin_part_from_serialized
 
     rclpy.init()
     node = Node("executor_overhead_subscriber")
     state = {"n": 0, "in_order": True, "equal": True, "first": None, "last": None}
 
+    serialized = taken == "bytes"
+    if serialized and not load_compiled():
+        raise RuntimeError("frames taken as bytes need the compiled backend")
+
     def got(msg) -> None:
+        if serialized:
+            msg = skin_part_from_serialized(msg)
         k = int(msg.sequence[0])
         state["in_order"] &= k == state["n"]
         state["equal"] &= k < expected and _checksum(msg) == checksums[k % len(checksums)]
@@ -78,7 +94,7 @@ def subscribe(kind: str, expected: int, checksums: Sequence[int]) -> dict:
         if state["n"] >= expected:
             rclpy.shutdown()
 
-    node.create_subscription(SkinPartFrames, _TOPIC, got, _qos())
+    node.create_subscription(SkinPartFrames, _TOPIC, got, _qos(), raw=serialized)
     watchdog = threading.Timer(MATCH_S + expected / RATE_HZ + 60.0, rclpy.try_shutdown)
     watchdog.daemon = True
     watchdog.start()
@@ -90,7 +106,7 @@ def subscribe(kind: str, expected: int, checksums: Sequence[int]) -> dict:
     watchdog.cancel()
     (t0, c0), (t1, c1) = state["first"] or (0.0, 0.0), state["last"] or (0.0, 0.0)
     between = max(state["n"] - 1, 0)
-    return {"executor": kind, "received": state["n"], "in_order": state["in_order"], "equal": state["equal"],
+    return {"executor": kind, "taken": taken, "received": state["n"], "in_order": state["in_order"], "equal": state["equal"],
             "wall_s": t1 - t0, "cpu_s": c1 - c0,
             "cpu_us_per_message": 1e6 * (c1 - c0) / between if between else None}
 
@@ -106,7 +122,7 @@ def _messages(seed: int = 0) -> list:
     return [template[part][1] for template in frames.templates]
 
 
-def _one_run(kind: str, seconds: float, env: dict[str, str]) -> dict:
+def _one_run(kind: str, seconds: float, env: dict[str, str], taken: str = "message") -> dict:
     import rclpy
     from rclpy.node import Node
 
@@ -115,7 +131,7 @@ def _one_run(kind: str, seconds: float, env: dict[str, str]) -> dict:
     msgs = _messages()
     expected = int(round(seconds * RATE_HZ))
     base = [_checksum(msg) for msg in msgs]
-    args = json.dumps({"kind": kind, "expected": expected, "checksums": base})
+    args = json.dumps({"kind": kind, "expected": expected, "checksums": base, "taken": taken})
     proc = subprocess.Popen([sys.executable, "-m", __name__, args], env=env, stdout=subprocess.PIPE, text=True)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -156,8 +172,10 @@ def _one_run(kind: str, seconds: float, env: dict[str, str]) -> dict:
 
 
 def measure(seconds: float = 15.0, rounds: int = 2, kinds: Sequence[str] = ("single", "events"),
-            progress: Callable[[str], None] | None = None) -> dict:
-    """Alternate ``rounds`` runs of each executor in ``kinds``; the median CPU per message of each, and the ratio."""
+            progress: Callable[[str], None] | None = None, taken: Sequence[str] = ("message",)) -> dict:
+    """Alternate ``rounds`` runs of each executor in ``kinds``, each way in ``taken`` (:data:`TAKEN`); the
+    median CPU per message of each (keyed by the executor, with ``", bytes"`` for the bytes taken) and the
+    ratios: events over single, bytes over message per executor."""
     import statistics
 
     from tactile_descriptors_ros.launching.processes import localhost_environment
@@ -165,30 +183,44 @@ def measure(seconds: float = 15.0, rounds: int = 2, kinds: Sequence[str] = ("sin
     env = localhost_environment()
     env.setdefault("ROS_DOMAIN_ID", str(random.randint(1, 100)))
     os.environ.update({k: env[k] for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_DOMAIN_ID")})
+    if any(t not in TAKEN for t in taken):
+        raise ValueError(f"taken must be among {TAKEN}, got {list(taken)}")
     runs = []
     for r in range(rounds):
         for kind in kinds:
-            if progress:
-                progress(f"round {r + 1}, {kind}")
-            runs.append(_one_run(kind, seconds, env))
-    per = {k: statistics.median(run["cpu_us_per_message"] for run in runs if run["executor"] == k) for k in kinds}
+            for way in taken:
+                if progress:
+                    progress(f"round {r + 1}, {_key(kind, way)}")
+                runs.append(_one_run(kind, seconds, env, way))
+    per = {_key(k, t): statistics.median(run["cpu_us_per_message"] for run in runs
+                                         if (run["executor"], run["taken"]) == (k, t))
+           for k in kinds for t in taken}
     report = {"rate_hz": RATE_HZ, "seconds": seconds, "rounds": rounds, "runs": runs,
               "cpu_us_per_message": per, "load_average": os.getloadavg()}
     if "single" in per and "events" in per:
         report["events_over_single"] = per["events"] / per["single"]
+    if "bytes" in taken and "message" in taken:
+        report["bytes_over_message"] = {k: per[_key(k, "bytes")] / per[k] for k in kinds}
     return report
+
+
+def _key(kind: str, taken: str) -> str:
+    """The report's name of runs of executor ``kind`` taking messages ``taken``."""
+    return kind if taken == "message" else f"{kind}, {taken}"
 
 
 def format_executor_overhead(report: dict) -> str:
     lines = [f"executor overhead: one NAO body part's frames at {report['rate_hz']:.0f} messages/s, "
              f"{report['seconds']:g} s a run, {report['rounds']} round(s), load {report['load_average'][0]:.1f}"]
     for kind, us in report["cpu_us_per_message"].items():
-        lines.append(f"  {kind:<7} {us:7.0f} us of CPU per message (median of runs)")
+        lines.append(f"  {kind:<14} {us:7.0f} us of CPU per message (median of runs)")
     if "events_over_single" in report:
         lines.append(f"  events / single: {report['events_over_single']:.2f}")
+    for kind, ratio in report.get("bytes_over_message", {}).items():
+        lines.append(f"  {kind}: bytes / message: {ratio:.2f}")
     return "\n".join(lines)
 
 
 if __name__ == "__main__":
     spec = json.loads(sys.argv[1])
-    print(json.dumps(subscribe(spec["kind"], spec["expected"], spec["checksums"])), flush=True)
+    print(json.dumps(subscribe(spec["kind"], spec["expected"], spec["checksums"], spec["taken"])), flush=True)

@@ -110,6 +110,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instead of timing: the CPU a node pays per message taken in each executor it can spin in "
                         "(TACTILE_EXECUTOR single and events), one NAO body part's frames at 700 messages/s, "
                         "--rounds alternating runs of --seconds each (lab/docs/performance.md, section Latency)")
+    p.add_argument("--serialized", action="store_true",
+                   help="with --executor-overhead: also take the frames as their bytes and read them in one "
+                        "compiled pass, as the nodes do (frames.serialized)")
     p.add_argument("--read-cost", action="store_true",
                    help="instead of timing: the skin driver's read path in one process (decode, stamp, cut, build "
                         "the messages) on --read-cost-cells cells read every --read-period-s, CPU per read with "
@@ -357,14 +360,16 @@ def _executor_overhead(args: argparse.Namespace) -> int:
     if args.rounds < 1 or not args.seconds > 0:
         print("tactile bench: error: --rounds and --seconds must be positive", file=sys.stderr)
         return 2
-    bar = tqdm(total=2 * args.rounds, desc="executor overhead", unit="run", file=sys.stderr, leave=False)
+    taken = ("message", "bytes") if args.serialized else ("message",)
+    bar = tqdm(total=2 * len(taken) * args.rounds, desc="executor overhead", unit="run", file=sys.stderr,
+               leave=False)
 
     def progress(text: str) -> None:
         bar.set_postfix_str(text)
         bar.update(1)
 
     try:
-        report = measure(args.seconds, args.rounds, progress=progress)
+        report = measure(args.seconds, args.rounds, progress=progress, taken=taken)
     except RuntimeError as exc:
         bar.close()
         print(f"tactile bench: error: executor overhead failed: {exc}", file=sys.stderr)
