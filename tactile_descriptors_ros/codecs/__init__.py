@@ -7,7 +7,7 @@ biotac_spi
 bridge_serial
     Our USB-serial bridge framing that carries BioTac frames (CRC-32).
 cdr
-    A body part's ``SkinPartFrames`` read from its serialised (CDR) bytes in one compiled pass.
+    A body part's ``SkinPartFrames`` read from and written as its serialised (CDR) bytes, in one compiled pass.
 skin
     Skin-cell samples and their payload layout (shared by CAN and serial).
 skin_can

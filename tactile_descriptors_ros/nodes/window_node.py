@@ -18,7 +18,7 @@ node that has fallen behind catches up instead of paying that per message
 (``lab/docs/performance.md, section Latency``).  A skin body part's frames are
 taken as their serialised bytes and read in one compiled pass
 (:mod:`~tactile_descriptors_ros.codecs.cdr`, ``frames.serialized``): rclpy
-building each message took more CPU than the node's whole intake of it.
+building each message cost the node about a sixth of its CPU in the NAO graph.
 
 The node subscribes as soon as it starts.  The descriptor kernel loads from
 its on-disk cache (``make setup`` fills it) on a thread meanwhile, in about a
