@@ -130,13 +130,13 @@ def take_waiting(subs: Sequence[Any], handlers: dict[Any, Callable], budget: int
 
 
 def take_frames(first: object, subs: Sequence[Any], handlers: dict[Any, Callable], by_type: dict[type, Callable],
-                budget: int, on_unreadable: Callable[[Exception], None]) -> tuple[list[tuple[object, Callable]], int]:
+                budget: int, faults: collections.Counter, logger: Any) -> tuple[list[tuple[object, Callable]], int]:
     """The frames callback's message ``first`` and those waiting on ``subs`` (:func:`take_waiting`), each with its
     handler, and how many were taken.
 
     A message taken serialised (``bytes``, from a ``raw`` subscription: the frames of skin cells) is read
-    first (:func:`~.conversions.skin_part_from_serialized`); bytes that cannot be read go to
-    ``on_unreadable`` with rclpy's error and are left out.  ``first``'s handler is its type's in ``by_type``.
+    first (:func:`~.conversions.skin_part_from_serialized`); bytes that cannot be read are counted in
+    ``faults["malformed"]``, logged (throttled) and left out.  ``first``'s handler is its type's in ``by_type``.
     """
     from .conversions import skin_part_from_serialized
 
@@ -147,7 +147,8 @@ def take_frames(first: object, subs: Sequence[Any], handlers: dict[Any, Callable
             try:
                 msg = skin_part_from_serialized(msg)
             except Exception as exc:  # noqa: BLE001 - rclpy's error type for bytes it cannot read is not public
-                on_unreadable(exc)
+                faults["malformed"] += 1
+                logger.warning(f"unreadable SkinPartFrames bytes dropped: {exc}", throttle_duration_sec=5.0)
                 continue
         out.append((msg, handler or by_type[type(msg)]))
     return out, len(taken)

@@ -246,14 +246,10 @@ class ContactNode(StopsQuietly, Node):
             self._tick_if_due()
 
     def _drain(self, first) -> list[tuple[object, Callable]]:
-        out, taken = take_frames(first, self.subs, self._handlers, self._by_type, self.drain_max, self._unreadable)
+        out, taken = take_frames(first, self.subs, self._handlers, self._by_type, self.drain_max, self.faults,
+                                 self.get_logger())
         self.frames_taken += taken
         return out
-
-    def _unreadable(self, exc: Exception) -> None:
-        """Serialised frames that neither the compiled pass nor rclpy could read: counted, dropped."""
-        self.faults["malformed"] += 1
-        self.get_logger().warning(f"unreadable SkinPartFrames bytes dropped: {exc}", throttle_duration_sec=5.0)
 
     def _on_biotac(self, msg, now_ns: int) -> None:
         p = self.parts.get(msg.body_part)

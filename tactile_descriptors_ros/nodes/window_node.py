@@ -352,16 +352,11 @@ class WindowNode(StopsQuietly, Node):
     def _drain(self, first) -> list[tuple[object, Callable]]:
         """``first`` and the messages waiting on the frames subscriptions (at most ``frames.drain_max``)."""
         out, taken = take_frames(first, self.subs, self._handlers, self._by_type, self.params["frames.drain_max"],
-                                 self._unreadable)
+                                 self.faults, self.get_logger())
         self.frames_taken += taken
         self.batches += 1
         self.largest_batch = max(self.largest_batch, taken)
         return out
-
-    def _unreadable(self, exc: Exception) -> None:
-        """Serialised frames that neither the compiled pass nor rclpy could read: counted, dropped."""
-        self.faults["malformed"] += 1
-        self.get_logger().warning(f"unreadable SkinPartFrames bytes dropped: {exc}", throttle_duration_sec=5.0)
 
     def _on_biotac(self, msg) -> list[tuple[int, CellChunk]]:
         part = msg.body_part
