@@ -984,6 +984,17 @@ def _cdr_u32(buf, pos):  # pragma: no cover - compiled
 
 
 @_jit
+def _cdr_seq_at(pos, n, size):  # pragma: no cover - compiled
+    """Where a sequence of ``n`` elements of ``size`` bytes written at ``pos`` puts its length, its first element
+    and its end (its elements aligned only when there are any, as Fast CDR writes them)."""
+    at = _cdr_align(pos, 4)
+    first = at + 4
+    if n:
+        first = _cdr_align(first, size)
+    return at, first, first + n * size
+
+
+@_jit
 def skin_part_cdr(buf):  # pragma: no cover - compiled
     """A ``SkinPartFrames`` read from its CDR bytes: where each field lies, and its arrays as views of ``buf``.
 
@@ -1030,20 +1041,17 @@ def skin_part_cdr(buf):  # pragma: no cover - compiled
             k += 1
             pos += 8
             continue
-        pos = _cdr_align(pos, 4)
-        if pos + 4 > n_buf:
+        at = _cdr_align(pos, 4)
+        if at + 4 > n_buf:
             ok = False
             break
-        n = _cdr_u32(buf, pos)
-        pos += 4
-        if n:
-            pos = _cdr_align(pos, size)
-        if pos + n * size > n_buf:
+        n = _cdr_u32(buf, at)
+        _, first, pos = _cdr_seq_at(at, n, size)
+        if pos > n_buf:
             ok = False
             break
-        starts[i] = pos
+        starts[i] = first
         counts[i] = n
-        pos += n * size
     if not ok:
         starts[:] = 0
         counts[:] = 0
@@ -1065,17 +1073,6 @@ def skin_part_cdr(buf):  # pragma: no cover - compiled
             scalars[1],
             buf[starts[17]:starts[17] + 2 * counts[17]].view(np.uint16),
             scalars[2])
-
-
-@_jit
-def _cdr_seq_at(pos, n, size):  # pragma: no cover - compiled
-    """Where a sequence of ``n`` elements of ``size`` bytes written at ``pos`` puts its length, its first element
-    and its end (its elements aligned only when there are any, as Fast CDR writes them)."""
-    at = _cdr_align(pos, 4)
-    first = at + 4
-    if n:
-        first = _cdr_align(first, size)
-    return at, first, first + n * size
 
 
 @_jit
@@ -1104,28 +1101,30 @@ def skin_part_cdr_bytes(sec, nanosec, frame_id, body_part, cell_ids, sequence, a
     n_f = force.shape[1]
     seqs = (frame_id.shape[0] + 1, body_part.shape[0] + 1, n, n, n, n, n, 3 * n, n, n_a, n_a, n_a, n_a, -1, 3 * n_f,
             n_f, -1, proximity.shape[0], -1)
+    n_plan = len(SKIN_PART_CDR_PLAN)
+    ats = np.empty(n_plan, dtype=np.int64)  # where each field's length (a float64: the field) goes
+    firsts = np.empty(n_plan, dtype=np.int64)  # and its first element
     pos = 12
-    for i in range(len(SKIN_PART_CDR_PLAN)):
+    for i in range(n_plan):
         size = SKIN_PART_CDR_PLAN[i]
         if size < 0:
-            pos = _cdr_align(pos, 8) + 8
+            ats[i] = _cdr_align(pos, 8)
+            pos = ats[i] + 8
         else:
-            pos = _cdr_seq_at(pos, seqs[i], size)[2]
+            ats[i], firsts[i], pos = _cdr_seq_at(pos, seqs[i], size)
     mem = np.zeros(pos // 8 + 2, dtype=np.float64).view(np.uint8)  # zeros: the padding bytes
     buf = mem[4:4 + pos]
     buf[1] = 1
     _cdr_put_u32(buf, 4, sec & 0xFFFFFFFF)
     _cdr_put_u32(buf, 8, nanosec)
-    pos = 12
-    for i in range(len(SKIN_PART_CDR_PLAN)):
+    for i in range(n_plan):
         size = SKIN_PART_CDR_PLAN[i]
+        at = ats[i]
         if size < 0:
-            pos = _cdr_align(pos, 8)
-            v = buf[pos:pos + 8].view(np.float64)
-            v[0] = a_scale if i == 13 else (f_scale if i == 16 else p_scale)
-            pos += 8
+            buf[at:at + 8].view(np.float64)[0] = a_scale if i == 13 else (f_scale if i == 16 else p_scale)
             continue
-        at, first, end = _cdr_seq_at(pos, seqs[i], size)
+        first = firsts[i]
+        end = first + seqs[i] * size
         _cdr_put_u32(buf, at, seqs[i])
         if i == 0 or i == 1:
             text = frame_id if i == 0 else body_part
@@ -1157,7 +1156,6 @@ def skin_part_cdr_bytes(sec, nanosec, frame_id, body_part, cell_ids, sequence, a
             buf[first:end].view(np.int64)[:] = f_off
         else:
             buf[first:end].view(np.uint16)[:] = proximity
-        pos = end
     return buf
 
 
