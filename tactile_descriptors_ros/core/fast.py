@@ -387,6 +387,7 @@ def warm_up() -> dict:
                            np.zeros((1, 1), dtype=bool), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64),
                            np.zeros(1, dtype=bool), rows, counts, t, np.zeros((1, 1), dtype=dtype), flags, True)
     warm_up_codecs(kernel)
+    warm_up_stream(kernel)
     warm_up_contact(kernel)
     warm_up_cdr(kernel)
     info["first_call_s"] = time.perf_counter() - t1
@@ -409,6 +410,24 @@ def warm_up_codecs(kernel: ModuleType) -> None:
                          np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros(1, dtype=bool),
                          np.empty(2, dtype=np.int8), np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64),
                          np.empty(2, dtype=np.int64), np.empty(2, dtype=np.int64))
+
+
+def warm_up_stream(kernel: ModuleType) -> None:
+    """Load (or compile) a skin stream's stamping pass (``skin_stamp_add``) in the variant
+    :meth:`~tactile_descriptors_ros.streams.skin.SkinStream._add_compiled` calls: C-contiguous int64, float64 and
+    bool arrays.  :func:`warm_up` calls it for ``make setup``; a skin driver calls it
+    (``streams.skin.load_compiled``) before it opens its bus."""
+    i64, f64, b = np.zeros(1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=bool)
+    given_t = np.zeros(0, dtype=np.int64)  # clock stamps made in the pass; device stamps given are the same type
+    kernel.skin_stamp_add(i64, i64, i64, np.ones(1, dtype=np.int64), np.zeros((1, 3), dtype=np.int64), given_t,
+                          np.ones(4), np.zeros(4, dtype=np.int64), np.zeros(4, dtype=bool), np.zeros(4, dtype=np.int64),
+                          np.zeros(4, dtype=np.int64), np.zeros(4, dtype=bool), np.zeros(4, dtype=np.int64),
+                          np.zeros(4, dtype=bool), np.zeros(4, dtype=np.int64), np.zeros(4, dtype=np.int64),
+                          np.zeros(4, dtype=np.int64), np.zeros(4, dtype=np.int64), 0.0, 0, 0, 0, i64.copy(),
+                          i64.copy(), i64.copy(), f64, 0.0, f64.copy(), i64.copy(), b, i64.copy(), b.copy(),
+                          i64.copy(), b.copy(), np.zeros((1, 5), dtype=np.int64), np.zeros((1, 5, 3), dtype=np.int64),
+                          i64.copy(), i64.copy(), np.empty((3, 1), dtype=np.int64), np.empty((3, 1), dtype=np.int64),
+                          np.empty((3, 1, 3), dtype=np.int64), np.zeros(5, dtype=np.int64))
 
 
 def warm_up_cdr(kernel: ModuleType) -> None:

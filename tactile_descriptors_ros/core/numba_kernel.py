@@ -49,7 +49,7 @@ import numpy as np
 
 __all__ = ["quantities", "cell_bounds", "central_moments", "power_spectrum", "band_moments", "rocket_ppv",
            "runs_in_order", "append_runs", "add_part_runs", "explore_runs", "trim_rows", "cut_rows", "decode_can_rows",
-           "track_forward", "skin_part_cdr", "skin_part_cdr_bytes", "SKIN_PART_CDR_PLAN", "CACHE_DIR",
+           "track_forward", "skin_stamp_add", "skin_part_cdr", "skin_part_cdr_bytes", "SKIN_PART_CDR_PLAN", "CACHE_DIR",
            "PATH_INDEPENDENT_CACHE", "OK", "NOT_EXACT", "DEGENERATE",
            "UNSORTED", "TOO_WIDE", "CAN_OK", "CAN_REMOTE_OR_ERROR", "CAN_FOREIGN", "CAN_UNKNOWN_MODALITY",
            "CAN_BAD_LENGTH", "CAN_UNKNOWN_CELL", "CAN_BAD_PAYLOAD"]
@@ -1755,3 +1755,175 @@ def track_forward(slot, seq, t, period, modulus, live, low, high, t_high, deferr
         t_high[s] = ti
         unwrapped[i] = u
     return n_gaps, lost, left
+
+
+@_jit
+def _observe_key(k, dev_max, host_ns, offset, anchored, last_dev, high_since, high_min, last_excess, drift, jump_ns,
+             confirm_ns):  # pragma: no cover - compiled
+    """:meth:`~tactile_descriptors_ros.streams.clock.DeviceClock.observe` of one key on the clock's arrays: the
+    lower envelope of host - device time, never above this observation; returns the key's offset and whether
+    it was re-anchored."""
+    obs = host_ns - dev_max
+    resynced = 0
+    new = not anchored[k]
+    off = offset[k]
+    last = last_dev[k]
+    step = dev_max - last
+    if step < 0:
+        step = 0
+    allowed = off + np.int64(step * drift)
+    est = obs if obs < allowed else allowed
+    back = False
+    if jump_ns:
+        back = (not new) and dev_max < last - jump_ns
+        high = (not new) and (not back) and obs - est > jump_ns
+        since = high_since[k]
+        start = high and since < 0
+        if start:
+            since = host_ns
+        elif not high:
+            since = -1
+        low = obs if start else (high_min[k] if high_min[k] < obs else obs)
+        lasting = high and host_ns - since >= confirm_ns
+        if back:
+            est = obs
+        elif lasting:
+            est = low
+        if back or lasting:
+            resynced = 1
+            since = -1
+        high_since[k] = since
+        high_min[k] = low
+    if new:
+        est = obs
+        high_since[k] = -1
+    offset[k] = est
+    if new or back:
+        last_dev[k] = dev_max
+    elif dev_max > last:
+        last_dev[k] = dev_max
+    last_excess[k] = obs - est
+    anchored[k] = True
+    return est, resynced
+
+
+@_jit
+def skin_stamp_add(ks, useq, starts, ends, vals, given_t, period, clk_last, clk_have, st_t, st_seq, st_have, offset,
+                   anchored, last_dev, high_since, high_min, last_excess, drift, jump_ns, confirm_ns, host_ns, lost,
+                   lost_since, samples, last_mono, mono_now, temperature, first_t, has_first, last_a, has_a, last_f,
+                   has_f, recent_t, recent_v, recent_pos, recent_n, out_t, out_c, out_v, counts):  # pragma: no cover
+    """One read's samples of a skin stream, after the sequence tracker, in one pass
+    (:meth:`~tactile_descriptors_ros.streams.skin.SkinStream._add_batch`, whose numpy code is the reference).
+
+    The rows are grouped by key (``cell * 4 + modality - 1``; group ``g`` is rows ``starts[g]..ends[g] - 1``,
+    arrival order within it); ``useq`` their unwrapped sequence numbers, ``vals`` their values, ``given_t``
+    their ``device`` stamps (empty: ``clock`` stamps, made here). Per group, in the reference's order: frames
+    lost (jumps past the highest number seen); for ``clock`` stamps the key's device clock observed
+    (:meth:`~tactile_descriptors_ros.streams.clock.DeviceClock.observe` on its arrays, host time ``host_ns``),
+    its samples stamped and those stepping back in time dropped; the cell's counters, last
+    temperature, first and newest stamps and remembered force samples (``RECENT_FORCE`` = ``recent_t``'s
+    width) updated.  The kept accelerometer, force and proximity samples go to ``out_t[m]``, ``out_c[m]``
+    (cell index), ``out_v[m]`` for ``m`` = 0, 1, 2; ``counts`` gets how many of each, the samples dropped
+    and the keys re-anchored.
+    """
+    n_rec = recent_t.shape[1]
+    n_cells = first_t.shape[0]
+    big = np.iinfo(np.int64).max
+    first_read = np.full(n_cells, big, np.int64)
+    n_out = np.zeros(3, np.int64)
+    back_total = 0
+    resyncs = 0
+    clock = given_t.shape[0] == 0
+    for g in range(starts.shape[0]):
+        s = starts[g]
+        e = ends[g]
+        k = ks[s]
+        cell = k // 4
+        mod = k % 4  # 0 accelerometer, 1 force, 2 proximity, 3 temperature
+        per = period[mod]
+        # frames lost: jumps beyond the highest number seen so far
+        h = clk_last[k] if clk_have[k] else useq[s] - 1
+        lost_sum = 0
+        dev_max = np.iinfo(np.int64).min
+        for i in range(s, e):
+            if i > s and useq[i - 1] > h:
+                h = useq[i - 1]
+            d = useq[i] - h - 1
+            if d > 0:
+                lost_sum += d
+            if clock:
+                dev = np.int64(np.rint(useq[i] * per))
+                if dev > dev_max:
+                    dev_max = dev
+        clk_have[k] = True
+        clk_last[k] = h if h > useq[e - 1] else useq[e - 1]
+        lost[cell] += lost_sum
+        lost_since[cell] += lost_sum
+        # the cell's counters and last temperature (every sample of the read)
+        samples[cell] += e - s
+        last_mono[cell] = mono_now
+        if mod == 3:
+            temperature[cell] = vals[e - 1, 0] * 0.01
+        if clock:
+            est, resynced = _observe_key(k, dev_max, host_ns, offset, anchored, last_dev, high_since, high_min,
+                                         last_excess, drift, jump_ns, confirm_ns)
+            resyncs += resynced
+        else:
+            est = 0
+        # stamps; a sample newer in sequence than the key's last stamped one but not later in time is dropped
+        had = st_have[k]
+        t_prev = st_t[k]
+        q_prev = st_seq[k]
+        newest_t = np.iinfo(np.int64).min
+        newest_q = np.iinfo(np.int64).min
+        rank = 0
+        for i in range(s, e):
+            if clock:
+                t = np.int64(np.rint(useq[i] * per)) + est
+                if had and useq[i] > q_prev and t <= t_prev:
+                    back_total += 1
+                    continue
+            else:
+                t = given_t[i]
+            if t > newest_t:
+                newest_t = t
+            if useq[i] > newest_q:
+                newest_q = useq[i]
+            if t < first_read[cell]:
+                first_read[cell] = t
+            if mod == 1:  # the last RECENT_FORCE force samples of the cell, a ring
+                slot = (recent_pos[cell] + rank) % n_rec
+                recent_t[cell, slot] = t
+                for j in range(3):
+                    recent_v[cell, slot, j] = vals[i, j]
+                rank += 1
+            if mod < 3:
+                m = n_out[mod]
+                out_t[mod, m] = t
+                out_c[mod, m] = cell
+                for j in range(3):
+                    out_v[mod, m, j] = vals[i, j]
+                n_out[mod] = m + 1
+        if newest_q > np.iinfo(np.int64).min:
+            if clock:
+                st_t[k] = newest_t if not had or newest_t > t_prev else t_prev
+                st_seq[k] = newest_q if not had or newest_q > q_prev else q_prev
+                st_have[k] = True
+            if mod == 0:
+                last_a[cell] = newest_t if not has_a[cell] or newest_t > last_a[cell] else last_a[cell]
+                has_a[cell] = True
+            elif mod == 1:
+                last_f[cell] = newest_t if not has_f[cell] or newest_t > last_f[cell] else last_f[cell]
+                has_f[cell] = True
+        if mod == 1:
+            recent_pos[cell] = (recent_pos[cell] + rank) % n_rec
+            recent_n[cell] = min(recent_n[cell] + rank, n_rec)
+    for c in range(n_cells):
+        if not has_first[c] and first_read[c] < big:
+            first_t[c] = first_read[c]
+            has_first[c] = True
+    counts[0] = n_out[0]
+    counts[1] = n_out[1]
+    counts[2] = n_out[2]
+    counts[3] = back_total
+    counts[4] = resyncs

@@ -49,6 +49,7 @@ from ..codecs.skin_serial import SkinSerialDecoder
 from ..errors import ConfigError
 from ..params.skin_driver import SKIN_DRIVER
 from ..streams.skin import MAX_BACKLOG_S, READ_FRAMES, RECENT_FORCE, CellState, SkinStream, drain_frames
+from ..streams.skin import load_compiled as load_stamping
 from ..streams.skin_parts import SkinPartFrames
 from .common import RateMeter, Status, run_node
 from .conversions import skin_part_to_msg
@@ -81,10 +82,11 @@ class SkinDriver(DriverBase):
         self.frames_serialized = params["frames.serialized"] and load_cdr()
         self.sim_loop = params["sim.loop"]
         self.is_can = self.transport_name == "can" or (self.transport_name == "simulated" and self.sim_wire == "can")
+        # the compiled decoding and stamping, loaded before the bus opens: its frames would queue meanwhile, and a
+        # first read more than MAX_BACKLOG_S behind sheds the oldest
         if self.is_can:
-            # the compiled decoding, loaded before the bus opens: its frames would queue meanwhile, and a first
-            # read more than MAX_BACKLOG_S behind sheds the oldest
             load_compiled()
+        load_stamping()
 
         ct = self.robot.cell_types[self.robot.body_parts[0].cell_type]
         self.accel_rate_hz = ct.vibration.rate_hz

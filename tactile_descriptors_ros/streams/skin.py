@@ -28,6 +28,11 @@ modality) at once with array operations:
   array operations over the read, no Python object per cell or sample.  A
   message holds at most :data:`MAX_MESSAGE_BYTES` of samples (whole
   batches): a part that fell behind goes out in several messages.
+
+After the unwrapping, the lost frames, ``clock`` stamps and per-cell state
+of a read are one compiled pass (``numba_kernel.skin_stamp_add``, loaded by
+:func:`load_compiled`) once no cell waits for its start tare; the numpy code
+stays the reference (:data:`COMPILED_STAMPING`).
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ import numpy as np
 
 from ..codecs.sequence import SequenceTracker
 from ..codecs.skin import NO_STAMP, NOMINAL_RATE_HZ, Modality, SkinSampleBatch
+from ..core import fast
 from ..core.tare import resting_level
 from ..errors import SignalError
 from ..markers import INVALID_COUNT
@@ -47,8 +53,8 @@ from .clock import DeviceClock
 from .frames import SkinFrame
 from .skin_parts import SkinPartFrames
 
-__all__ = ["SkinStream", "CellState", "RECENT_FORCE", "drain_frames", "READ_FRAMES", "MAX_READ_FRAMES", "MAX_BACKLOG_S",
-           "MAX_MESSAGE_BYTES"]
+__all__ = ["SkinStream", "CellState", "RECENT_FORCE", "drain_frames", "load_compiled", "COMPILED_STAMPING", "READ_FRAMES",
+           "MAX_READ_FRAMES", "MAX_BACKLOG_S", "MAX_MESSAGE_BYTES"]
 
 #: Frames asked of a message transport per ``recv_batch`` call.
 READ_FRAMES = 65536
@@ -146,6 +152,31 @@ class CellState:
 
 #: Force samples kept per cell for ~/tare and the contact check.
 RECENT_FORCE = 500
+
+
+#: Whether :class:`SkinStream` may stamp a read's samples in one compiled pass when the backend is loaded (the
+#: tests switch it off to compare both paths).
+COMPILED_STAMPING = True
+
+
+#: ``skin_stamp_add``'s sample times when it makes them (``clock``)
+_NO_TIMES = np.zeros(0, np.int64)
+
+
+def _stream_kernel():
+    """The compiled backend's module when the stream may use it (:data:`COMPILED_STAMPING`), else None."""
+    return fast.kernel_module() if COMPILED_STAMPING else None
+
+
+def load_compiled() -> bool:
+    """Load the compiled stamping now (from the on-disk cache ``make setup`` fills) rather than on a stream's
+    first read, whose frames would queue meanwhile: a skin driver calls this before it opens its bus.  Returns
+    whether it serves (False where numpy does)."""
+    kernel = _stream_kernel()
+    if kernel is None:
+        return False
+    fast.warm_up_stream(kernel)
+    return True
 
 
 class _Pending:
@@ -339,6 +370,12 @@ class SkinStream:
         stand_in = -1 if arrival_ns is None or (bus_t != NO_STAMP).any() else int(arrival_ns)
         t_ref = np.where(bus_t == NO_STAMP, stand_in, bus_t)
         _, useq = self.tracker.track_many(ks, batch.sequence[order] & 0xFF, int, t_ref, self._period_ns[ks % 4])
+        kernel = _stream_kernel() if self.tare_on_start_s <= 0 or self._tared.all() else None
+        if kernel is not None:  # nothing waits for a start tare: the rest in one compiled pass
+            t = None if self.stamp_source == "clock" else \
+                self._device_times(batch.stamp_ns[order], ks, useq, gk, starts, ends, lens)
+            self._add_compiled(kernel, ks, useq, starts, ends, batch.values[order], t)
+            return
         # frames lost: jumps beyond the highest number seen so far
         prev = np.empty(n, np.int64)
         prev[1:] = useq[:-1]
@@ -354,29 +391,7 @@ class SkinStream:
             t = self._clock_times(ks, useq, starts)
             keep = self._monotonic(ks, useq, t, gk, starts)
         else:
-            t = batch.stamp_ns[order].copy()
-            need = t == NO_STAMP
-            if need.any():
-                self.faults["no_device_time"] += int(need.sum())
-                group = np.repeat(np.arange(gk.size), lens)
-                need = self._extrapolate_device_times(t, need, useq, gk, group, starts, ends)
-            if need.any():  # nothing stamped in this read: from the key's last bus time, else the host clock
-                idx = np.flatnonzero(need)
-                k = ks[idx]
-                held = clk["bus_have"][k]
-                a = idx[held]
-                t[a] = clk["bus_t"][ks[a]] + np.rint((useq[a] - clk["bus_seq"][ks[a]])
-                                                     * self._period_ns[ks[a] % 4]).astype(np.int64)
-                b = idx[~held]
-                if b.size:
-                    t[b] = self._clock_times(ks[b], useq[b], np.flatnonzero(np.r_[True, ks[b][1:] != ks[b][:-1]]))
-            stamped = np.flatnonzero(~need)  # the last bus time of each key anchors its later samples
-            if stamped.size:
-                last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
-                ok = (last >= starts) & (last >= 0)
-                clk["bus_have"][gk[ok]] = True
-                clk["bus_t"][gk[ok]] = t[last[ok]]
-                clk["bus_seq"][gk[ok]] = useq[last[ok]]
+            t = self._device_times(batch.stamp_ns[order], ks, useq, gk, starts, ends, lens)
         # per cell: counters, the last temperature, then the samples to the pending arrays
         vals = batch.values[order]
         cell_of = ks // 4
@@ -419,6 +434,68 @@ class SkinStream:
         self._acc.add(t[a], cell_of[a], vals[a, :3])
         self._force.add(t[f], cell_of[f], vals[f, :3])
         self._prox.add(t[p], cell_of[p], vals[p, :1])
+
+    def _device_times(self, bus_t: np.ndarray, ks: np.ndarray, useq: np.ndarray, gk: np.ndarray,
+                      starts: np.ndarray, ends: np.ndarray, lens: np.ndarray) -> np.ndarray:
+        """``device`` stamps of samples grouped by key: their bus times; where a sample has none, extrapolated
+        from a stamped one of its key (this read's, else the last one's), else from the host clock."""
+        clk = self._clk
+        t = bus_t.copy()
+        need = t == NO_STAMP
+        if need.any():
+            self.faults["no_device_time"] += int(need.sum())
+            group = np.repeat(np.arange(gk.size), lens)
+            need = self._extrapolate_device_times(t, need, useq, gk, group, starts, ends)
+        if need.any():  # nothing stamped in this read: from the key's last bus time, else the host clock
+            idx = np.flatnonzero(need)
+            k = ks[idx]
+            held = clk["bus_have"][k]
+            a = idx[held]
+            t[a] = clk["bus_t"][ks[a]] + np.rint((useq[a] - clk["bus_seq"][ks[a]])
+                                                 * self._period_ns[ks[a] % 4]).astype(np.int64)
+            b = idx[~held]
+            if b.size:
+                t[b] = self._clock_times(ks[b], useq[b], np.flatnonzero(np.r_[True, ks[b][1:] != ks[b][:-1]]))
+        stamped = np.flatnonzero(~need)  # the last bus time of each key anchors its later samples
+        if stamped.size:
+            last = stamped[np.searchsorted(stamped, ends - 1, side="right") - 1]
+            ok = (last >= starts) & (last >= 0)
+            clk["bus_have"][gk[ok]] = True
+            clk["bus_t"][gk[ok]] = t[last[ok]]
+            clk["bus_seq"][gk[ok]] = useq[last[ok]]
+        return t
+
+    def _add_compiled(self, kernel, ks: np.ndarray, useq: np.ndarray, starts: np.ndarray, ends: np.ndarray,
+                      vals: np.ndarray, t: np.ndarray | None) -> None:
+        """What the rest of :meth:`_add_batch` does with no start tare pending, in one compiled pass
+        (``numba_kernel.skin_stamp_add``; the numpy code is the reference the tests hold it to): ``clock`` stamps
+        (``t`` None) are made in the pass, ``device`` stamps ``t`` come made."""
+        n = ks.size
+        out_t = np.empty((3, n), np.int64)
+        out_c = np.empty((3, n), np.int64)
+        out_v = np.empty((3, n, 3), np.int64)
+        counts = np.zeros(5, np.int64)
+        clk, clock = self._clk, self.clock
+        given = _NO_TIMES if t is None else t
+        kernel.skin_stamp_add(ks, useq, starts, ends, np.ascontiguousarray(vals, np.int64), given, self._period_ns,
+                              clk["last"], clk["have"], clk["st_t"], clk["st_seq"], clk["st_have"], clock.offset_ns,
+                              clock.anchored, clock._last_dev, clock._high_since, clock._high_min,
+                              clock.last_excess_ns, clock.drift, clock.jump_ns, clock.confirm_ns, int(self._now()),
+                              self._lost, self._lost_since, self._samples, self._last_mono, time.monotonic(),
+                              self._temperature, self._first_t, self._has_first, self._last_a, self._has_a,
+                              self._last_f, self._has_f, self._recent_t, self._recent_v, self._recent_pos,
+                              self._recent_n, out_t, out_c, out_v, counts)
+        n_a, n_f, n_p, back, resyncs = counts.tolist()
+        if t is None:
+            clock.observations += starts.size
+        if resyncs:
+            clock.resyncs += resyncs
+            self.faults["clock_resync"] += resyncs
+        if back:
+            self.faults["clock_step_back_samples"] += back
+        self._acc.add(out_t[0, :n_a], out_c[0, :n_a], out_v[0, :n_a])
+        self._force.add(out_t[1, :n_f], out_c[1, :n_f], out_v[1, :n_f])
+        self._prox.add(out_t[2, :n_p], out_c[2, :n_p], out_v[2, :n_p, :1])
 
     def _remember_force(self, cells: np.ndarray, t: np.ndarray, v: np.ndarray) -> None:
         """The last :data:`RECENT_FORCE` force samples of each cell (``~/tare``, the contact check)."""

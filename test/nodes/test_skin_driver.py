@@ -112,22 +112,24 @@ def test_unopenable_device_is_a_clear_error(ros_context):
             Parameter("serial.port", value="/dev/does_not_exist_tactile")])
 
 
-def test_the_compiled_decoding_is_loaded_before_the_bus_opens(ros_context, monkeypatch):
-    """Loading it takes about 0.3 s; after the bus opened, the first read would come that much late (a
-    simulated bus sheds what is more than MAX_BACKLOG_S behind).  A serial driver does not load it."""
+def test_the_compiled_decoding_and_stamping_are_loaded_before_the_bus_opens(ros_context, monkeypatch):
+    """Loading them takes about 0.3 s; after the bus opened, the first read would come that much late (a
+    simulated bus sheds what is more than MAX_BACKLOG_S behind, a serial port's buffer overflows).  A serial
+    driver loads the stamping only."""
     from tactile_descriptors_ros.nodes import skin_driver
     from tactile_descriptors_ros.streams.link import DeviceLink
 
     events = []
-    monkeypatch.setattr(skin_driver, "load_compiled", lambda: events.append("load") or True)
+    monkeypatch.setattr(skin_driver, "load_compiled", lambda: events.append("decoding") or True)
+    monkeypatch.setattr(skin_driver, "load_stamping", lambda: events.append("stamping") or True)
     opened = DeviceLink.open
     monkeypatch.setattr(DeviceLink, "open", lambda self: (events.append("open"), opened(self))[1])
     channel = f"skin_test_{time.monotonic_ns()}"
     drv, _, _ = _make(ros_context, {"robot": "nao", "transport": "can", "can.interface": "virtual",
                                     "can.channel": channel})
     drv.close()
-    assert events == ["load", "open"]
+    assert events == ["decoding", "stamping", "open"]
     events.clear()
     drv, _, _ = _make(ros_context, {"robot": "nao", "transport": "serial", "serial.port": "loop://"})
     drv.close()
-    assert events == ["open"]
+    assert events == ["stamping", "open"]

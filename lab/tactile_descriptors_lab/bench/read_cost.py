@@ -1,4 +1,4 @@
-"""The skin driver's read path in one process: CPU per read with compiled decoding against numpy's.
+"""The skin driver's read path in one process: CPU per read with compiled decoding and stamping against numpy's.
 
 ``tactile bench --read-cost`` plays the scale graph's looped scene
 (:func:`~tactile_descriptors_ros.sim.synthetic.scale_robot_files`: N cells of
@@ -9,16 +9,18 @@ hands out the frames due in ``read_period_s`` of scene time
 stepped clock), :meth:`~tactile_descriptors_ros.codecs.skin_can.SkinCanDecoder.decode_frames`
 decodes them, :meth:`~tactile_descriptors_ros.streams.skin.SkinStream.add_parts`
 stamps and cuts them into body part messages and
-:func:`~tactile_descriptors_ros.nodes.conversions.skin_part_to_msg` builds each
-message (publishing is left out: that is the middleware's).
+:func:`~tactile_descriptors_ros.codecs.cdr.write_skin_part` writes each
+message's bytes (publishing is left out: that is the middleware's).
 
-Two paths over the same reads, alternating, in one run: the compiled
-decoding and sequence tracking (:data:`~tactile_descriptors_ros.codecs.skin_can.COMPILED_DECODE`,
-:data:`~tactile_descriptors_ros.codecs.sequence.COMPILED_TRACKING`) and
-numpy's.  Before anything is timed both must give the same messages, field
-by field (floats bit for bit), and the same counters (the run stops otherwise).  Reported: CPU
-time of the thread per read and per cell and second of data, the minimum
-over ``repeat`` runs of each path (this machine is shared), and their ratio.
+Three paths over the same reads, alternating, in one run (:data:`PATHS`):
+everything compiled; the compiled decoding and sequence tracking
+(:data:`~tactile_descriptors_ros.codecs.skin_can.COMPILED_DECODE`,
+:data:`~tactile_descriptors_ros.codecs.sequence.COMPILED_TRACKING`) with the
+stream's stamping in numpy (:data:`~tactile_descriptors_ros.streams.skin.COMPILED_STAMPING`
+off); and numpy throughout.  Before anything is timed every path must give
+the numpy path's bytes and counters (the run stops otherwise).  Reported:
+CPU time of the thread per read and per cell and second of data, the minimum
+over ``repeat`` runs of each path (this machine is shared), and their ratios.
 """
 
 from __future__ import annotations
@@ -64,63 +66,62 @@ def _reads(n_cells: int, read_period_s: float | None, batch_s: float | None, sec
     return reads[int(round(1.0 / period)):], scene.robot, period, batch
 
 
-@contextmanager
-def _compiled(on: bool) -> Iterator[None]:
-    """The compiled decoding and tracking switched on or off for the block."""
-    from tactile_descriptors_ros.codecs import sequence, skin_can
+#: The host clock's start in the runs [ns since the epoch].
+_HOST_T0_NS = 1_700_000_000 * 10**9
+#: The paths timed: whether the decoding and tracking, and the stream's stamping, are compiled.
+PATHS = {"compiled": (True, True), "without_stamping": (True, False), "numpy": (False, False)}
 
-    before = skin_can.COMPILED_DECODE, sequence.COMPILED_TRACKING
-    skin_can.COMPILED_DECODE = sequence.COMPILED_TRACKING = on
+
+@contextmanager
+def _compiled(path: str) -> Iterator[None]:
+    """The compiled decoding, tracking and stamping switched on or off for the block, as ``PATHS[path]`` says."""
+    from tactile_descriptors_ros.codecs import sequence, skin_can
+    from tactile_descriptors_ros.streams import skin
+
+    before = skin_can.COMPILED_DECODE, sequence.COMPILED_TRACKING, skin.COMPILED_STAMPING
+    decoding, stamping = PATHS[path]
+    skin_can.COMPILED_DECODE = sequence.COMPILED_TRACKING = decoding
+    skin.COMPILED_STAMPING = stamping
     try:
         yield
     finally:
-        skin_can.COMPILED_DECODE, sequence.COMPILED_TRACKING = before
+        skin_can.COMPILED_DECODE, sequence.COMPILED_TRACKING, skin.COMPILED_STAMPING = before
 
 
-def _run(robot, reads: list[np.ndarray], batch_s: float, compiled: bool) -> tuple[float, list, dict]:
-    """One pass of the driver's read path over ``reads``; its thread's CPU time, the messages and counters."""
+def _run(robot, reads: list[np.ndarray], read_period_s: float, batch_s: float, stamp_source: str, path: str
+         ) -> tuple[float, list, dict]:
+    """One pass of the driver's read path over ``reads``; its thread's CPU time, the messages' bytes and the
+    counters.  The host clock steps a read period per read (each run stamps alike)."""
+    from tactile_descriptors_ros.codecs.cdr import load_compiled as load_cdr
+    from tactile_descriptors_ros.codecs.cdr import write_skin_part
     from tactile_descriptors_ros.codecs.skin_can import SkinCanDecoder, load_compiled
-    from tactile_descriptors_ros.nodes.conversions import skin_part_to_msg
     from tactile_descriptors_ros.streams.skin import SkinStream
 
     ct = next(iter(robot.cell_types.values()))
     cells = {c.id: (bp.name, f"cell_{c.id}") for bp in robot.body_parts for c in bp.cells}
     faults: Counter = Counter()
-    stream = SkinStream(cells, ct.vibration.rate_hz, ct.deformation.rate_hz, batch_s, "device", 1.0, 0.0,
-                        time.time_ns, faults, lambda level, text: None, scales=(1.0, 1.0, 0.0))
+    host = {"ns": _HOST_T0_NS}
+    stream = SkinStream(cells, ct.vibration.rate_hz, ct.deformation.rate_hz, batch_s, stamp_source, 1.0, 0.0,
+                        lambda: host["ns"], faults, lambda level, text: None, scales=(1.0, 1.0, 0.0))
     decoder = SkinCanDecoder(known_cell_ids=set(cells), rates_hz=stream.rates_hz())
+    step_ns = int(round(read_period_s * 1e9))
     msgs = []
-    with _compiled(compiled):
+    with _compiled(path):
         load_compiled()
+        load_cdr()
         c = time.thread_time()
         for frames in reads:
-            batch = decoder.decode_frames(frames, time.time_ns())
-            msgs += [skin_part_to_msg(part) for part in stream.add_parts(batch, time.time_ns())]
+            host["ns"] += step_ns
+            batch = decoder.decode_frames(frames, host["ns"])
+            msgs += [write_skin_part(part, part.body_part) for part in stream.add_parts(batch, host["ns"])]
         cpu = time.thread_time() - c
     counters = {"decoder": decoder.stats, "stream_faults": dict(faults), "lost": stream.tracker.lost}
     return cpu, msgs, counters
 
 
-def _same(a, b) -> bool:
-    """Two messages field by field, floats bit for bit.  (Not their CDR serialisation: rclpy leaves the
-    alignment padding uninitialised, so one message serialised twice can differ.)"""
-    for name in a.get_fields_and_field_types():
-        x, y = getattr(a, name), getattr(b, name)
-        if name == "header":
-            if (x.stamp.sec, x.stamp.nanosec, x.frame_id) != (y.stamp.sec, y.stamp.nanosec, y.frame_id):
-                return False
-        elif isinstance(x, str):
-            if x != y:
-                return False
-        else:
-            x, y = np.asarray(x), np.asarray(y)
-            if x.dtype != y.dtype or x.shape != y.shape or x.tobytes() != y.tobytes():
-                return False
-    return True
-
-
 def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None = None,
-              batch_s: float | None = None, seconds: float = 4.0, repeat: int = 3) -> dict:
+              batch_s: float | None = None, seconds: float = 4.0, repeat: int = 3,
+              stamp_source: str = "device") -> dict:
     """CPU per read of the skin driver's read path, compiled and numpy (module docstring).
 
     Parameters
@@ -137,18 +138,22 @@ def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None
         Scene time read per run.
     repeat : int
         Runs of each path, alternating; the minimum is reported.
+    stamp_source : {"device", "clock"}
+        The stream's stamps: the scale graph's drivers take the simulator's bus times (``device``), the NAO
+        graph's estimate them on the host clock (``clock``, the default of a driver).
 
     Returns
     -------
     dict
-        ``cells``, ``parts``, ``reads``, ``frames``, ``messages``, ``ms_per_read`` and
-        ``ms_per_cell_second`` per path (``compiled``, ``numpy``), ``speedup``
-        (numpy over compiled) and ``same_messages`` (checked before timing).
+        ``cells``, ``parts``, ``stamp_source``, ``reads``, ``frames``, ``messages``, ``ms_per_read`` and
+        ``ms_per_cell_second`` per path (:data:`PATHS`: ``compiled``, ``without_stamping``, ``numpy``),
+        ``speedup`` (numpy over compiled), ``stamping_speedup`` (without stamping over compiled) and
+        ``same_messages`` (checked before timing).
 
     Raises
     ------
     RuntimeError
-        When the two paths give different messages or counters, without the compiled backend, or for a read
+        When the paths give different messages or counters, without the compiled backend, or for a read
         period of 0.
     """
     from tactile_descriptors_ros.core import fast
@@ -157,32 +162,34 @@ def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None
         raise RuntimeError("the compiled backend is not loaded (TACTILE_NO_NUMBA or numba missing)")
     with tempfile.TemporaryDirectory() as tmp:
         reads, robot, read_period_s, batch_s = _reads(n_cells, read_period_s, batch_s, seconds, tmp, parts)
-    _, want, want_counters = _run(robot, reads, batch_s, compiled=False)
-    _, got, got_counters = _run(robot, reads, batch_s, compiled=True)
-    if len(got) != len(want) or not all(_same(a, b) for a, b in zip(got, want)) or got_counters != want_counters:
-        raise RuntimeError("compiled and numpy read paths disagree: nothing timed")
-    best = {"compiled": np.inf, "numpy": np.inf}
+    _, want, want_counters = _run(robot, reads, read_period_s, batch_s, stamp_source, "numpy")
+    for path in PATHS:
+        _, got, got_counters = _run(robot, reads, read_period_s, batch_s, stamp_source, path)
+        if got != want or got_counters != want_counters:
+            raise RuntimeError(f"the {path} and numpy read paths disagree: nothing timed")
+    best = dict.fromkeys(PATHS, np.inf)
     for _ in range(repeat):
         for key in best:
-            best[key] = min(best[key], _run(robot, reads, batch_s, compiled=key == "compiled")[0])
+            best[key] = min(best[key], _run(robot, reads, read_period_s, batch_s, stamp_source, key)[0])
     data_s = len(reads) * read_period_s
-    return {"cells": n_cells, "parts": parts, "read_period_s": read_period_s, "batch_s": batch_s, "reads": len(reads),
+    return {"cells": n_cells, "parts": parts, "stamp_source": stamp_source, "read_period_s": read_period_s,
+            "batch_s": batch_s, "reads": len(reads),
             "frames": int(sum(r.size for r in reads)), "messages": len(want), "same_messages": True,
             "ms_per_read": {k: 1e3 * v / len(reads) for k, v in best.items()},
             "ms_per_cell_second": {k: 1e3 * v / (n_cells * data_s) for k, v in best.items()},
-            "speedup": best["numpy"] / best["compiled"]}
+            "speedup": best["numpy"] / best["compiled"],
+            "stamping_speedup": best["without_stamping"] / best["compiled"]}
 
 
 def format_read_cost(r: dict) -> str:
     """The result as text."""
     per, cell = r["ms_per_read"], r["ms_per_cell_second"]
+    names = {"compiled": "compiled throughout:", "without_stamping": "compiled, numpy stamping:",
+             "numpy": "numpy throughout:"}
     return "\n".join([
-        f"skin driver read path, {r['cells']} cells in {r['parts']} body part(s), a read every "
-        f"{1e3 * r['read_period_s']:g} ms of scene time "
-        f"({r['reads']} reads, {r['frames']} CAN frames, {r['messages']} body part messages; both paths gave the "
-        "same messages and counters):",
-        f"  compiled decoding and tracking: {per['compiled']:.3f} ms per read, {cell['compiled']:.3f} ms per cell "
-        "and second of data",
-        f"  numpy:                          {per['numpy']:.3f} ms per read, {cell['numpy']:.3f} ms per cell and "
-        "second of data",
-        f"  numpy / compiled: {r['speedup']:.2f}x"])
+        f"skin driver read path, {r['cells']} cells in {r['parts']} body part(s), {r['stamp_source']} stamps, a "
+        f"read every {1e3 * r['read_period_s']:g} ms of scene time "
+        f"({r['reads']} reads, {r['frames']} CAN frames, {r['messages']} body part messages; every path gave the "
+        "same bytes and counters):",
+        *(f"  {names[k]:<27}{per[k]:.3f} ms per read, {cell[k]:.3f} ms per cell and second of data" for k in names),
+        f"  numpy / compiled: {r['speedup']:.2f}x; numpy stamping / compiled: {r['stamping_speedup']:.2f}x"])

@@ -114,13 +114,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --executor-overhead: also take the frames as their bytes and read them in one "
                         "compiled pass, as the nodes do (frames.serialized)")
     p.add_argument("--read-cost", action="store_true",
-                   help="instead of timing: the skin driver's read path in one process (decode, stamp, cut, build "
-                        "the messages) on --read-cost-cells cells read every --read-period-s, CPU per read with "
-                        "the compiled decoding and with numpy's, checked equal first, --rounds alternating runs "
-                        "each (lab/docs/performance.md, section Scale)")
+                   help="instead of timing: the skin driver's read path in one process (decode, stamp, cut, write "
+                        "the messages' bytes) on --read-cost-cells cells read every --read-period-s, CPU per read "
+                        "compiled, with numpy's stamping, and numpy throughout, checked equal first, --rounds "
+                        "alternating runs each (lab/docs/performance.md, section Scale)")
     p.add_argument("--read-cost-cells", type=int, default=200, help="skin cells of --read-cost (default 200)")
     p.add_argument("--read-cost-parts", type=int, default=1,
                    help="body parts the cells of --read-cost make, a message each per batch (default 1; the NAO: 7)")
+    p.add_argument("--read-cost-stamps", choices=("device", "clock"), default="device",
+                   help="the stamps of --read-cost: the simulator's bus times as the scale graph takes them "
+                        "(device, default) or estimated on the host clock as the NAO graph's driver does (clock)")
     p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead, "
                    "runs of each executor of --executor-overhead, of each path of --read-cost (default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
@@ -341,10 +344,10 @@ def _read_cost(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     print(f"tactile bench: the skin driver's read path, {args.read_cost_cells} cells in {args.read_cost_parts} body "
-          f"part(s), {args.rounds} run(s) of each path ...", file=sys.stderr)
+          f"part(s), {args.read_cost_stamps} stamps, {args.rounds} run(s) of each path ...", file=sys.stderr)
     try:
         report = read_cost(args.read_cost_cells, parts=args.read_cost_parts, read_period_s=args.read_period_s,
-                           batch_s=args.batch_s, repeat=args.rounds)
+                           batch_s=args.batch_s, repeat=args.rounds, stamp_source=args.read_cost_stamps)
     except RuntimeError as exc:
         print(f"tactile bench: error: read cost: {exc}", file=sys.stderr)
         return 1
