@@ -351,3 +351,28 @@ def test_nao_graph_window_parameters_are_the_nodes_own(ros_context):
         assert [p.name for p in node.robot.body_parts] == params["body_parts"]
     finally:
         node.destroy_node()
+
+
+def test_the_newest_sample_of_a_message_is_found_whichever_way_it_was_read():
+    """A frames message's newest vibration sample (the frames' age on arrival): rclpy's message (``array``
+    fields), the same read from its bytes (numpy views), a BioTac batch; none for a message without samples."""
+    from rclpy.serialization import serialize_message
+
+    from tactile_descriptors_msgs.msg import BioTacFrameBatch, SkinPartFrames
+    from tactile_descriptors_ros.codecs.cdr import available, read_skin_part
+    from tactile_descriptors_ros.nodes.window_node import _newest_sample_ns
+
+    msg = SkinPartFrames()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000, 250
+    assert _newest_sample_ns(msg) is None
+    msg.accel_offset_ns = [30, 9_000_000, -5, 8_999_999]
+    want = 1_700_000_000 * 10**9 + 250 + 9_000_000
+    assert _newest_sample_ns(msg) == want
+    if available():  # read from its bytes (the compiled backend)
+        view = read_skin_part(serialize_message(msg))
+        assert isinstance(view.accel_offset_ns, np.ndarray)
+        assert _newest_sample_ns(view) == want
+    bt = BioTacFrameBatch()
+    bt.header.stamp.sec = 3
+    bt.pac_offset_ns = [7, 41, 2]
+    assert _newest_sample_ns(bt) == 3 * 10**9 + 41
