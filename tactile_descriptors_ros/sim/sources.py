@@ -194,39 +194,37 @@ class SkinRows:
     """
 
     def __init__(self, result: SimResult) -> None:
-        parts_t, parts_c, parts_m, parts_s, parts_bad, parts_vals = [], [], [], [], [], []
+        streams = []
         for cell in result.cells.values():
             if cell.kind != "skin":
                 continue
             for name, mod in SKIN_STREAM_MODALITY.items():
                 st = cell.streams.get(name)
-                if st is None or not st.seq.size:
-                    continue
-                n = st.seq.size
-                parts_t.append(st.t_ns)
-                parts_c.append(np.full(n, cell.cell_id, dtype=np.int64))
-                parts_m.append(np.full(n, mod, dtype=np.int64))
-                parts_s.append(st.seq & 0xFF)
-                parts_bad.append((st.fault == FAULT_CORRUPT).any(axis=0))
-                vals = np.zeros((n, 3), dtype=np.int64)
-                vals[:, :st.counts.shape[0]] = st.counts.T
-                parts_vals.append(vals)
-        if not parts_t:
+                if st is not None and st.seq.size:
+                    streams.append((mod, cell.cell_id, st))
+        if not streams:
             z = np.zeros(0, dtype=np.int64)
             self.t_ns, self.cell_id, self.modality, self.sequence = z, z.copy(), z.copy(), z.copy()
             self.value_array = np.zeros((0, 3), dtype=np.int64)
             self.corrupt = np.zeros(0, dtype=bool)
             return
-        t = np.concatenate(parts_t).astype(np.int64)
-        c = np.concatenate(parts_c)
-        m = np.concatenate(parts_m)
-        order = np.lexsort((c, m, t))
+        # Each stream is in time order: laid end to end by modality, then cell id, one stable sort by time puts
+        # every row in time, modality, cell id order (a third of a three-key lexsort's time for a NAO chunk).
+        streams.sort(key=lambda x: (x[0], x[1]))
+        sizes = [st.seq.size for _, _, st in streams]
+        t = np.concatenate([st.t_ns for _, _, st in streams]).astype(np.int64)
+        order = np.argsort(t, kind="stable")
         self.t_ns = t[order]
-        self.cell_id = c[order]
-        self.modality = m[order]
-        self.sequence = np.concatenate(parts_s).astype(np.int64)[order]
-        self.corrupt = np.concatenate(parts_bad)[order]
-        self.value_array = np.concatenate(parts_vals)[order]
+        self.cell_id = np.repeat(np.array([c for _, c, _ in streams], dtype=np.int64), sizes)[order]
+        self.modality = np.repeat(np.array([m for m, _, _ in streams], dtype=np.int64), sizes)[order]
+        self.sequence = (np.concatenate([st.seq for _, _, st in streams]).astype(np.int64) & 0xFF)[order]
+        self.corrupt = np.concatenate([(st.fault == FAULT_CORRUPT).any(axis=0) for _, _, st in streams])[order]
+        vals = np.zeros((t.size, 3), dtype=np.int64)
+        lo = 0
+        for (_, _, st), n in zip(streams, sizes):
+            vals[lo:lo + n, :st.counts.shape[0]] = st.counts.T
+            lo += n
+        self.value_array = vals[order]
 
     def __len__(self) -> int:
         return int(self.t_ns.size)

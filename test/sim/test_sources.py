@@ -211,6 +211,29 @@ def _reference_rows(scene):
     return rows, [rows.sample(i) for i in range(len(rows))]
 
 
+def test_skin_rows_are_every_streams_samples_in_time_modality_cell_order():
+    """One row per sample of every skin stream (dropped frames left out, corrupt ones flagged), ordered by
+    time, then modality, then cell id, then the stream's own order, built the slow way here."""
+    from tactile_descriptors_ros.sim.engine import FAULT_CORRUPT
+    from tactile_descriptors_ros.sim.sources import SKIN_STREAM_MODALITY, SkinRows
+
+    result = simulate(_scene(NAO, dropped_frames={"probability": 0.02}, corrupt_frames={"probability": 0.02}))
+    ref = []
+    for cell in result.cells.values():
+        for name, mod in SKIN_STREAM_MODALITY.items():
+            st = cell.streams.get(name) if cell.kind == "skin" else None
+            for j in range(0 if st is None else st.seq.size):
+                vals = [int(v) for v in st.counts[:, j]] + [0] * (3 - st.counts.shape[0])
+                ref.append(((int(st.t_ns[j]), mod, cell.cell_id, j), int(st.seq[j]) & 0xFF, tuple(vals),
+                            bool((st.fault[:, j] == FAULT_CORRUPT).any())))
+    ref.sort(key=lambda r: r[0])
+    rows = SkinRows(result)
+    got = list(zip(rows.t_ns.tolist(), rows.modality.tolist(), rows.cell_id.tolist(), rows.sequence.tolist(),
+                   map(tuple, rows.value_array.tolist()), rows.corrupt.tolist()))
+    assert got == [(k[0], k[1], k[2], q, v, bad) for k, q, v, bad in ref]
+    assert rows.corrupt.any() and len({k[1] for k, *_ in ref}) == 4  # every modality, some frames corrupt
+
+
 def test_skin_can_batch_source_sends_the_per_sample_encoders_frames():
     from tactile_descriptors_ros.codecs.can_frames import messages_from_frames
     from tactile_descriptors_ros.codecs.skin_can import encode_can_message
