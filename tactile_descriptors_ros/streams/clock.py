@@ -158,6 +158,13 @@ class DeviceClock:
         self.last_excess_ns[k] = obs - est
         self.anchored[k] = True
 
+    def state(self) -> tuple[np.ndarray, ...]:
+        """The per-key arrays :meth:`observe` updates, for a compiled pass that observes in place
+        (``numba_kernel.skin_stamp_add``): offset, anchored, last device time, start and least observation of a
+        lasting excess, last excess."""
+        return (self.offset_ns, self.anchored, self._last_dev, self._high_since, self._high_min,
+                self.last_excess_ns)
+
     def to_host(self, keys: np.ndarray | int, device_ns: np.ndarray | int) -> np.ndarray:
         """Host times [ns] of device times of (anchored) keys: ``device_ns + offset``."""
         return np.asarray(device_ns, np.int64) + self.offset_ns[keys]

@@ -478,9 +478,8 @@ class SkinStream:
         clk, clock = self._clk, self.clock
         given = _NO_TIMES if t is None else t
         kernel.skin_stamp_add(ks, useq, starts, ends, np.ascontiguousarray(vals, np.int64), given, self._period_ns,
-                              clk["last"], clk["have"], clk["st_t"], clk["st_seq"], clk["st_have"], clock.offset_ns,
-                              clock.anchored, clock._last_dev, clock._high_since, clock._high_min,
-                              clock.last_excess_ns, clock.drift, clock.jump_ns, clock.confirm_ns, int(self._now()),
+                              clk["last"], clk["have"], clk["st_t"], clk["st_seq"], clk["st_have"], *clock.state(),
+                              clock.drift, clock.jump_ns, clock.confirm_ns, int(self._now()),
                               self._lost, self._lost_since, self._samples, self._last_mono, time.monotonic(),
                               self._temperature, self._first_t, self._has_first, self._last_a, self._has_a,
                               self._last_f, self._has_f, self._recent_t, self._recent_v, self._recent_pos,
