@@ -139,8 +139,8 @@ def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None
     repeat : int
         Runs of each path, alternating; the minimum is reported.
     stamp_source : {"device", "clock"}
-        The stream's stamps: the scale graph's drivers take the simulator's bus times (``device``), the NAO
-        graph's estimate them on the host clock (``clock``, the default of a driver).
+        The stream's stamps: the simulated graphs' drivers (scale graph, soak, demo) take the simulator's bus
+        times (``device``), a robot's estimates them on the host clock (``clock``, the default of a driver).
 
     Returns
     -------

@@ -123,7 +123,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="body parts the cells of --read-cost make, a message each per batch (default 1; the NAO: 7)")
     p.add_argument("--read-cost-stamps", choices=("device", "clock"), default="device",
                    help="the stamps of --read-cost: the simulator's bus times as the scale graph takes them "
-                        "(device, default) or estimated on the host clock as the NAO graph's driver does (clock)")
+                        "(device, default) or estimated on the host clock as a robot's driver does (clock, a driver's default)")
     p.add_argument("--rounds", type=int, default=2, help="runs with and without the views of --view-overhead, "
                    "runs of each executor of --executor-overhead, of each path of --read-cost (default 2 each)")
     p.add_argument("--cells", type=int, default=10000, help="skin cells of --scale-graph (default 10000)")
