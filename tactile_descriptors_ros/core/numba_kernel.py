@@ -1844,17 +1844,15 @@ def skin_stamp_add(ks, useq, starts, ends, vals, given_t, period, clk_last, clk_
         # frames lost: jumps beyond the highest number seen so far
         h = clk_last[k] if clk_have[k] else useq[s] - 1
         lost_sum = 0
-        dev_max = np.iinfo(np.int64).min
+        q_max = useq[s]
         for i in range(s, e):
             if i > s and useq[i - 1] > h:
                 h = useq[i - 1]
             d = useq[i] - h - 1
             if d > 0:
                 lost_sum += d
-            if clock:
-                dev = np.int64(np.rint(useq[i] * per))
-                if dev > dev_max:
-                    dev_max = dev
+            if useq[i] > q_max:
+                q_max = useq[i]
         clk_have[k] = True
         clk_last[k] = h if h > useq[e - 1] else useq[e - 1]
         lost[cell] += lost_sum
@@ -1865,6 +1863,7 @@ def skin_stamp_add(ks, useq, starts, ends, vals, given_t, period, clk_last, clk_
         if mod == 3:
             temperature[cell] = vals[e - 1, 0] * 0.01
         if clock:
+            dev_max = np.int64(np.rint(q_max * per))  # the newest device time: rint(q * period) grows with q
             est, resynced = _observe_key(k, dev_max, host_ns, offset, anchored, last_dev, high_since, high_min,
                                          last_excess, drift, jump_ns, confirm_ns)
             resyncs += resynced
