@@ -163,7 +163,7 @@ def read_cost(n_cells: int = 200, *, parts: int = 1, read_period_s: float | None
     with tempfile.TemporaryDirectory() as tmp:
         reads, robot, read_period_s, batch_s = _reads(n_cells, read_period_s, batch_s, seconds, tmp, parts)
     _, want, want_counters = _run(robot, reads, read_period_s, batch_s, stamp_source, "numpy")
-    for path in PATHS:
+    for path in (p for p in PATHS if p != "numpy"):  # each against numpy's messages
         _, got, got_counters = _run(robot, reads, read_period_s, batch_s, stamp_source, path)
         if got != want or got_counters != want_counters:
             raise RuntimeError(f"the {path} and numpy read paths disagree: nothing timed")
