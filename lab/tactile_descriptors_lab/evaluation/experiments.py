@@ -461,9 +461,50 @@ def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int 
 SELECTION_FOLDS: int = 3
 
 
+def _block_label(block_s: float | None) -> str:
+    return f"{block_s:g} s blocks" if block_s else "whole window"
+
+
+def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
+                          block_hop_s: float) -> tuple[dict[str, EvalConfig], dict[str, str]]:
+    """The configurations a selection compares, by label, and the pairs it cannot run, with why.
+
+    Without ``blocks`` a candidate is a mode with ``cfg``'s blocks (its label
+    is the mode's name).  With ``blocks`` it is every (mode, block length)
+    pair; a block of 0 is one descriptor per window; a block's hop is
+    ``block_hop_s`` or the block, whichever is shorter.  The ``subwindows``
+    group describes a window's pieces itself, so it pairs with the whole
+    window only.
+    """
+    for mode in modes:
+        mode_groups(mode)  # unknown modes are refused before any work
+    if blocks is None:
+        if cfg.block_s and any("subwindows" in mode_groups(m) for m in modes):
+            raise ConfigError("block averaging and the subwindows group do not combine: select with whole windows "
+                              "(block 0), or among blocks including 0 (--select-blocks)", key="block")
+        return {m: cfg for m in dict.fromkeys(modes)}, {}
+    if any(not np.isfinite(b) or b < 0 for b in blocks) or not block_hop_s > 0:
+        raise ConfigError(f"selection blocks must be >= 0 s (0 = whole window) with a hop > 0, got "
+                          f"{list(blocks)} / {block_hop_s:g}", key="select_blocks")
+    runs: dict[str, EvalConfig] = {}
+    skipped: dict[str, str] = {}
+    for mode in dict.fromkeys(modes):
+        for b in dict.fromkeys(float(b) for b in blocks):
+            label = f"{mode}, {_block_label(b)}"
+            if b and "subwindows" in mode_groups(mode):
+                skipped[label] = "the subwindows group describes the window's pieces itself: whole window only"
+                continue
+            runs[label] = replace(cfg, mode=mode, block_s=b or None, block_hop_s=min(block_hop_s, b) if b else None)
+    if not runs:
+        raise ConfigError("no candidate the selection can run: " + "; ".join(f"{k} ({v})" for k, v in skipped.items()),
+                          key="select_blocks")
+    return runs, skipped
+
+
 def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Sequence[str],
-                folds: int = SELECTION_FOLDS) -> dict:
-    """Choose a descriptor mode by cross-validation by trial *inside the training trials only*.
+                folds: int = SELECTION_FOLDS, blocks: Sequence[float] | None = None,
+                block_hop_s: float = DEFAULT_BLOCK_HOP_S) -> dict:
+    """Choose a descriptor mode (and block length) by cross-validation by trial *inside the training trials only*.
 
     The training trials are cut into ``folds`` contiguous blocks
     (:func:`trial_folds`); each candidate is trained on the other blocks and
@@ -473,45 +514,57 @@ def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: S
     cheaper ones first).  No test trial is read: the test split is scored
     once, afterwards, with the chosen mode (:func:`evaluate_selected`).
 
+    With ``blocks`` (seconds, 0 = one descriptor per window) every mode is
+    tried with every block length, modes first in the order listed: how a
+    window is averaged is chosen by the same inner cross-validation, never
+    by the test split.
+
     Returns
     -------
     dict
-        ``chosen``, ``candidates`` (per mode: ``accuracy``, ``accuracy_std``,
-        ``fold_accuracy``), ``folds`` and ``classifier``.
+        ``chosen`` (the mode), ``block_s`` (its block length, None = the
+        whole window), ``chosen_label``, ``candidates`` (per label: ``mode``,
+        ``block_s``, ``accuracy``, ``accuracy_std``, ``fold_accuracy``),
+        ``skipped`` (labels a mode cannot pair with, and why), ``folds`` and
+        ``classifier``.
     """
     if not candidates:
         raise ConfigError("no candidate mode to select from", key="select")
-    for c in candidates:
-        mode_groups(c)  # unknown modes are refused before any work
+    runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s)
     name = cfg.classifiers[0]
     trials = sorted({r.trial for r in train})
-    blocks = trial_folds(trials, folds)
+    fold_trials = trial_folds(trials, folds)
     scores: dict[str, dict] = {}
-    for mode in dict.fromkeys(candidates):
+    for label, run_cfg in runs.items():
         accs = []
-        for block in blocks:
+        for block in fold_trials:
             inner_test = [r for r in train if r.trial in block]
             inner_train = [r for r in train if r.trial not in block]
-            res = evaluate(inner_train, inner_test, replace(cfg, mode=mode, classifiers=(name,), test_window=None))
+            res = evaluate(inner_train, inner_test, replace(run_cfg, classifiers=(name,), test_window=None))
             accs.append(res["classifiers"][name]["accuracy"])
-        scores[mode] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
-                        "fold_accuracy": [float(a) for a in accs]}
+        scores[label] = {"mode": run_cfg.mode, "block_s": run_cfg.block_s,
+                         "accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
+                         "fold_accuracy": [float(a) for a in accs]}
     best = max(v["accuracy"] for v in scores.values())
-    chosen = next(m for m, v in scores.items() if v["accuracy"] >= best - 1e-12)
-    return {"chosen": chosen, "candidates": scores, "classifier": name,
-            "folds": [[int(min(b)), int(max(b))] for b in blocks]}
+    chosen = next(k for k, v in scores.items() if v["accuracy"] >= best - 1e-12)
+    return {"chosen": scores[chosen]["mode"], "block_s": runs[chosen].block_s,
+            "block_hop_s": runs[chosen].block_hop_s, "chosen_label": chosen,
+            "candidates": scores, "skipped": skipped, "classifier": name,
+            "folds": [[int(min(b)), int(max(b))] for b in fold_trials]}
 
 
 def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
-                      candidates: Sequence[str], folds: int = SELECTION_FOLDS) -> dict:
-    """:func:`select_mode` on the training trials, then :func:`evaluate` once with the chosen mode.
+                      candidates: Sequence[str], folds: int = SELECTION_FOLDS, blocks: Sequence[float] | None = None,
+                      block_hop_s: float = DEFAULT_BLOCK_HOP_S) -> dict:
+    """:func:`select_mode` on the training trials, then :func:`evaluate` once with the chosen mode and blocks.
 
     Returns
     -------
     dict
         :func:`evaluate`'s result with the selection under ``selection``.
     """
-    selection = select_mode(train, cfg, candidates, folds)
-    out = evaluate(train, test, replace(cfg, mode=selection["chosen"]))
+    selection = select_mode(train, cfg, candidates, folds, blocks, block_hop_s)
+    out = evaluate(train, test, replace(cfg, mode=selection["chosen"], block_s=selection["block_s"],
+                                        block_hop_s=selection["block_hop_s"]))
     out["selection"] = selection
     return out

@@ -235,6 +235,9 @@ def register(subparsers) -> None:
     p.add_argument("--select", default=None, metavar="MODE,MODE,...",
                    help="choose the mode among these by cross-validation by trial inside the training trials "
                    "(3 blocks; ties to the first listed), then score the test once with it (replaces --channels)")
+    p.add_argument("--select-blocks", default=None, metavar="S,S,...",
+                   help="with --select, also choose the block length among these seconds (0 = one descriptor "
+                   "per window) by the same cross-validation inside the training trials (default: --block's)")
     p.add_argument("--c-grid", default=None, metavar="C,C,...",
                    help="the SVM's candidate C values (default: the paper's 15)")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
@@ -287,6 +290,19 @@ def run(args: argparse.Namespace) -> int:
     asked = args.channels is not None
     for mode in candidates or ([args.channels] if asked else []):
         mode_groups(mode)  # an unknown mode is refused before any data is read
+    select_blocks = None
+    if args.select_blocks is not None:
+        if not candidates:
+            raise ConfigError("--select-blocks chooses among blocks with --select: give the modes too",
+                              key="select-blocks")
+        try:
+            select_blocks = [float(b) for b in args.select_blocks.split(",") if b.strip()]
+        except ValueError:
+            raise ConfigError(f"--select-blocks takes seconds joined by ',', got {args.select_blocks!r}",
+                              key="select-blocks") from None
+        if not select_blocks or not all(np.isfinite(b) and b >= 0 for b in select_blocks):
+            raise ConfigError(f"--select-blocks values must be >= 0 s (0 = whole window), got "
+                              f"{args.select_blocks!r}", key="select-blocks")
     c_grid = None
     if args.c_grid:
         try:
@@ -339,8 +355,9 @@ def run(args: argparse.Namespace) -> int:
     if candidates:
         from ..evaluation.experiments import evaluate_selected
 
-        result = evaluate_selected(train, test, cfg, candidates)
+        result = evaluate_selected(train, test, cfg, candidates, blocks=select_blocks, block_hop_s=args.block_hop)
         args.channels = result["selection"]["chosen"]
+        args.block = result["selection"]["block_s"] or 0.0
     else:
         result = evaluate(train, test, cfg)
     if args.json:
@@ -355,7 +372,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"selection by trial cross-validation inside the training trials ({sel['classifier']}, blocks "
               + ", ".join(f"{a}-{b}" for a, b in sel["folds"]) + "): "
               + "; ".join(f"{m} {100 * v['accuracy']:.1f} +- {100 * v['accuracy_std']:.1f} %"
-                          for m, v in sel["candidates"].items()) + f" -> {sel['chosen']}")
+                          for m, v in sel["candidates"].items()) + f" -> {sel['chosen_label']}")
+        for label, why in sel["skipped"].items():
+            print(f"  not tried: {label} ({why})")
     print(f"descriptor mode {args.channels} ({result['n_features']} values, {blocks}), window {args.window} s "
           f"(test {args.test_window or args.window}), crop {result['common_length_s']:.2f} s; "
           f"{result['n_train']} training and {result['n_test']} test windows ({args.windows} positions); "
