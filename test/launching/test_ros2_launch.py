@@ -79,13 +79,28 @@ class Graph:
         """Run ``ros2 ARGS``; return its stdout (raise with its output when it fails and ``check``;
         without ``check``, return stdout and stderr together).  A call that overruns ``timeout`` is stopped
         with Ctrl-C (:func:`ros_cli.finish`) and raises :class:`subprocess.TimeoutExpired`."""
-        run = run_ros2(*args, env=self.env, timeout_s=timeout)
+        return self._judged(run_ros2(*args, env=self.env, timeout_s=timeout), args, timeout, check)
+
+    def _judged(self, run: CliRun, args: tuple[str, ...], timeout: float, check: bool) -> str:
+        """:meth:`ros2`'s verdict on one finished call."""
         if run.stopped:
             raise subprocess.TimeoutExpired(["ros2", *args], timeout, output=run.stdout, stderr=run.stderr)
         if check and run.returncode != 0:
             raise AssertionError(f"ros2 {' '.join(args)} exited {run.returncode}:\n{run.stdout}\n{run.stderr}"
                                  f"\n--- launch log:\n{self.output()[-4000:]}")
         return run.stdout if check else run.text
+
+    def listed(self, verb: str, spin_s: int) -> set[str]:
+        """The names ``ros2 VERB list`` shows, for a caller that polls until what it waits for is listed.  A
+        CLI process that crashed (:meth:`ros2_node`: seen under load as a segmentation fault in its own
+        ``destroy_node``) has listed nothing and says nothing about the graph: it shows no name, and the
+        caller's poll asks again within its own deadline.  Any other failure raises as in :meth:`ros2`."""
+        args = (verb, "list", "--no-daemon", "--spin-time", str(spin_s))
+        run = run_ros2(*args, env=self.env, timeout_s=CLI_S)
+        if run.crashed:
+            print(f"ros2 {' '.join(args)} crashed (signal {-run.returncode}); asked again")
+            return set()
+        return set(self._judged(run, args, CLI_S, True).split())
 
     def output(self) -> str:
         return self.log.read_text(errors="replace")
@@ -150,7 +165,7 @@ class Graph:
         deadline = time.monotonic() + CLI_S
         seen: set[str] = set()
         while time.monotonic() < deadline:
-            seen = set(self.ros2("node", "list", "--no-daemon", "--spin-time", "2").split())
+            seen = self.listed("node", 2)
             if names <= seen:
                 return
         raise AssertionError(f"nodes {sorted(names - seen)} not discovered; saw {sorted(seen)}")
@@ -303,6 +318,30 @@ def test_a_cli_call_that_crashed_is_asked_again_and_any_other_failure_is_not(mon
         g.ros2_node("param", "set", "/n", "p", "1")
 
 
+def test_a_list_that_crashed_shows_no_name_and_a_poll_asks_again(monkeypatch, tmp_path):
+    """``Graph.listed``: a ``ros2 ... list`` ended by a signal it was not sent shows nothing and the poll that
+    asked (``wait_for_nodes``) asks again; a list that failed otherwise raises."""
+    log = tmp_path / "launch.log"
+    log.write_text("")
+    g = Graph("nao", None, log, {}, tmp_path, "")
+    crash = CliRun(-11, "", "Fatal Python error: Segmentation fault", stopped=False)
+    calls: list[tuple] = []
+
+    def run(*args, **kwargs):
+        calls.append(args)
+        return next(runs)
+
+    monkeypatch.setattr(sys.modules[__name__], "run_ros2", run)
+    runs = iter([crash, CliRun(0, "/a\n/b\n", "", stopped=False)])
+    g.wait_for_nodes({"/a", "/b"})
+    assert calls == [("node", "list", "--no-daemon", "--spin-time", "2")] * 2
+    runs = iter([crash])
+    assert g.listed("topic", 3) == set()
+    runs = iter([CliRun(1, "", "rcl error", stopped=False)])
+    with pytest.raises(AssertionError, match="exited 1"):
+        g.listed("topic", 3)
+
+
 def test_launch_reaches_first_prediction(graph):
     assert re.search(r"^exploration_id: [1-9]\d*$", graph.first_prediction, re.M), graph.first_prediction
     assert graph.proc.poll() is None
@@ -365,7 +404,7 @@ def test_every_topic_echoes_once_with_default_qos(graph):
     deadline = time.monotonic() + CLI_S
     listed: set[str] = set()
     while not set(topics) <= listed and time.monotonic() < deadline:
-        listed = set(graph.ros2("topic", "list", "--no-daemon", "--spin-time", "3").split())
+        listed = graph.listed("topic", 3)
     assert set(topics) <= listed, f"not listed: {sorted(set(topics) - listed)}"
 
 
