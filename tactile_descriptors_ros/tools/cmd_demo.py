@@ -46,30 +46,9 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["register", "run_demo", "match_exploration", "learning_curve", "never_windowed", "positive_float",
-           "chance_level"]
+from .arguments import positive_float, positive_int
 
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number above zero (``--speed``)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (value > 0 and value != float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a finite number above 0, got {text!r}")
-    return value
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer of at least 1 (``--block``)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return value
+__all__ = ["register", "run_demo", "match_exploration", "learning_curve", "never_windowed", "chance_level"]
 
 
 def match_exploration(start_ns: int, end_ns: int, timings) -> int | None:

@@ -24,7 +24,7 @@ import yaml
 from ..errors import ConfigError
 from ..launching.graph import LOG_LEVELS, build_graph, parameters_document
 from ..launching.processes import GraphProcesses, localhost_environment, node_command, run_until_interrupted
-from .cmd_demo import positive_float
+from .arguments import positive_float
 
 __all__ = ["register", "parse_set", "specs_from_args"]
 

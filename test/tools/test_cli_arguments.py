@@ -71,3 +71,44 @@ def test_demo_summary_names_touches_never_windowed():
     assert never_windowed([(1, 9), (41, 60)], touches) == [1]
     assert never_windowed([(0, 100)], touches) == [1, 2]  # one window over all counts for one touch only
     assert never_windowed([(-5, 12), (19, 31), (45, 46)], touches) == []
+
+
+def test_number_list_reads_values_in_order_and_skips_empty_items():
+    from tactile_descriptors_ros.tools.arguments import number_list
+
+    assert number_list("C values")("0.25,1,,4,") == [0.25, 1.0, 4.0]
+    assert number_list("cell counts", integer=True)("100, 1000") == [100, 1000]
+    assert number_list("seconds", low_open=False)("1,0") == [1.0, 0.0]
+    assert number_list("seconds", high=60)("60") == [60.0]
+
+
+@pytest.mark.parametrize(("kwargs", "text", "message"), [
+    ({}, "", "at least one"),
+    ({}, "1,x", "joined by ','"),
+    ({"integer": True}, "1.5", "joined by ','"),
+    ({}, "0", r"lie in \(0, inf\)"),
+    ({}, "nan", r"lie in \(0, inf\)"),
+    ({}, "inf", r"lie in \(0, inf\)"),
+    ({"low_open": False}, "-1", r"lie in \[0, inf\)"),
+    ({"high": 60}, "61", r"lie in \(0, 60\]"),
+])
+def test_number_list_refuses_what_is_not_a_value_in_range(kwargs, text, message):
+    import argparse
+
+    from tactile_descriptors_ros.tools.arguments import number_list
+
+    with pytest.raises(argparse.ArgumentTypeError, match=message):
+        number_list("values", **kwargs)(text)
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["bench", "--sizes", "0"], "argument --sizes: cell counts must lie in"),
+    (["bench", "--lengths", "2,120"], "argument --lengths: window lengths in seconds must lie in"),
+])
+def test_bench_lists_are_refused_in_one_line(argv, message, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err
+    assert "Traceback" not in err

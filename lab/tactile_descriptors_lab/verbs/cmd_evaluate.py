@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile_descriptors_ros.errors import ConfigError
+from tactile_descriptors_ros.tools.arguments import number_list
 
 __all__ = ["register", "run", "run_live", "default_trials", "split_trials", "check_recordings", "check_pac_rate"]
 
@@ -235,10 +236,11 @@ def register(subparsers) -> None:
     p.add_argument("--select", default=None, metavar="MODE,MODE,...",
                    help="choose the mode among these by cross-validation by trial inside the training trials "
                    "(3 blocks; ties to the first listed), then score the test once with it (replaces --channels)")
-    p.add_argument("--select-blocks", default=None, metavar="S,S,...",
+    p.add_argument("--select-blocks", type=number_list("block lengths in seconds (0 = the whole window)",
+                                                       low_open=False), default=None, metavar="S,S,...",
                    help="with --select, also choose the block length among these seconds (0 = one descriptor "
                    "per window) by the same cross-validation inside the training trials (default: --block's)")
-    p.add_argument("--c-grid", default=None, metavar="C,C,...",
+    p.add_argument("--c-grid", type=number_list("C values"), default=None, metavar="C,C,...",
                    help="the SVM's candidate C values (default: the paper's 15)")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
     p.add_argument("--gate", action=argparse.BooleanOptionalAction, default=False,
@@ -290,27 +292,11 @@ def run(args: argparse.Namespace) -> int:
     asked = args.channels is not None
     for mode in candidates or ([args.channels] if asked else []):
         mode_groups(mode)  # an unknown mode is refused before any data is read
-    select_blocks = None
-    if args.select_blocks is not None:
-        if not candidates:
-            raise ConfigError("--select-blocks chooses among blocks with --select: give the modes too",
-                              key="select-blocks")
-        try:
-            select_blocks = [float(b) for b in args.select_blocks.split(",") if b.strip()]
-        except ValueError:
-            raise ConfigError(f"--select-blocks takes seconds joined by ',', got {args.select_blocks!r}",
-                              key="select-blocks") from None
-        if not select_blocks or not all(np.isfinite(b) and b >= 0 for b in select_blocks):
-            raise ConfigError(f"--select-blocks values must be >= 0 s (0 = whole window), got "
-                              f"{args.select_blocks!r}", key="select-blocks")
-    c_grid = None
-    if args.c_grid:
-        try:
-            c_grid = tuple(float(c) for c in args.c_grid.split(","))
-        except ValueError:
-            raise ConfigError(f"--c-grid takes numbers joined by ',', got {args.c_grid!r}", key="c-grid") from None
-        if not c_grid or not all(np.isfinite(c) and c > 0 for c in c_grid):
-            raise ConfigError(f"--c-grid values must be positive, got {args.c_grid!r}", key="c-grid")
+    select_blocks = args.select_blocks
+    if select_blocks is not None and not candidates:
+        raise ConfigError("--select-blocks chooses among blocks with --select: give the modes too",
+                          key="select-blocks")
+    c_grid = tuple(args.c_grid) if args.c_grid else None
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
     if (args.train_windows is not None and args.train_windows < 1) or args.test_windows < 1 or args.cv_repeats < 1:

@@ -114,7 +114,14 @@ def test_cli_select_blocks_needs_modes_and_seconds(biotac_data_dir, tmp_path, ca
     base = ["evaluate", "--train", str(biotac_data_dir), "--test", str(biotac_data_dir), "--cache", str(tmp_path)]
     assert main(base + ["--select-blocks", "1,0"]) == 2
     assert "--select" in capsys.readouterr().err
-    assert main(base + ["--select", "paper", "--select-blocks", "1,x"]) == 2
-    assert "seconds" in capsys.readouterr().err
-    assert main(base + ["--select", "paper", "--select-blocks", "-1"]) == 2
-    assert ">= 0 s" in capsys.readouterr().err
+    for value, message in [("1,x", "block lengths in seconds (0 = the whole window) joined by ','"),
+                           ("-1", "must lie in [0, inf)")]:
+        with pytest.raises(SystemExit) as exc:  # argparse's one line, before any data is read
+            main(base + ["--select", "paper", "--select-blocks", value])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert "argument --select-blocks: " in err
+        assert message in err
+    with pytest.raises(SystemExit):
+        main(base + ["--c-grid", "0.25,0"])
+    assert "argument --c-grid: C values must lie in (0, inf)" in capsys.readouterr().err
