@@ -95,14 +95,16 @@ class ProbeFrames:
 
 
 def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] = (300, 700),
-                 phases_ns: dict[int, int] | None = None) -> ProbeFrames:
+                 phases_ns: dict[int, int] | None = None, whole_robot: bool = False) -> ProbeFrames:
     """The probe's ``SkinPartFrames`` for every body part (see :class:`ProbeFrames`).
 
     Force counts are drawn from ``force_counts`` (untared: 300-700 counts are
     0.7-1.7 N, every cell in contact; 0-20 counts are below the release threshold).
     ``phases_ns``: cell id -> how long after the grid that cell samples (less than
     an accelerometer period; cells on clocks of their own, :func:`cell_phases_ns`);
-    every cell on the grid without it.
+    every cell on the grid without it.  ``whole_robot``: each batch is one
+    message of every body part's runs in order (body part ``""``), the same
+    samples as the messages per body part.
     """
     import math
 
@@ -135,9 +137,11 @@ def probe_frames(desc, batch_s: float, seed: int, force_counts: tuple[int, int] 
                 frame = SkinFrame(0, accel, offsets_a - offsets_a[0] + ph, force, offsets_f - offsets_a[0] + ph,
                                   np.zeros(0, dtype=np.uint16))
                 runs.append(SkinRun(cell.id, frame, np.zeros(3)))
-            msg = skin_part_to_msg(pack_skin_part(part.name, runs, force_n_per_count=n_per_count))
-            out.append((part.name, msg))
-        templates.append(out)
+            out.append((part.name, runs))
+        if whole_robot:
+            out = [("", [run for _, runs in out for run in runs])]
+        templates.append([(name, skin_part_to_msg(pack_skin_part(name, runs, force_n_per_count=n_per_count)))
+                          for name, runs in out])
         last_a.append(int(offsets_a[-1]))
         last_f.append(int(offsets_f[-1]) if offsets_f.size else -1)
     return ProbeFrames(templates, np.array(last_a, np.int64), np.array(last_f, np.int64), period_ns)

@@ -33,6 +33,16 @@ from tactile_descriptors_ros.tools.arguments import number_list
 __all__ = ["register", "run"]
 
 
+def _layouts(text: str) -> list[str]:
+    """argparse type of ``--executor-layouts``: names among the executor bench's layouts, joined by ','."""
+    from tactile_descriptors_lab.bench.executor_overhead import LAYOUTS
+
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    if not names or any(x not in LAYOUTS for x in names):
+        raise argparse.ArgumentTypeError(f"expected layouts among {', '.join(LAYOUTS)} joined by ',', got {text!r}")
+    return list(dict.fromkeys(names))
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("bench", help="time the descriptor path against a naive baseline",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -95,6 +105,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--serialized", action="store_true",
                    help="with --executor-overhead: also take the frames as their bytes and read them in one "
                         "compiled pass, as the nodes do (frames.serialized)")
+    p.add_argument("--executor-layouts", type=_layouts, default=["part"], metavar="L,L,...",
+                   help="with --executor-overhead: what a message holds, among part (the NAO's largest body part, "
+                        "700/s), parts (each body part in turn, 700/s) and robot (every cell in one message a "
+                        "batch, 100/s); parts,robot compares the two per cell-second (default part)")
     p.add_argument("--read-cost", action="store_true",
                    help="instead of timing: the skin driver's read path in one process (decode, stamp, cut, write "
                         "the messages' bytes) on --read-cost-cells cells read every --read-period-s, CPU per read "
@@ -346,15 +360,15 @@ def _executor_overhead(args: argparse.Namespace) -> int:
         print("tactile bench: error: --rounds and --seconds must be positive", file=sys.stderr)
         return 2
     taken = ("message", "bytes") if args.serialized else ("message",)
-    bar = tqdm(total=2 * len(taken) * args.rounds, desc="executor overhead", unit="run", file=sys.stderr,
-               leave=False)
+    bar = tqdm(total=2 * len(taken) * len(args.executor_layouts) * args.rounds, desc="executor overhead",
+               unit="run", file=sys.stderr, leave=False)
 
     def progress(text: str) -> None:
         bar.set_postfix_str(text)
         bar.update(1)
 
     try:
-        report = measure(args.seconds, args.rounds, progress=progress, taken=taken)
+        report = measure(args.seconds, args.rounds, progress=progress, taken=taken, layouts=args.executor_layouts)
     except RuntimeError as exc:
         bar.close()
         print(f"tactile bench: error: executor overhead failed: {exc}", file=sys.stderr)

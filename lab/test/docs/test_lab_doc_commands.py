@@ -23,6 +23,9 @@ SKIP: dict[tuple[str, str], str] = {
         "43 processes on three hosts for minutes; lab/test/bench/test_multi_host.py runs a small two-host graph",
     ("lab/docs/performance.md", "tactile bench --executor-overhead --rounds 3 --seconds 15 --json"):
         "six 15 s runs of two processes each; lab/test/bench/test_executor_overhead.py runs a short one",
+    ("lab/docs/performance.md",
+     "tactile bench --executor-overhead --serialized --executor-layouts parts,robot --rounds 2 --seconds 15 --json"):
+        "sixteen 15 s runs of two processes each; lab/test/bench/test_executor_overhead.py runs a short one",
     ("lab/docs/performance.md", "tactile bench --read-cost --read-cost-cells 200 --rounds 3 --json"):
         "seven passes over 4 s of 200 cells' frames, about a minute; lab/test/bench/test_read_cost.py runs the same "
         "command with 20 cells and one round",
