@@ -1,8 +1,8 @@
 """argparse types shared by the ``tactile`` verbs: one home for how a number or a list of numbers is read.
 
-A bad value is argparse's own one-line error (``tactile demo: error: argument
---speed: must be a finite number above 0, got '0'``, exit 2), given before a
-verb reads any data.
+A bad value gets argparse's usage and its one-line error (``tactile demo:
+error: argument --speed: must be a finite number above 0, got '0'``, exit 2),
+before a verb reads any data.
 """
 
 from __future__ import annotations
