@@ -37,7 +37,7 @@ def positive_int(text: str) -> int:
 
 
 def number_list(what: str, *, integer: bool = False, low: float = 0.0, low_open: bool = True,
-                high: float = math.inf) -> Callable[[str], list]:
+                high: float = math.inf, empty: bool = False) -> Callable[[str], list]:
     """argparse type of a comma-separated list of numbers (``--sizes 100,1000``, ``--c-grid 0.25,1``).
 
     Parameters
@@ -49,14 +49,17 @@ def number_list(what: str, *, integer: bool = False, low: float = 0.0, low_open:
     low, low_open, high : float
         Every value must lie in ``(low, high]`` (``[low, high]`` with
         ``low_open`` False) and be finite.
+    empty : bool
+        Whether no value at all (``""``) is a list: an option that turns a
+        part of the work off that way (``tactile bench --sizes ""``).
 
     Returns
     -------
     callable
         ``str -> list`` for ``add_argument(type=...)``: the values in the
         order given; empty items (``"1,,2"``, a trailing comma) are skipped;
-        no value at all, a value that is not a number or one out of range
-        raise ``argparse.ArgumentTypeError`` naming the text.
+        no value at all (unless ``empty``), a value that is not a number or
+        one out of range raise ``argparse.ArgumentTypeError`` naming the text.
     """
     cast = int if integer else float
     bound = f"{'(' if low_open else '['}{low:g}, {high:g}{']' if math.isfinite(high) else ')'}"
@@ -66,7 +69,7 @@ def number_list(what: str, *, integer: bool = False, low: float = 0.0, low_open:
             values = [cast(x) for x in text.split(",") if x.strip()]
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected {what} joined by ',', got {text!r}") from None
-        if not values:
+        if not values and not empty:
             raise argparse.ArgumentTypeError(f"expected at least one of the {what}, got {text!r}")
         for v in values:
             if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):

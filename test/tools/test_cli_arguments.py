@@ -80,6 +80,7 @@ def test_number_list_reads_values_in_order_and_skips_empty_items():
     assert number_list("cell counts", integer=True)("100, 1000") == [100, 1000]
     assert number_list("seconds", low_open=False)("1,0") == [1.0, 0.0]
     assert number_list("seconds", high=60)("60") == [60.0]
+    assert number_list("cell counts", integer=True, empty=True)("") == []  # `tactile bench --sizes ""`: none
 
 
 @pytest.mark.parametrize(("kwargs", "text", "message"), [

@@ -47,9 +47,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("bench", help="time the descriptor path against a naive baseline",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeat", type=int, default=7, help="timed repeats per case (median reported; default 7)")
-    p.add_argument("--sizes", type=number_list("cell counts", integer=True), default=[1000, 10000],
+    p.add_argument("--sizes", type=number_list("cell counts", integer=True, empty=True), default=[1000, 10000],
                    help="large skins to time, comma-separated cell counts (default 1000,10000)")
-    p.add_argument("--lengths", type=number_list("window lengths in seconds", high=60), default=[0.5, 1.0, 2.0, 5.0, 10.0],
+    p.add_argument("--lengths", type=number_list("window lengths in seconds", high=60, empty=True),
+                   default=[0.5, 1.0, 2.0, 5.0, 10.0],
                    help="NAO window lengths for the scaling table, seconds (default 0.5,1,2,5,10)")
     p.add_argument("--baseline-cells", type=int, default=116,
                    help="cells on which the baseline of a large skin is measured (default 116)")
