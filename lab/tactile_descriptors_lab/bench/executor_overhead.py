@@ -191,6 +191,10 @@ def _one_run(kind: str, seconds: float, env: dict[str, str], taken: str = "messa
     if not (result["received"] == expected and result["in_order"] and result["equal"]):
         raise RuntimeError(f"the {kind} subscriber received {result['received']} of {expected} messages "
                            f"(in order: {result['in_order']}, equal to what was sent: {result['equal']})")
+    for side in ("", "publisher_"):  # messages a second x CPU a message / cells = CPU per cell and second of data
+        # (the largest body part alone is not a second of the robot's data)
+        result[f"{side}cpu_ms_per_cell_second"] = (result[f"{side}cpu_us_per_message"] * rate_hz / cells / 1e3
+                                                   if layout != "part" else None)
     return result
 
 
@@ -227,11 +231,6 @@ def measure(seconds: float = 15.0, rounds: int = 2, kinds: Sequence[str] = ("sin
         return statistics.median(run[field] for run in runs
                                  if (run["executor"], run["taken"], run["layout"]) == combo)
 
-    for run in runs:  # messages a second x CPU a message / cells = CPU per cell and second of data
-        whole = run["layout"] != "part"  # the largest part alone is not a second of the robot's data
-        for side in ("", "publisher_"):
-            run[f"{side}cpu_ms_per_cell_second"] = (run[f"{side}cpu_us_per_message"] * run["rate_hz"]
-                                                    / run["cells_per_batch"] / 1e3 if whole else None)
     per = {_key(*c): median_of("cpu_us_per_message", c) for c in combos}
     report = {"rate_hz": RATE_HZ, "seconds": seconds, "rounds": rounds, "layouts": list(layouts), "runs": runs,
               "cpu_us_per_message": per, "load_average": os.getloadavg()}
