@@ -11,6 +11,12 @@ the shipped ``config/rocket/biotac.json`` was written by::
 
 Fit on training trials only: the biases are quantiles of training signals,
 and an evaluation whose test trials fed them has seen its test data.
+
+``--vibration-features``, ``--slow-features`` and ``--vibration-max-dilation``
+size the transforms (the shipped file: 420, 840 and 12); a larger transform
+costs the window node in proportion.  To evaluate one without touching the
+shipped file, write it into a copy of the configuration directory and point
+``TACTILE_CONFIG_DIR`` at the copy.
 """
 
 from __future__ import annotations
@@ -18,6 +24,8 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+
+from tactile_descriptors_ros.tools.arguments import positive_int
 
 __all__ = ["register", "run"]
 
@@ -30,20 +38,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--trials", default=None, help="training trials, e.g. 1-20 (default: all)")
     p.add_argument("-o", "--output", type=Path, required=True, help="the JSON file to write")
     p.add_argument("--seed", type=int, default=0, help="window positions and random choices (default 0)")
+    p.add_argument("--vibration-features", type=positive_int, default=None,
+                   help="features of the vibration transform, at least 84 (default 420)")
+    p.add_argument("--slow-features", type=positive_int, default=None,
+                   help="features of the slow channels' transform, at least 84 (default 840)")
+    p.add_argument("--vibration-max-dilation", type=positive_int, default=None,
+                   help="largest dilation of the vibration transform, in samples (default 12)")
     p.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tactile_descriptors_lab.evaluation.rocket_fit import fit_rocket, write_rocket
+    from tactile_descriptors_lab.evaluation.rocket_fit import (
+        SLOW_FEATURES,
+        VIBRATION_FEATURES,
+        VIBRATION_MAX_DILATION,
+        fit_rocket,
+        write_rocket,
+    )
     from tactile_descriptors_lab.evaluation.sampling import format_trials, load_split, parse_trials
 
     trials = parse_trials(args.trials)
     recs = load_split(args.data, trials, mapping=args.mapping)
-    params = fit_rocket(recs, seed=args.seed)
+    sizes = {"vibration_features": args.vibration_features or VIBRATION_FEATURES,
+             "slow_features": args.slow_features or SLOW_FEATURES,
+             "vibration_max_dilation": args.vibration_max_dilation or VIBRATION_MAX_DILATION}
+    params = fit_rocket(recs, seed=args.seed, **sizes)
     used = sorted({r.trial for r in recs})
     desc = (f"fitted by tactile fit-rocket on {len(recs)} recordings ({len({r.material for r in recs})} classes, "
             f"trials {format_trials(used)}), seed {args.seed}")
+    if sizes != {"vibration_features": VIBRATION_FEATURES, "slow_features": SLOW_FEATURES,
+                 "vibration_max_dilation": VIBRATION_MAX_DILATION}:
+        desc += ", " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sizes.items())
     path = write_rocket(args.output, params, desc)
     summary = {"output": str(path), "recordings": len(recs), "trials": format_trials(used),
                "features": {k: v.n_features for k, v in params.items()},
