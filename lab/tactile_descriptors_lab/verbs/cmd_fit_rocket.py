@@ -60,15 +60,14 @@ def run(args: argparse.Namespace) -> int:
 
     trials = parse_trials(args.trials)
     recs = load_split(args.data, trials, mapping=args.mapping)
-    sizes = {"vibration_features": args.vibration_features or VIBRATION_FEATURES,
-             "slow_features": args.slow_features or SLOW_FEATURES,
-             "vibration_max_dilation": args.vibration_max_dilation or VIBRATION_MAX_DILATION}
+    defaults = {"vibration_features": VIBRATION_FEATURES, "slow_features": SLOW_FEATURES,
+                "vibration_max_dilation": VIBRATION_MAX_DILATION}
+    sizes = {k: getattr(args, k) or v for k, v in defaults.items()}  # an option given is at least 1
     params = fit_rocket(recs, seed=args.seed, **sizes)
     used = sorted({r.trial for r in recs})
     desc = (f"fitted by tactile fit-rocket on {len(recs)} recordings ({len({r.material for r in recs})} classes, "
             f"trials {format_trials(used)}), seed {args.seed}")
-    if sizes != {"vibration_features": VIBRATION_FEATURES, "slow_features": SLOW_FEATURES,
-                 "vibration_max_dilation": VIBRATION_MAX_DILATION}:
+    if sizes != defaults:
         desc += ", " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sizes.items())
     path = write_rocket(args.output, params, desc)
     summary = {"output": str(path), "recordings": len(recs), "trials": format_trials(used),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -33,6 +34,18 @@ def test_sizes_are_options(biotac_data_dir, tmp_path, capsys):
     description = json.loads(out.read_text())["description"]
     assert "trials 1-2" in description and "vibration features 168, slow features 252, vibration max dilation 3" \
         in description
+
+
+def test_help_gives_the_librarys_default_sizes(capsys):
+    """The options' help names the defaults; the library's constants are their one home."""
+    from tactile_descriptors_lab.evaluation.rocket_fit import SLOW_FEATURES, VIBRATION_FEATURES, VIBRATION_MAX_DILATION
+
+    with pytest.raises(SystemExit):
+        main(["fit-rocket", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for option, default in (("--vibration-features", VIBRATION_FEATURES), ("--slow-features", SLOW_FEATURES),
+                            ("--vibration-max-dilation", VIBRATION_MAX_DILATION)):
+        assert re.search(rf"{option} \S+ [^-]*\(default {default}\)", text), (option, default)
 
 
 @pytest.mark.parametrize("option, value", [("--slow-features", "0"), ("--vibration-features", "many"),
