@@ -56,7 +56,13 @@ def _values(status):
 
 class _Bridge:
     """A BioTac bridge on a pty behind a stable name (as udev's /dev/serial/by-id links): frames of chip
-    selects 0 and 1 at 100 Hz from a thread; ``unplug`` closes the pty, ``replug`` makes a new one."""
+    selects 0 and 1 at 100 Hz from a thread; ``unplug`` closes the pty and removes the name, as udev
+    does, ``replug`` makes a new pty and names it again.
+
+    The name must go with the pty: the kernel gives a freed pty number to the next pty opened on the
+    machine (another test's, a terminal's), and a name left pointing at it would hand the driver a
+    stranger's device that never sends a frame.
+    """
 
     def __init__(self, link_path) -> None:
         from tactile_descriptors_ros.codecs.biotac_spi import FramePattern
@@ -89,6 +95,7 @@ class _Bridge:
     def unplug(self) -> None:
         with self.lock:
             master, slave, self.master, self.slave = self.master, self.slave, None, None
+        os.unlink(self.link_path)
         os.close(master)
         os.close(slave)
 
