@@ -482,7 +482,7 @@ def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequenc
         if cfg.block_s and any("subwindows" in mode_groups(m) for m in modes):
             raise ConfigError("block averaging and the subwindows group do not combine: select with whole windows "
                               "(block 0), or among blocks including 0 (--select-blocks)", key="block")
-        return {m: cfg for m in dict.fromkeys(modes)}, {}
+        return {m: replace(cfg, mode=m) for m in dict.fromkeys(modes)}, {}
     if any(not np.isfinite(b) or b < 0 for b in blocks) or not block_hop_s > 0:
         raise ConfigError(f"selection blocks must be >= 0 s (0 = whole window) with a hop > 0, got "
                           f"{list(blocks)} / {block_hop_s:g}", key="select_blocks")

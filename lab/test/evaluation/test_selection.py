@@ -59,6 +59,24 @@ def test_selection_tries_every_mode_and_block_on_training_trials_only(monkeypatc
     assert sel["folds"] == [[1, 3], [4, 6], [7, 9]]
 
 
+def test_selection_without_blocks_runs_each_mode_as_itself(monkeypatch):
+    """``--select A,B`` alone: each candidate is scored with its own mode and ``cfg``'s blocks (not the
+    first mode under every label, which would tie and always choose the first)."""
+    table = {("plain", 1.0): 0.80, ("combined", 1.0): 0.90, ("per_channel", 1.0): 0.85}
+    calls: list = []
+    monkeypatch.setattr(experiments, "evaluate", _scoring(table, calls))
+    cfg = EvalConfig(window="2", mode="plain", classifiers=("pa",), block_s=1.0, block_hop_s=0.5)
+    out = evaluate_selected(TRAIN, TEST, cfg, ["plain", "combined", "per_channel"])
+    sel = out["selection"]
+    assert {label: v["accuracy"] for label, v in sel["candidates"].items()} == pytest.approx({
+        "plain": 0.80, "combined": 0.90, "per_channel": 0.85}, abs=1e-12)
+    assert {label: v["mode"] for label, v in sel["candidates"].items()} == {
+        "plain": "plain", "combined": "combined", "per_channel": "per_channel"}
+    assert sel["chosen"] == "combined" and sel["block_s"] == 1.0
+    assert [c[0] for c in calls] == ["plain"] * 3 + ["combined"] * 3 + ["per_channel"] * 3 + ["combined"]
+    assert {(c[1], c[2]) for c in calls} == {(1.0, 0.5)}  # cfg's blocks for every candidate
+
+
 def test_selection_ties_go_to_the_candidate_listed_first(monkeypatch):
     table = {("plain", 1.0): 0.9, ("plain", None): 0.9, ("combined", 1.0): 0.9, ("combined", None): 0.9}
     monkeypatch.setattr(experiments, "evaluate", _scoring(table, []))
