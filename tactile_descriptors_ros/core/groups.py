@@ -386,13 +386,30 @@ def body_part_layout(cell_type: CellType, channels: str = "averaged") -> tuple[s
     return tuple(labels)
 
 
-@functools.lru_cache(maxsize=256)
+def _rocket_sizes(cell_type: CellType, groups: Iterable[str]) -> tuple[int, ...] | None:
+    """The fitted ``rocket`` transforms' feature counts when ``groups`` holds the group, else None.
+
+    The labels' caches take it as part of their key: a transform file written
+    again (``tactile fit-rocket``), or another one put in its place, gives
+    labels of its own size in the same process.
+    """
+    if not any(parse_group(g)[0] == "rocket" for g in groups):
+        return None
+    params = rocket_parameters(cell_type)
+    return tuple(params[sig].n_features for sig in ROCKET_SIGNALS)
+
+
 def group_labels(cell_type: CellType, group: str) -> tuple[str, ...]:
     """Labels of one group's values in a body part, without the ``<group>/`` prefix.
 
     The kernel groups follow :func:`body_part_layout`; the
     others are documented in this module's docstring.
     """
+    return _group_labels(cell_type, group, _rocket_sizes(cell_type, (group,)))
+
+
+@functools.lru_cache(maxsize=256)
+def _group_labels(cell_type: CellType, group: str, rocket_sizes: tuple[int, ...] | None) -> tuple[str, ...]:
     name, chans = parse_group(group)
     if name in KERNEL_GROUPS:
         return body_part_layout(cell_type, KERNEL_GROUPS[name])
@@ -405,8 +422,7 @@ def group_labels(cell_type: CellType, group: str) -> tuple[str, ...]:
     if name == "plain":
         return tuple(f"{q}_{ch}" for q in ("avg", "std", "min", "max") for ch in cell_type.channels)
     if name == "rocket":
-        params = rocket_parameters(cell_type)
-        return tuple(f"ppv_{sig}_{i:04d}" for sig in ROCKET_SIGNALS for i in range(params[sig].n_features))
+        return tuple(f"ppv_{sig}_{i:04d}" for sig, n in zip(ROCKET_SIGNALS, rocket_sizes) for i in range(n))
     dbands = [_band_name(lo, hi) for lo, hi in deformation_bands(cell_type.deformation.rate_hz)]
     both = vib + dfm
     return tuple([f"logvar_{c}" for c in both] + [f"skew_{c}" for c in both] + [f"kurt_{c}" for c in both]
@@ -414,10 +430,15 @@ def group_labels(cell_type: CellType, group: str) -> tuple[str, ...]:
                  + [f"logbp_{c}_{b}" for c in dfm for b in dbands])
 
 
-@functools.lru_cache(maxsize=256)
 def selection_labels(cell_type: CellType, groups: tuple[str, ...]) -> tuple[str, ...]:
     """A body part's labels for a selection: ``<group>/<label>`` group after group."""
-    return tuple(f"{g}/{lab}" for g in groups for lab in group_labels(cell_type, g))
+    return _selection_labels(cell_type, tuple(groups), _rocket_sizes(cell_type, groups))
+
+
+@functools.lru_cache(maxsize=256)
+def _selection_labels(cell_type: CellType, groups: tuple[str, ...],
+                      rocket_sizes: tuple[int, ...] | None) -> tuple[str, ...]:
+    return tuple(f"{g}/{lab}" for g in groups for lab in _group_labels(cell_type, g, rocket_sizes))
 
 
 def selection_name(groups: Iterable[str]) -> str:

@@ -145,3 +145,30 @@ def test_a_cell_type_without_fitted_transforms_cannot_feed_the_group():
     with pytest.raises(ConfigError, match=r"'rocket' cannot be fed by cell type .*no fitted transform .*fit-rocket"):
         check_groups(ct, ("rocket",))
     assert "rocket" not in feedable_groups(ct, ct.channels) and "plain" in feedable_groups(ct, ct.channels)
+
+
+def test_labels_follow_a_transform_file_written_again_in_the_same_process(tmp_path, monkeypatch):
+    """The labels' caches key on the fitted sizes: a config directory whose ``rocket/biotac.json`` is written
+    again with other sizes (``tactile fit-rocket`` in a running evaluation) gives labels of the new size,
+    and the describe on the live path agrees with them."""
+    import shutil
+
+    from tactile_descriptors_ros.core.groups import group_labels, rocket_parameters, selection_labels
+    from tactile_descriptors_ros.core.robot import load_robot
+    from tactile_descriptors_ros.core.yamlreader import config_dir
+
+    ct = load_robot("shadow_hand").cell_types["biotac"]
+    shipped = len(group_labels(ct, "rocket"))
+    cfg = tmp_path / "config"
+    shutil.copytree(config_dir(), cfg)
+    monkeypatch.setenv("TACTILE_CONFIG_DIR", str(cfg))
+    assert len(selection_labels(ct, ("plain", "rocket"))) == len(group_labels(ct, "plain")) + shipped
+    rng = np.random.default_rng(0)
+    small = {"vibration": rocket.fit(rng.integers(-50, 50, size=(4, 1, 97)), 84, seed=1),
+             "slow": rocket.fit(rng.integers(-50, 50, size=(4, 22, 100)), 168, seed=2)}
+    rocket.save_parameters(cfg / "rocket" / "biotac.json", small)
+    assert rocket_parameters(ct)["slow"].n_features == 168
+    assert len(group_labels(ct, "rocket")) == 84 + 168
+    assert len(selection_labels(ct, ("plain", "rocket"))) == len(group_labels(ct, "plain")) + 84 + 168
+    monkeypatch.delenv("TACTILE_CONFIG_DIR")
+    assert len(group_labels(ct, "rocket")) == shipped  # the shipped file again, from the cache
