@@ -467,6 +467,14 @@ def _save_cache(path: Path, entries: dict[tuple, tuple]) -> None:
     os.replace(tmp, path)
 
 
+def _use_config_dir(path: str | None) -> None:
+    """A worker's initializer: read the config directory the parent process reads."""
+    if path is None:
+        os.environ.pop("TACTILE_CONFIG_DIR", None)
+    else:
+        os.environ["TACTILE_CONFIG_DIR"] = path
+
+
 def _work(args: tuple) -> list[tuple]:
     rec, starts, n_frames, cell_type, threshold = args
     return [window_bank(rec, s, n_frames, cell_type, threshold) for s in starts]
@@ -565,7 +573,9 @@ def compute_bank(recordings: Sequence[BiotacRecording], windows: Sequence[Window
             bar = tqdm(total=len(tasks), desc=f"{desc} ({n_frames / rate_hz:.2f} s windows)", unit="trial",
                        leave=False)
         if jobs > 1 and len(tasks) > 4:
-            pool = ProcessPoolExecutor(max_workers=jobs)
+            # the workers read the config directory the caller reads (a transform in use, rocket_fit)
+            pool = ProcessPoolExecutor(max_workers=jobs, initializer=_use_config_dir,
+                                       initargs=(os.environ.get("TACTILE_CONFIG_DIR"),))
             results = pool.map(_work, tasks, chunksize=4)
         else:
             pool = None

@@ -26,6 +26,7 @@ from tactile_descriptors_lab.evaluation.bank import (
     select_features,
 )
 from tactile_descriptors_lab.evaluation.classifiers import C_GRID, C_GRID_TEXT, CV_REPEATS, fit_svm, gmm_nmi, pa_curve
+from tactile_descriptors_lab.evaluation.rocket_fit import transform_in_use
 from tactile_descriptors_lab.evaluation.sampling import (
     DEFAULT_BLOCK_HOP_S,
     DEFAULT_BLOCK_S,
@@ -102,6 +103,10 @@ class EvalConfig:
         Block averaging (:func:`describe_windows`): a window's descriptor is
         the mean of the descriptors of its ``block_s`` blocks, at most
         ``block_hop_s`` apart.  ``None``: one descriptor of the whole window.
+    rocket_file : str or None
+        The ``rocket`` group's transforms from this file (written by
+        ``tactile fit-rocket``) instead of the config directory's
+        (:func:`~.rocket_fit.transform_in_use`); None: the config directory's.
     jobs : int
     cache_dir : str or None
     progress : bool
@@ -126,6 +131,7 @@ class EvalConfig:
     windows: str = "random"
     block_s: float | None = DEFAULT_BLOCK_S
     block_hop_s: float | None = DEFAULT_BLOCK_HOP_S
+    rocket_file: str | None = None
     jobs: int = 2
     cache_dir: str | None = "build/cache"
     progress: bool = False
@@ -291,6 +297,15 @@ def evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecordi
     dict of str to dict
         :func:`evaluate`'s result per test window specification.
     """
+    if cfg.rocket_file is None:
+        return _evaluate_many(train, test, cfg, test_windows)
+    _, cell_type = recordings_robot(list(train) + list(test))
+    with transform_in_use(cfg.rocket_file, cell_type):
+        return _evaluate_many(train, test, cfg, test_windows)
+
+
+def _evaluate_many(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
+                   test_windows: Sequence[str]) -> dict[str, dict]:
     classifiers = _check_classifiers(cfg.classifiers)
     specs = list(dict.fromkeys(test_windows))
     if not train or not test:
@@ -466,7 +481,8 @@ def _block_label(block_s: float | None) -> str:
 
 
 def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
-                          block_hop_s: float) -> tuple[dict[str, EvalConfig], dict[str, str]]:
+                          block_hop_s: float, rockets: Sequence[str] | None = None
+                          ) -> tuple[dict[str, EvalConfig], dict[str, str]]:
     """The configurations a selection compares, by label, and the pairs it cannot run, with why.
 
     Without ``blocks`` a candidate is a mode with ``cfg``'s blocks (its label
@@ -474,8 +490,29 @@ def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequenc
     pair; a block of 0 is one descriptor per window; a block's hop is
     ``block_hop_s`` or the block, whichever is shorter.  The ``subwindows``
     group describes a window's pieces itself, so it pairs with the whole
-    window only.
+    window only.  With ``rockets`` (transform files) every candidate whose
+    mode holds the ``rocket`` group is tried with each file in turn (label
+    ``<label>, transform <file>``); the other modes once.
     """
+    runs, skipped = _mode_block_candidates(cfg, modes, blocks, block_hop_s)
+    if not rockets:
+        return runs, skipped
+    if not any("rocket" in mode_groups(run.mode) for run in runs.values()):
+        raise ConfigError("transform files choose among the rocket group's transforms: no candidate mode holds "
+                          "the group (e.g. rocket, combined_rocket)", key="select_rocket")
+    out: dict[str, EvalConfig] = {}
+    for label, run in runs.items():
+        if "rocket" not in mode_groups(run.mode):
+            out[label] = run
+            continue
+        for path in dict.fromkeys(rockets):
+            out[f"{label}, transform {path}"] = replace(run, rocket_file=str(path))
+    return out, skipped
+
+
+def _mode_block_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
+                           block_hop_s: float) -> tuple[dict[str, EvalConfig], dict[str, str]]:
+    """:func:`_selection_candidates` without the transform files."""
     for mode in modes:
         mode_groups(mode)  # unknown modes are refused before any work
     if blocks is None:
@@ -503,7 +540,7 @@ def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequenc
 
 def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Sequence[str],
                 folds: int = SELECTION_FOLDS, blocks: Sequence[float] | None = None,
-                block_hop_s: float = DEFAULT_BLOCK_HOP_S) -> dict:
+                block_hop_s: float = DEFAULT_BLOCK_HOP_S, rockets: Sequence[str] | None = None) -> dict:
     """Choose a descriptor mode (and block length) by cross-validation by trial *inside the training trials only*.
 
     The training trials are cut into ``folds`` contiguous blocks
@@ -519,18 +556,26 @@ def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: S
     window is averaged is chosen by the same inner cross-validation, never
     by the test split.
 
+    With ``rockets`` (files written by ``tactile fit-rocket``, e.g. of two
+    sizes) the modes holding the ``rocket`` group are also tried with each
+    transform: the transform's size is chosen the same way.  The files should
+    be fitted on the training trials only; inside the selection a file fitted
+    on all of them has seen the inner test block's signals (its biases are
+    quantiles of them, never of labels), and every file alike.
+
     Returns
     -------
     dict
         ``chosen`` (the mode), ``block_s`` (its block length, None = the
-        whole window), ``chosen_label``, ``candidates`` (per label: ``mode``,
-        ``block_s``, ``accuracy``, ``accuracy_std``, ``fold_accuracy``),
+        whole window), ``rocket_file`` (None = the config directory's),
+        ``chosen_label``, ``candidates`` (per label: ``mode``, ``block_s``,
+        ``rocket_file``, ``accuracy``, ``accuracy_std``, ``fold_accuracy``),
         ``skipped`` (labels a mode cannot pair with, and why), ``folds`` and
         ``classifier``.
     """
     if not candidates:
         raise ConfigError("no candidate mode to select from", key="select")
-    runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s)
+    runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s, rockets)
     name = cfg.classifiers[0]
     trials = sorted({r.trial for r in train})
     fold_trials = trial_folds(trials, folds)
@@ -542,29 +587,31 @@ def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: S
             inner_train = [r for r in train if r.trial not in block]
             res = evaluate(inner_train, inner_test, replace(run_cfg, classifiers=(name,), test_window=None))
             accs.append(res["classifiers"][name]["accuracy"])
-        scores[label] = {"mode": run_cfg.mode, "block_s": run_cfg.block_s,
+        scores[label] = {"mode": run_cfg.mode, "block_s": run_cfg.block_s, "rocket_file": run_cfg.rocket_file,
                          "accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
                          "fold_accuracy": [float(a) for a in accs]}
     best = max(v["accuracy"] for v in scores.values())
     chosen = next(k for k, v in scores.items() if v["accuracy"] >= best - 1e-12)
     return {"chosen": scores[chosen]["mode"], "block_s": runs[chosen].block_s,
-            "block_hop_s": runs[chosen].block_hop_s, "chosen_label": chosen,
+            "block_hop_s": runs[chosen].block_hop_s, "rocket_file": runs[chosen].rocket_file,
+            "chosen_label": chosen,
             "candidates": scores, "skipped": skipped, "classifier": name,
             "folds": [[int(min(b)), int(max(b))] for b in fold_trials]}
 
 
 def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
                       candidates: Sequence[str], folds: int = SELECTION_FOLDS, blocks: Sequence[float] | None = None,
-                      block_hop_s: float = DEFAULT_BLOCK_HOP_S) -> dict:
-    """:func:`select_mode` on the training trials, then :func:`evaluate` once with the chosen mode and blocks.
+                      block_hop_s: float = DEFAULT_BLOCK_HOP_S, rockets: Sequence[str] | None = None) -> dict:
+    """:func:`select_mode` on the training trials, then :func:`evaluate` once with the chosen mode, blocks and
+    transform.
 
     Returns
     -------
     dict
         :func:`evaluate`'s result with the selection under ``selection``.
     """
-    selection = select_mode(train, cfg, candidates, folds, blocks, block_hop_s)
+    selection = select_mode(train, cfg, candidates, folds, blocks, block_hop_s, rockets)
     out = evaluate(train, test, replace(cfg, mode=selection["chosen"], block_s=selection["block_s"],
-                                        block_hop_s=selection["block_hop_s"]))
+                                        block_hop_s=selection["block_hop_s"], rocket_file=selection["rocket_file"]))
     out["selection"] = selection
     return out

@@ -18,11 +18,17 @@ signals the group will see.  Two transforms per cell type:
 
 Only the fitted parameters are written (dilations, channel combinations,
 biases), never the data.
+
+:func:`transform_in_use` evaluates with another fitted file than the
+config directory's (``tactile evaluate --rocket``, ``--select-rocket``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -36,9 +42,13 @@ from tactile_descriptors_lab.evaluation.sampling import (
     window_frames,
 )
 from tactile_descriptors_ros.core import rocket
+from tactile_descriptors_ros.core.cell_types import CellType
+from tactile_descriptors_ros.core.groups import rocket_parameters
+from tactile_descriptors_ros.core.yamlreader import config_dir
 from tactile_descriptors_ros.errors import ConfigError
 
-__all__ = ["VIBRATION_FEATURES", "VIBRATION_MAX_DILATION", "SLOW_FEATURES", "training_blocks", "fit_rocket"]
+__all__ = ["VIBRATION_FEATURES", "VIBRATION_MAX_DILATION", "SLOW_FEATURES", "training_blocks", "fit_rocket",
+           "transform_in_use"]
 
 #: Features of the vibration transform (5 per kernel: 2 at dilation 1, 1 at 3, 6 and 12).
 VIBRATION_FEATURES: int = 420
@@ -105,3 +115,65 @@ def write_rocket(path: str | Path, params: dict[str, rocket.RocketParameters], d
     path.parent.mkdir(parents=True, exist_ok=True)
     rocket.save_parameters(path, params, description=description)
     return path
+
+
+@contextmanager
+def transform_in_use(path: str | Path | None, cell_type: CellType, *, key: str = "rocket") -> Iterator[Path | None]:
+    """Describe with the transforms of ``path`` (a file ``tactile fit-rocket`` wrote) inside the block.
+
+    The feature engine reads a cell type's transforms from one place, the
+    config directory's ``rocket/<cell type>.json``
+    (:func:`~tactile_descriptors_ros.core.groups.rocket_parameters`).  This
+    makes a directory of links to the config directory's entries, with
+    ``path`` as the cell type's transform, and points ``TACTILE_CONFIG_DIR``
+    at it for the block (restored afterwards, also on an error): what a user
+    does by hand with a copy of ``config/``, so the node, the evaluation and
+    the bank cache (keyed by the transform's digest) all read the same file.
+    ``path`` None changes nothing.
+
+    Yields
+    ------
+    pathlib.Path or None
+        ``path`` resolved.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key`` when the file is missing, is not a transform file, or
+        does not fit the cell type's channels (checked on entry).
+    """
+    if path is None:
+        yield None
+        return
+    src = Path(path).resolve()
+    if not src.is_file():
+        raise ConfigError(f"rocket transform {path}: no such file", key=key)
+    try:
+        rocket.load_parameters(src)
+    except ConfigError as exc:
+        raise ConfigError(str(exc), key=key) from None
+    base = config_dir()
+    name = f"{cell_type.name}.json"
+    before = os.environ.get("TACTILE_CONFIG_DIR")
+    with tempfile.TemporaryDirectory(prefix="tactile-config-") as tmp:
+        root = Path(tmp)
+        for entry in base.iterdir():
+            if entry.name != "rocket":
+                (root / entry.name).symlink_to(entry.resolve())
+        (root / "rocket").mkdir()
+        for entry in (base / "rocket").glob("*.json") if (base / "rocket").is_dir() else ():
+            if entry.name != name:
+                (root / "rocket" / entry.name).symlink_to(entry.resolve())
+        (root / "rocket" / name).symlink_to(src)
+        os.environ["TACTILE_CONFIG_DIR"] = str(root)
+        try:
+            try:
+                rocket_parameters(cell_type, key=key)
+            except ConfigError as exc:  # named by the link: name the file given
+                raise ConfigError(str(exc).replace(str(root / "rocket" / name), str(path)), key=key) from None
+            yield src
+        finally:
+            if before is None:
+                os.environ.pop("TACTILE_CONFIG_DIR", None)
+            else:
+                os.environ["TACTILE_CONFIG_DIR"] = before

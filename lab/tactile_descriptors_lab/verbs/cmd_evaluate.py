@@ -240,6 +240,12 @@ def register(subparsers) -> None:
                                                        low_open=False), default=None, metavar="S,S,...",
                    help="with --select, also choose the block length among these seconds (0 = one descriptor "
                    "per window) by the same cross-validation inside the training trials (default: --block's)")
+    p.add_argument("--rocket", default=None, metavar="FILE",
+                   help="the rocket group's transforms from FILE (written by tactile fit-rocket, e.g. of another "
+                   "size) instead of config/rocket/<cell type>.json")
+    p.add_argument("--select-rocket", default=None, metavar="FILE,FILE,...",
+                   help="with --select, also choose the rocket group's transforms among these files (fitted on the "
+                   "training trials) for the modes that hold the group, by the same cross-validation")
     p.add_argument("--c-grid", type=number_list("C values"), default=None, metavar="C,C,...",
                    help="the SVM's candidate C values (default: the paper's 15)")
     p.add_argument("--scaling", default="log_standardize", choices=list(SCALINGS))
@@ -281,8 +287,9 @@ def run(args: argparse.Namespace) -> int:
             args.channels = DEFAULT_MODE
         return run_live(args)
     from tactile_descriptors_lab.datasets.readers import LoadReport, align_classes, check_selection
-    from tactile_descriptors_lab.evaluation.bank import mode_groups
+    from tactile_descriptors_lab.evaluation.bank import mode_groups, recordings_cell_type
     from tactile_descriptors_lab.evaluation.experiments import CLASSIFIERS, EvalConfig, evaluate
+    from tactile_descriptors_lab.evaluation.rocket_fit import transform_in_use
     from tactile_descriptors_lab.evaluation.sampling import load_split
     from tactile_descriptors_lab.verbs.cmd_import import parse_classes
 
@@ -296,6 +303,7 @@ def run(args: argparse.Namespace) -> int:
     if select_blocks is not None and not candidates:
         raise ConfigError("--select-blocks chooses among blocks with --select: give the modes too",
                           key="select-blocks")
+    rockets = _rocket_files(args, candidates)
     c_grid = tuple(args.c_grid) if args.c_grid else None
     train_trials, test_trials = default_trials(args.train, args.test, args.train_trials, args.test_trials)
     materials = parse_classes(args.materials) if args.materials else None
@@ -322,9 +330,14 @@ def run(args: argparse.Namespace) -> int:
         test = load_split(args.test, test_trials, materials, test_mapping, report=reports[1])
     train, test = align_classes(train, test)
     check_classes(train, test, args.train, args.test, every)
-    args.channels = resolve_mode(list(train) + list(test), args.channels)
-    for mode in candidates or [args.channels]:
-        check_recordings(list(train) + list(test), mode)
+    # the modes are checked with the transform they will run (a cell type may have none in config/rocket)
+    with transform_in_use(args.rocket or (rockets[0] if rockets else None),
+                          recordings_cell_type(list(train) + list(test))):
+        args.channels = resolve_mode(list(train) + list(test), args.channels)
+        if not candidates:
+            _check_rocket_mode(args)
+        for mode in candidates or [args.channels]:
+            check_recordings(list(train) + list(test), mode)
     for rep in reports:
         for line in rep.tare_lines():
             print(f"{rep.source}: {line}", file=sys.stderr)
@@ -337,13 +350,15 @@ def run(args: argparse.Namespace) -> int:
                      cv_repeats=args.cv_repeats, windows=args.windows, jobs=args.jobs,
                      cache_dir=args.cache or None,
                      block_s=args.block or None, block_hop_s=args.block_hop if args.block else None,
-                     progress=True, **({"c_grid": c_grid} if c_grid else {}))
+                     rocket_file=args.rocket, progress=True, **({"c_grid": c_grid} if c_grid else {}))
     if candidates:
         from ..evaluation.experiments import evaluate_selected
 
-        result = evaluate_selected(train, test, cfg, candidates, blocks=select_blocks, block_hop_s=args.block_hop)
+        result = evaluate_selected(train, test, cfg, candidates, blocks=select_blocks, block_hop_s=args.block_hop,
+                                   rockets=rockets)
         args.channels = result["selection"]["chosen"]
         args.block = result["selection"]["block_s"] or 0.0
+        args.rocket = result["selection"]["rocket_file"] or args.rocket
     else:
         result = evaluate(train, test, cfg)
     if args.json:
@@ -361,7 +376,8 @@ def run(args: argparse.Namespace) -> int:
                           for m, v in sel["candidates"].items()) + f" -> {sel['chosen_label']}")
         for label, why in sel["skipped"].items():
             print(f"  not tried: {label} ({why})")
-    print(f"descriptor mode {args.channels} ({result['n_features']} values, {blocks}), window {args.window} s "
+    transform = f", rocket transform {args.rocket}" if args.rocket and "rocket" in mode_groups(args.channels) else ""
+    print(f"descriptor mode {args.channels} ({result['n_features']} values, {blocks}{transform}), window {args.window} s "
           f"(test {args.test_window or args.window}), crop {result['common_length_s']:.2f} s; "
           f"{result['n_train']} training and {result['n_test']} test windows ({args.windows} positions); "
           f"contact gate {'on' if args.gate else 'off'}")
@@ -387,6 +403,37 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+
+
+def _rocket_files(args: argparse.Namespace, candidates: list[str]) -> list[str] | None:
+    """Check ``--rocket`` and ``--select-rocket`` before any data is read; the files to select among, or None."""
+    from tactile_descriptors_ros.core.rocket import load_parameters
+
+    rockets = [f.strip() for f in args.select_rocket.split(",") if f.strip()] if args.select_rocket else None
+    if args.select_rocket is not None and not rockets:
+        raise ConfigError("--select-rocket needs at least one transform file", key="select-rocket")
+    if rockets and not candidates:
+        raise ConfigError("--select-rocket chooses among transforms with --select: give the modes too",
+                          key="select-rocket")
+    if rockets and args.rocket:
+        raise ConfigError("give the transform (--rocket) or the files to choose among (--select-rocket), not both",
+                          key="rocket")
+    if not candidates and args.channels is not None:
+        _check_rocket_mode(args)
+    for path in [args.rocket] if args.rocket else rockets or []:
+        if not Path(path).is_file():
+            raise ConfigError(f"rocket transform {path}: no such file", key="rocket")
+        load_parameters(path)
+    return rockets
+
+
+def _check_rocket_mode(args: argparse.Namespace) -> None:
+    """Refuse ``--rocket`` with a mode that has no ``rocket`` group (the file would change nothing)."""
+    from tactile_descriptors_lab.evaluation.bank import mode_groups
+
+    if args.rocket and "rocket" not in mode_groups(args.channels):
+        raise ConfigError(f"--rocket gives the rocket group's transforms, and mode {args.channels} has no rocket "
+                          "group", key="rocket")
 
 
 def _block_setting(args: argparse.Namespace) -> None:
@@ -418,7 +465,8 @@ def run_live(args: argparse.Namespace) -> int:
     if Path(args.train).resolve() != Path(args.test).resolve() or (args.test_mapping or args.mapping) != args.mapping:
         raise ConfigError("--live replays one source: give the same source to --train and --test", key="test")
     refusals = {"test-window": args.test_window not in (None, args.window), "gate": args.gate, "drop": args.drop,
-                "windows": args.windows != "random"}
+                "windows": args.windows != "random", "select": args.select, "select-blocks": args.select_blocks,
+                "rocket": args.rocket, "select-rocket": args.select_rocket}
     bad = [k for k, v in refusals.items() if v]
     if bad:
         raise ConfigError(f"--live scores one window per trial (its first --window seconds) with the nodes' "

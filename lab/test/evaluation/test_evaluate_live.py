@@ -143,3 +143,19 @@ def test_evaluate_live_gives_the_offline_descriptors_and_predictions(biotac_data
     assert out["descriptors_match"] and out["max_relative_descriptor_difference"] < 1e-9
     assert out["predictions_match"] and out["live_accuracy"] == out["offline_accuracy"]
     assert out["window_node_faults"].get("lost_frames", 0) == 0
+
+
+@pytest.mark.parametrize("extra, option", [
+    (["--select", "paper,combined"], "--select"),
+    (["--channels", "paper", "--select-blocks", "1,0"], "--select-blocks"),
+    (["--channels", "rocket", "--rocket", "biotac_4x.json"], "--rocket"),
+    (["--channels", "rocket", "--select-rocket", "biotac_4x.json"], "--select-rocket"),
+    (["--gate"], "--gate"),
+])
+def test_live_refuses_what_the_nodes_do_not_run_before_reading(biotac_data_dir, tmp_path, capsys, extra, option):
+    """The replay runs the nodes' one descriptor: an option it would ignore is refused, never dropped."""
+    from tactile_descriptors_ros.tools.cli import main
+
+    data = str(biotac_data_dir)
+    assert main(["evaluate", "--train", data, "--test", data, "--live", "--cache", str(tmp_path)] + extra) == 2
+    assert f"leave out {option}" in capsys.readouterr().err
