@@ -15,8 +15,8 @@ and an evaluation whose test trials fed them has seen its test data.
 ``--vibration-features``, ``--slow-features`` and ``--vibration-max-dilation``
 size the transforms (the shipped file: 420, 840 and 12); a larger transform
 costs the window node in proportion.  To evaluate one without touching the
-shipped file, write it into a copy of the configuration directory and point
-``TACTILE_CONFIG_DIR`` at the copy.
+shipped file, write it anywhere and give it to ``tactile evaluate --rocket``
+(or several to ``--select-rocket``, which chooses inside the training trials).
 """
 
 from __future__ import annotations
