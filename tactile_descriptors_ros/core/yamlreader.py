@@ -20,6 +20,11 @@ from ..errors import ConfigError
 
 __all__ = ["YamlReader", "kind_names", "resolve_yaml", "config_dir"]
 
+#: Where a source checkout and an installed prefix keep the config directory (resolved once: the
+#: module's file does not move while it runs, and config_dir() is on the describe path of the rocket group).
+_CHECKOUT_CONFIG = Path(__file__).resolve().parents[2] / "config"
+_PREFIX_CONFIG = Path(sys.prefix) / "share" / "tactile_descriptors_ros" / "config"
+
 
 def _kinds(kind: Any) -> tuple:
     return kind if isinstance(kind, tuple) else (kind,)
@@ -146,8 +151,7 @@ def config_dir() -> Path:
     """
     env = os.environ.get("TACTILE_CONFIG_DIR")
     candidates = [Path(env)] if env else []
-    candidates.append(Path(__file__).resolve().parents[2] / "config")
-    candidates.append(Path(sys.prefix) / "share" / "tactile_descriptors_ros" / "config")
+    candidates += [_CHECKOUT_CONFIG, _PREFIX_CONFIG]
     for path in candidates:
         if (path / "shadow_hand.yaml").is_file():
             return path
