@@ -573,6 +573,14 @@ def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: S
         ``skipped`` (labels a mode cannot pair with, and why), ``folds`` and
         ``classifier``.
     """
+    return _select(train, cfg, candidates, folds, blocks, block_hop_s, rockets)[0]
+
+
+def _select(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Sequence[str], folds: int,
+            blocks: Sequence[float] | None, block_hop_s: float, rockets: Sequence[str] | None
+            ) -> tuple[dict, EvalConfig]:
+    """:func:`select_mode`'s result, and the chosen candidate's configuration (``cfg`` with its mode, blocks
+    and transform)."""
     if not candidates:
         raise ConfigError("no candidate mode to select from", key="select")
     runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s, rockets)
@@ -592,11 +600,10 @@ def select_mode(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: S
                          "fold_accuracy": [float(a) for a in accs]}
     best = max(v["accuracy"] for v in scores.values())
     chosen = next(k for k, v in scores.items() if v["accuracy"] >= best - 1e-12)
-    return {"chosen": scores[chosen]["mode"], "block_s": runs[chosen].block_s,
-            "block_hop_s": runs[chosen].block_hop_s, "rocket_file": runs[chosen].rocket_file,
-            "chosen_label": chosen,
-            "candidates": scores, "skipped": skipped, "classifier": name,
-            "folds": [[int(min(b)), int(max(b))] for b in fold_trials]}
+    pick = runs[chosen]
+    return ({"chosen": pick.mode, "block_s": pick.block_s, "block_hop_s": pick.block_hop_s,
+             "rocket_file": pick.rocket_file, "chosen_label": chosen, "candidates": scores, "skipped": skipped,
+             "classifier": name, "folds": [[int(min(b)), int(max(b))] for b in fold_trials]}, pick)
 
 
 def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
@@ -610,8 +617,7 @@ def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRec
     dict
         :func:`evaluate`'s result with the selection under ``selection``.
     """
-    selection = select_mode(train, cfg, candidates, folds, blocks, block_hop_s, rockets)
-    out = evaluate(train, test, replace(cfg, mode=selection["chosen"], block_s=selection["block_s"],
-                                        block_hop_s=selection["block_hop_s"], rocket_file=selection["rocket_file"]))
+    selection, chosen = _select(train, cfg, candidates, folds, blocks, block_hop_s, rockets)
+    out = evaluate(train, test, chosen)
     out["selection"] = selection
     return out
