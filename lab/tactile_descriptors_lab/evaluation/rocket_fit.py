@@ -48,7 +48,7 @@ from tactile_descriptors_ros.core.yamlreader import config_dir
 from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["VIBRATION_FEATURES", "VIBRATION_MAX_DILATION", "SLOW_FEATURES", "training_blocks", "fit_rocket",
-           "transform_in_use"]
+           "check_transform_file", "transform_in_use"]
 
 #: Features of the vibration transform (5 per kernel: 2 at dilation 1, 1 at 3, 6 and 12).
 VIBRATION_FEATURES: int = 420
@@ -117,6 +117,22 @@ def write_rocket(path: str | Path, params: dict[str, rocket.RocketParameters], d
     return path
 
 
+def check_transform_file(path: str | Path, *, key: str = "rocket") -> None:
+    """Refuse a path that is not a transforms file ``tactile fit-rocket`` could have written.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``key`` and the file: missing, not JSON, another format, inconsistent arrays.
+    """
+    if not Path(path).is_file():
+        raise ConfigError(f"rocket transform {path}: no such file", key=key)
+    try:
+        rocket.load_parameters(path)
+    except ConfigError as exc:
+        raise ConfigError(str(exc), key=key) from None
+
+
 @contextmanager
 def transform_in_use(path: str | Path | None, cell_type: CellType, *, key: str = "rocket") -> Iterator[Path | None]:
     """Describe with the transforms of ``path`` (a file ``tactile fit-rocket`` wrote) inside the block.
@@ -145,13 +161,8 @@ def transform_in_use(path: str | Path | None, cell_type: CellType, *, key: str =
     if path is None:
         yield None
         return
+    check_transform_file(path, key=key)
     src = Path(path).resolve()
-    if not src.is_file():
-        raise ConfigError(f"rocket transform {path}: no such file", key=key)
-    try:
-        rocket.load_parameters(src)
-    except ConfigError as exc:
-        raise ConfigError(str(exc), key=key) from None
     base = config_dir()
     name = f"{cell_type.name}.json"
     before = os.environ.get("TACTILE_CONFIG_DIR")

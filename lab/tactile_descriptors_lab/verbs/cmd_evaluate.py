@@ -407,7 +407,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _rocket_files(args: argparse.Namespace, candidates: list[str]) -> list[str] | None:
     """Check ``--rocket`` and ``--select-rocket`` before any data is read; the files to select among, or None."""
-    from tactile_descriptors_ros.core.rocket import load_parameters
+    from tactile_descriptors_lab.evaluation.rocket_fit import check_transform_file
 
     rockets = [f.strip() for f in args.select_rocket.split(",") if f.strip()] if args.select_rocket else None
     if args.select_rocket is not None and not rockets:
@@ -421,9 +421,7 @@ def _rocket_files(args: argparse.Namespace, candidates: list[str]) -> list[str] 
     if not candidates and args.channels is not None:
         _check_rocket_mode(args)
     for path in [args.rocket] if args.rocket else rockets or []:
-        if not Path(path).is_file():
-            raise ConfigError(f"rocket transform {path}: no such file", key="rocket")
-        load_parameters(path)
+        check_transform_file(path)
     return rockets
 
 
