@@ -60,7 +60,7 @@ from tactile_descriptors_ros.core.robot import RobotDescription
 from tactile_descriptors_ros.core.tare import resting_level
 from tactile_descriptors_ros.errors import ConfigError, SceneError, SignalError
 from tactile_descriptors_ros.sim.engine import CellRecord, ExplorationTiming, SimResult, Stream, iter_simulate
-from tactile_descriptors_ros.sim.scene import Scene, parse_scene, scene_path
+from tactile_descriptors_ros.sim.scene import Scene, parse_scene, restrict_robot, scene_path
 
 __all__ = [
     "MODES",
@@ -335,26 +335,6 @@ def override_scene(name: str, *, materials: int | Sequence[str] | None = None, r
     record["explorations"] = len(scene.explorations)
     record["simulated_s"] = round(scene.duration_s, 1)
     return scene, record
-
-
-def restrict_robot(scene: Scene, body_parts: Sequence[str]) -> Scene:
-    """The same scene on a robot reduced to ``body_parts`` (in the robot's order).
-
-    The simulator keys every random draw by cell and exploration, so the kept
-    cells' samples do not change (checked by the tests); the explorations
-    must touch only kept body parts.
-    """
-    robot = scene.robot
-    keep = tuple(p for p in robot.body_parts if p.name in set(body_parts))
-    missing = sorted(set(body_parts) - {p.name for p in keep})
-    if missing:
-        raise ConfigError(f"unknown body parts {missing} of robot {robot.name!r}", key="body_parts")
-    used = {b for e in scene.explorations for b in (*e.body_parts, *e.holding_parts)}
-    lost = sorted(used - {p.name for p in keep})
-    if lost:
-        raise ConfigError(f"explorations touch body parts {lost} that would be removed", key="body_parts")
-    small = dataclasses.replace(robot, body_parts=keep)
-    return dataclasses.replace(scene, robot=small)
 
 
 @contextlib.contextmanager

@@ -29,8 +29,8 @@ from __future__ import annotations
 import math
 import os
 import random
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -54,6 +54,7 @@ __all__ = [
     "large_object_parameters",
     "sensor_defaults",
     "sensor_kind",
+    "restrict_robot",
 ]
 
 #: Every effect a scene may declare, with its parameters and their defaults.
@@ -567,3 +568,23 @@ def _resolve(index: int, material: str, label: Any, params: Mapping[str, Any], k
         pause_s=num("pause_s", 1.0, positive=False), stroke_m=num("stroke_m", 0.04),
         circle_period_s=num("circle_period_s", 1.0), weight_g=weight, group=group, part_force_n=part_force,
     )
+
+
+def restrict_robot(scene: Scene, body_parts: Sequence[str]) -> Scene:
+    """The same scene on a robot reduced to ``body_parts`` (in the robot's order).
+
+    The simulator keys every random draw by cell and exploration, so the kept
+    cells' samples do not change (checked by the tests); the explorations
+    must touch only kept body parts.
+    """
+    robot = scene.robot
+    keep = tuple(p for p in robot.body_parts if p.name in set(body_parts))
+    missing = sorted(set(body_parts) - {p.name for p in keep})
+    if missing:
+        raise ConfigError(f"unknown body parts {missing} of robot {robot.name!r}", key="body_parts")
+    used = {b for e in scene.explorations for b in (*e.body_parts, *e.holding_parts)}
+    lost = sorted(used - {p.name for p in keep})
+    if lost:
+        raise ConfigError(f"explorations touch body parts {lost} that would be removed", key="body_parts")
+    small = replace(robot, body_parts=keep)
+    return replace(scene, robot=small)

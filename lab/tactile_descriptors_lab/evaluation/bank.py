@@ -306,6 +306,19 @@ def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, st
     return tuple(able), why
 
 
+def default_mode_for(cell_type: CellType) -> tuple[str, tuple[str, ...], str]:
+    """The default mode's groups that a cell type can feed, as a mode; the groups left out; why the first was.
+
+    ``(DEFAULT_MODE, (), "")`` when the cell type feeds every group of the default mode.
+    """
+    _, why = cell_type_groups(cell_type)
+    groups = mode_groups(DEFAULT_MODE)
+    left = tuple(g for g in groups if g.partition(":")[0] in why)
+    if not left:
+        return DEFAULT_MODE, (), ""
+    return "+".join(g for g in groups if g not in left), left, why[left[0].partition(":")[0]]
+
+
 def bank_labels(cell_type: CellType | None = None) -> dict[str, tuple[str, ...]]:
     """Labels of every group, ``<group>/<label>`` (the core's :func:`~.core.groups.selection_labels`)."""
     ct = cell_type or biotac_cell_type()

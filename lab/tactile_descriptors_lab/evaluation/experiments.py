@@ -47,7 +47,7 @@ from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S", "evaluate", "evaluate_many",
            "trial_folds", "trial_cv", "descriptor_seconds", "draw_spec_windows", "describe_windows",
-           "select_mode", "evaluate_selected", "SELECTION_FOLDS"]
+           "select_mode", "evaluate_selected", "selected_trial_cv", "SELECTION_FOLDS"]
 
 
 #: Learners of ``tactile evaluate --classifier``.
@@ -620,4 +620,35 @@ def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRec
     selection, chosen = _select(train, cfg, candidates, folds, blocks, block_hop_s, rockets)
     out = evaluate(train, test, chosen)
     out["selection"] = selection
+    return out
+
+
+def selected_trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Sequence[str],
+                      folds: int = 3) -> dict:
+    """Cross-validation over trials of a selection: what ``tactile evaluate --select`` scores on unseen trials.
+
+    Each block of trials (:func:`trial_folds`) is the test set once; for each
+    classifier of ``cfg`` the mode is chosen among ``candidates`` inside the
+    other blocks alone (:func:`evaluate_selected`, by that classifier's
+    accuracy), then the block is scored once with the choice.
+
+    Returns
+    -------
+    dict
+        ``folds``, ``candidates`` and per classifier ``accuracy``,
+        ``accuracy_std``, ``fold_accuracy`` and ``chosen`` (the mode chosen in each fold).
+    """
+    blocks = trial_folds(sorted({r.trial for r in recordings}), folds)
+    out: dict = {"folds": [[int(min(b)), int(max(b))] for b in blocks], "candidates": list(candidates),
+                 "classifiers": {}}
+    for name in cfg.classifiers:
+        accs, chosen = [], []
+        for block in blocks:
+            test = [r for r in recordings if r.trial in block]
+            train = [r for r in recordings if r.trial not in block]
+            res = evaluate_selected(train, test, replace(cfg, classifiers=(name,)), candidates)
+            accs.append(float(res["classifiers"][name]["accuracy"]))
+            chosen.append(res["selection"]["chosen"])
+        out["classifiers"][name] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
+                                    "fold_accuracy": accs, "chosen": chosen}
     return out

@@ -19,6 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from tactile_descriptors_lab.datasets.biotac_slide import BiotacRecording, load_recordings
+from tactile_descriptors_lab.evaluation.across_datasets import (
+    FLOOR_MODE,
+    FULL_DATASETS,
+    QUICK_DATASETS,
+    DatasetPlan,
+    default_at_least_floor,
+    evaluate_datasets,
+)
 from tactile_descriptors_lab.evaluation.bank import BANK_VERSION, DEFAULT_MODE
 from tactile_descriptors_lab.evaluation.classifiers import C_GRID_TEXT
 from tactile_descriptors_lab.evaluation.experiments import (
@@ -37,7 +45,8 @@ __all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "SECTIONS", "LENGTH_SECTIONS
            "what_to_expect", "update_readme"]
 
 #: Sections of results.json, in report order.
-SECTIONS: tuple[str, ...] = ("headline", "sweep", "length", "length_cv", "short", "ablation", "trial_cv")
+SECTIONS: tuple[str, ...] = ("headline", "sweep", "length", "length_cv", "short", "ablation", "trial_cv",
+                             "datasets")
 
 #: The sections ``tactile report --only length`` recomputes (the rest is kept from results.json).
 LENGTH_SECTIONS: tuple[str, ...] = ("length", "length_cv", "short")
@@ -86,7 +95,7 @@ class ReportPlan:
                  ablation_modes: Sequence[str], ablation_window: str, headline_repeats: int,
                  sweep_repeats: int, cv_folds: int, train_per_trial: int, test_per_trial: int,
                  pa_orders: int, length_repeats: int = 1, short_train_per_trial: int | None = None,
-                 trial_cv_modes: Sequence[str] | None = None) -> None:
+                 trial_cv_modes: Sequence[str] | None = None, datasets: DatasetPlan = FULL_DATASETS) -> None:
         self.headline_modes = tuple(headline_modes)
         self.headline_windows = tuple(headline_windows)
         self.sweep_modes = tuple(sweep_modes)
@@ -106,6 +115,7 @@ class ReportPlan:
         self.train_per_trial = train_per_trial
         self.test_per_trial = test_per_trial
         self.pa_orders = pa_orders
+        self.datasets = datasets
 
 
 FULL_PLAN = ReportPlan(
@@ -128,7 +138,8 @@ QUICK_PLAN = ReportPlan(
     length_tests=("1", "0.5-2"), length_cv_tests=("1", "0.5-2"),
     short_windows=("0.5",), short_train_per_trial=1,
     ablation_modes=("paper",), ablation_window="1", trial_cv_modes=("paper", "plain"),
-    headline_repeats=1, sweep_repeats=1, cv_folds=2, train_per_trial=1, test_per_trial=1, pa_orders=1)
+    headline_repeats=1, sweep_repeats=1, cv_folds=2, train_per_trial=1, test_per_trial=1, pa_orders=1,
+    datasets=QUICK_DATASETS)
 
 
 def _pct(x: float) -> str:
@@ -275,6 +286,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
                  "split"))
     for m in plan.trial_cv_modes:
         todo.append(("trial_cv", (m, plan.ablation_window), replace(abl, mode=m), "cv"))
+    todo.append(("datasets", ("every layout",), abl, "datasets"))
     todo = [t for t in todo if t[0] in wanted]
 
     results: dict = {sec: {} for sec in wanted}
@@ -286,6 +298,14 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
             results[section][key] = evaluate(train, test, cfg)
         elif kind == "cv":
             results[section][key] = trial_cv(dev, cfg, plan.cv_folds)
+        elif kind == "datasets":
+            import tempfile
+
+            with tempfile.TemporaryDirectory(prefix="tactile_report_datasets_") as tmp:
+                rows = evaluate_datasets(dev, tmp, cfg, plan.datasets,
+                                         progress=lambda text: bar.set_postfix_str(f"datasets {text}"))
+            for name, row in rows.items():
+                results[section][(name,)] = row
         elif kind == "many":
             for w, res in evaluate_many(train, test, cfg, key[1]).items():
                 results[section][(key[0], w)] = res
@@ -301,7 +321,9 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
         serial[sec] = {" | ".join(k): v for k, v in results[sec].items()}
     serial = json.loads(json.dumps(serial, default=_json_default))  # plain JSON types, as read back
     serial["plan"] = {**previous.get("plan", {}), **_plan_record(plan, wanted)}
-    serial["runtime_s"] = previous.get("runtime_s", runtime_s) if only is not None else runtime_s
+    serial["runtime_s"] = runtime_s
+    if only is not None and "runtime_s" in previous:  # the last full run's, plus a section it did not hold
+        serial["runtime_s"] = previous["runtime_s"] + (runtime_s if any(not previous.get(s) for s in wanted) else 0.0)
     serial["section_runtime_s"] = {**previous.get("section_runtime_s", {}),
                                    **{sec: runtime_s for sec in wanted}} if only is not None else {}
     serial["provenance"] = {**previous.get("provenance", {}), **{sec: section_provenance() for sec in wanted}}
@@ -325,6 +347,8 @@ def _plan_record(plan: ReportPlan, sections: Sequence[str]) -> dict:
         rec.update(length_train=plan.ablation_window, length_tests=list(plan.length_tests),
                    length_cv_tests=list(plan.length_cv_tests), short_windows=list(plan.short_windows),
                    length_repeats=plan.length_repeats)
+    if "datasets" in sections:
+        rec.update(datasets_window=plan.datasets.window, datasets_folds=plan.datasets.folds)
     return rec
 
 
@@ -580,7 +604,48 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
             folds = ", ".join(f"{a_}-{b}" for a_, b in r["folds"])
             a(f"| {m} | {folds} | {_cv_cell(r, 'svm')} | {_cv_cell(r, 'pa')} |")
         a("")
+    if serial.get("datasets"):
+        _datasets_markdown(serial, a)
     return "\n".join(L) + "\n"
+
+
+def _selected_cell(sel: dict | None, name: str, mode: str) -> str:
+    """A selection's accuracy by trial CV and how many folds chose the default mode (``-`` when not run)."""
+    if sel is None or name not in sel["classifiers"]:
+        return "-"
+    c = sel["classifiers"][name]
+    return f"{_cv_cell(sel, name)} (default in {sum(m == mode for m in c['chosen'])} of {len(c['chosen'])})"
+
+
+def _datasets_markdown(serial: dict, a) -> None:
+    """The table of :mod:`.across_datasets`: every layout, the default descriptor against plain statistics."""
+    plan = serial["plan"]
+    a("## Across data sets: the default descriptor against plain statistics")
+    a("")
+    for line in _provenance_lines(serial, "datasets"):
+        a(line)
+    a("Each data set is written in its lab's layout (built from the data at hand, "
+      "`tactile_descriptors_lab/datasets/layouts.py`) and read back through its mapping, as `tactile evaluate "
+      f"--mapping` reads it; then cross-validation over {plan.get('datasets_folds', plan['cv_folds'])} contiguous "
+      "blocks of trials (the Penn layout's blocks are its sessions), each the test set once. `plain` (mean, sd, "
+      "min and max of every channel) against the default mode, less the groups the cell type cannot feed (what "
+      "`tactile evaluate` runs without `--mode`), with the same classifier, windows and seeds. Where the default "
+      "falls below `plain`, `tactile evaluate --select plain,<default>` chooses between them inside the training "
+      "trials; *selected* is that choice, made in each fold without its test block (the count: folds in which "
+      "it chose the default).")
+    a("")
+    a("| data set | classes | trials | window | default mode | SVM %: plain | SVM %: default | SVM %: selected "
+      "| online %: plain | online %: default | online %: selected | default >= plain (SVM, online) |")
+    a("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for name, r in serial["datasets"].items():
+        floor, mine = r["cv"][FLOOR_MODE], r["cv"][r["mode"]]
+        mode = f"`{r['mode']}`" + (f" (without {', '.join(r['left_out'])})" if r["left_out"] else "")
+        verdict = ", ".join("yes" if default_at_least_floor(r, c) else "**no**" for c in ("svm", "pa"))
+        sel = r.get("selected")
+        a(f"| {name}: {r['about']} | {r['classes']} | {r['trials']} | {r['window']} s | {mode} | "
+          f"{_cv_cell(floor, 'svm')} | {_cv_cell(mine, 'svm')} | {_selected_cell(sel, 'svm', r['mode'])} | "
+          f"{_cv_cell(floor, 'pa')} | {_cv_cell(mine, 'pa')} | {_selected_cell(sel, 'pa', r['mode'])} | {verdict} |")
+    a("")
 
 
 _QUANTITY_NAMES = {"A": "Activity", "M": "Mobility", "C": "Complexity", "L": "Pearson", "N": "Spearman",
@@ -741,6 +806,7 @@ def what_to_expect(serial: dict) -> str:
     short = {w: get("short", f"{DEFAULT_MODE} | {w}") for w in ("0.5", "1")}
     length_min = serial.get("section_runtime_s", {}).get("length")
     headline_min = serial.get("section_runtime_s", {}).get("headline")
+    datasets_min = serial.get("section_runtime_s", {}).get("datasets")
 
     def svm(r: dict) -> str:
         return f"{_pct(r['classifiers']['svm']['accuracy'])} %"
@@ -774,9 +840,21 @@ def what_to_expect(serial: dict) -> str:
         f"- `make report` regenerates the real-data report in about {serial['runtime_s'] / 60:.0f} minutes on 2 "
         "cores" + "".join(f"; `make report-{name}` {what} in about {minutes / 60:.0f} minutes"
                           for name, what, minutes in (("headline", "its headline table", headline_min),
-                                                      ("length", "its touch-length sections", length_min))
+                                                      ("length", "its touch-length sections", length_min),
+                                                      ("datasets", "its table across data sets", datasets_min))
                           if minutes) + ".",
     ]
+    if serial.get("datasets"):
+        rows = serial["datasets"]
+
+        def pair(r: dict, name: str) -> str:
+            acc = {m: _pct(r["cv"][m]["classifiers"][name]["accuracy"]) for m in (r["mode"], FLOOR_MODE)}
+            return f"{acc[r['mode']]} against {acc[FLOOR_MODE]} %"
+
+        lines.insert(2, "- **Other labs' layouts** (read through mappings; `lab/docs/results.md`): by cross-validation "
+                     "over trials, the default descriptor against plain per-channel statistics, linear SVM, on "
+                     + "; ".join(f"the {name} {pair(r, 'svm')}" for name, r in rows.items())
+                     + when("datasets") + ".")
     return "\n".join([README_BEGIN, *lines, README_END])
 
 

@@ -126,23 +126,24 @@ def resolve_mode(recordings, mode: str | None) -> str:
     from tactile_descriptors_lab.evaluation.bank import (
         DEFAULT_MODE,
         cell_type_groups,
+        default_mode_for,
         mode_groups,
         recordings_cell_type,
     )
 
     ct = recordings_cell_type(recordings)
-    able, why = cell_type_groups(ct)
-    groups = mode_groups(mode if mode is not None else DEFAULT_MODE)
-    left = [g for g in groups if g.partition(":")[0] in why]
-    if not left:
-        return mode if mode is not None else DEFAULT_MODE
     if mode is not None:
-        raise ConfigError(f"mode {mode!r}: {why[left[0].partition(':')[0]]}; the groups it can feed: "
-                          f"{', '.join(able)}", key="channels")
-    kept = [g for g in groups if g not in left]
-    print(f"note: descriptor mode {DEFAULT_MODE} without {', '.join(left)} ({why[left[0].partition(':')[0]]}): "
-          f"{'+'.join(kept)}; --mode {DEFAULT_MODE} asks for every group", file=sys.stderr)
-    return "+".join(kept)
+        able, why = cell_type_groups(ct)
+        left = [g for g in mode_groups(mode) if g.partition(":")[0] in why]
+        if left:
+            raise ConfigError(f"mode {mode!r}: {why[left[0].partition(':')[0]]}; the groups it can feed: "
+                              f"{', '.join(able)}", key="channels")
+        return mode
+    kept, left, reason = default_mode_for(ct)
+    if left:
+        print(f"note: descriptor mode {DEFAULT_MODE} without {', '.join(left)} ({reason}): "
+              f"{kept}; --mode {DEFAULT_MODE} asks for every group", file=sys.stderr)
+    return kept
 
 
 def check_classes(train, test, train_source: str, test_source: str, every=None) -> None:

@@ -17,6 +17,7 @@ import pytest
 import yaml
 from writers import SKIN_SAMPLES_PER_FRAME, simulated_skin_trials, write_skin_csv, write_skin_hdf5, write_skin_npz
 
+from tactile_descriptors_lab.datasets.layouts import SKIN_CHANNELS, skin_hdf5_mapping
 from tactile_descriptors_lab.datasets.mapping import load_mapping
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
 from tactile_descriptors_lab.datasets.recording import CellRecording
@@ -24,15 +25,10 @@ from tactile_descriptors_ros.core.groups import selection_labels
 from tactile_descriptors_ros.errors import ConfigError, DataFormatError
 from tactile_descriptors_ros.tools.cli import main
 
-SKIN_CHANNELS = {"ax": "acc_x{i}", "ay": "acc_y{i}", "az": "acc_z{i}", "f1": "force1", "f2": "force2",
-                 "f3": "force3", "proximity": "prox", "temperature": "temp_c"}
 CSV_MAPPING = {"format": "csv", "files": "*/*.csv", "robot": "nao", "class": {"from": "folder"},
                "trial": {"from": "file", "pattern": r"trial_(\d+)$"}, "channels": SKIN_CHANNELS,
                "stamps": {"column": "t_ns", "unit": "ns"}, "tare": "none"}
-HDF5_MAPPING = {"format": "hdf5", "files": "*.h5", "groups": "*/trial_*", "robot": "nao", "cell_type": "skin_cell",
-                "class": {"from": "group", "pattern": "^([^/]+)/"},
-                "trial": {"from": "group", "pattern": r"trial_(\d+)$"}, "samples_per_frame": 4,
-                "channels": SKIN_CHANNELS, "stamps": {"column": "t_ns", "unit": "ns"}, "tare": "none"}
+HDF5_MAPPING = skin_hdf5_mapping()
 NPZ_MAPPING = {"format": "npz", "files": "*.npz", "robot": "nao",
                "class": {"from": "file", "pattern": r"^([a-z]+)_"}, "trial": {"from": "file", "pattern": r"_(\d+)$"},
                "channels": {"ax": "ax", "ay": "ay", "az": "az", "f1": "F1", "f2": "F2", "f3": "F3",

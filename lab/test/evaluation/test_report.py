@@ -52,6 +52,24 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
     assert set(res["trial_cv"]) == {"paper | 1", "plain | 1"}
     assert len(res["trial_cv"]["plain | 1"]["classifiers"]["svm"]["fold_accuracy"]) == 2
     assert "| plain | " in md and "`plain` (mean, sd, min and max of every channel) is the floor" in md
+    # the other labs' layouts, each read back through its mapping: plain against the default mode by trial CV
+    ds = res["datasets"]
+    assert list(ds) == ["shared BioTac", "Penn BOLT layout", "iCub taxel pad", "simulated NAO"]
+    assert (ds["shared BioTac"]["classes"], ds["shared BioTac"]["trials"], ds["shared BioTac"]["mode"]) == (
+        3, 36, "combined")
+    assert ds["Penn BOLT layout"]["classes"] == 3 and ds["Penn BOLT layout"]["trials"] == 3 * 6  # 2 trials a run
+    assert (ds["iCub taxel pad"]["mode"], ds["iCub taxel pad"]["left_out"]) == ("levels+statistics",
+                                                                                ["per_channel", "bands"])
+    assert (ds["simulated NAO"]["classes"], ds["simulated NAO"]["trials"]) == (3, 18)
+    for row in ds.values():
+        assert set(row["cv"]) == {"plain", row["mode"]}
+        assert all(len(cv["classifiers"][c]["fold_accuracy"]) == 3 for cv in row["cv"].values() for c in ("svm", "pa"))
+        # the choice between the two, made in each fold's training trials, one per classifier and fold
+        for c in ("svm", "pa"):
+            assert len(row["selected"]["classifiers"][c]["chosen"]) == 3
+            assert set(row["selected"]["classifiers"][c]["chosen"]) <= {"plain", row["mode"]}
+    assert "## Across data sets: the default descriptor against plain statistics" in md
+    assert "| iCub taxel pad: 3 materials, 36 trials of a 60-taxel pressure-only pad at 50 Hz" in md
 
     # --only length recomputes those sections alone, keeps the rest and renders the page again
     head_before = res["headline"]

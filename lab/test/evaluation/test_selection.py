@@ -143,3 +143,39 @@ def test_cli_select_blocks_needs_modes_and_seconds(biotac_data_dir, tmp_path, ca
     with pytest.raises(SystemExit):
         main(base + ["--c-grid", "0.25,0"])
     assert "argument --c-grid: C values must lie in (0, inf)" in capsys.readouterr().err
+
+
+def test_trial_cv_of_a_selection_chooses_in_each_fold_without_its_test_block(monkeypatch):
+    """Each outer block is scored once, by the mode its own training trials chose, one choice per classifier:
+    here the SVM prefers ``combined`` and the online learner ``plain`` inside every training set, but the
+    outer block 7-9 scores ``combined`` below ``plain`` (what the test block alone would have chosen)."""
+    calls: list = []
+
+    def fake(train, test, cfg):
+        name = cfg.classifiers[0]
+        outer_test = sorted({r.trial for r in test})
+        calls.append((cfg.mode, name, sorted({r.trial for r in train}), outer_test))
+        inner_pref = {"svm": {"combined": 0.9, "plain": 0.8}, "pa": {"combined": 0.7, "plain": 0.75}}
+        acc = inner_pref[name][cfg.mode]
+        if outer_test == [7, 8, 9]:
+            acc = {"combined": 0.5, "plain": 0.6}[cfg.mode]
+        return {"classifiers": {name: {"accuracy": acc}}}
+
+    monkeypatch.setattr(experiments, "evaluate", fake)
+    recs = [_Rec(t) for t in range(1, 10)]
+    cfg = EvalConfig(window="2", classifiers=("svm", "pa"))
+    out = experiments.selected_trial_cv(recs, cfg, ["plain", "combined"], folds=3)
+    assert out["folds"] == [[1, 3], [4, 6], [7, 9]]
+    svm, pa = out["classifiers"]["svm"], out["classifiers"]["pa"]
+    assert svm["chosen"] == ["combined"] * 3 and pa["chosen"] == ["plain"] * 3
+    assert svm["fold_accuracy"] == pytest.approx([0.9, 0.9, 0.5])  # block 7-9 scored with the choice made before
+    assert pa["fold_accuracy"] == pytest.approx([0.75, 0.75, 0.6])
+    assert svm["accuracy"] == pytest.approx(2.3 / 3) and svm["accuracy_std"] > 0
+    # per classifier and block: 2 modes x 3 inner folds, then the block scored once; the inner runs read
+    # the block's training trials only
+    assert len(calls) == 2 * 3 * 7
+    for k in range(0, len(calls), 7):
+        *inner, (_, _, outer_train, outer_test) = calls[k:k + 7]
+        assert len(outer_test) == 3 and len(outer_train) == 6
+        for _, _, train, test in inner:
+            assert set(train) | set(test) <= set(outer_train) and not set(train) & set(test)
