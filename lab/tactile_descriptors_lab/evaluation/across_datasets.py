@@ -51,7 +51,8 @@ from tactile_descriptors_lab.datasets.recording import BiotacRecording
 from tactile_descriptors_lab.evaluation.bank import default_mode_for, recordings_cell_type
 from tactile_descriptors_lab.evaluation.experiments import EvalConfig, selected_trial_cv, trial_cv
 
-__all__ = ["DatasetPlan", "FULL_DATASETS", "QUICK_DATASETS", "FLOOR_MODE", "write_sources", "evaluate_datasets"]
+__all__ = ["DatasetPlan", "FULL_DATASETS", "QUICK_DATASETS", "FLOOR_MODE", "write_sources", "evaluate_datasets",
+           "default_at_least_floor"]
 
 #: The floor every data set's default descriptor is compared with.
 FLOOR_MODE: str = "plain"
