@@ -441,6 +441,26 @@ def trial_folds(trials: Sequence[int], folds: int) -> list[list[int]]:
     return [[int(x) for x in b] for b in np.array_split(np.array(t), folds)]
 
 
+def _trial_splits(recordings: Sequence[BiotacRecording], folds: int
+                  ) -> tuple[list[list[int]], list[tuple[list[BiotacRecording], list[BiotacRecording]]]]:
+    """The blocks of :func:`trial_folds` over the recordings' trials and, for each, its ``(training, test)``
+    recordings: the block tested, the other blocks trained on."""
+    blocks = trial_folds(sorted({r.trial for r in recordings}), folds)
+    return blocks, [([r for r in recordings if r.trial not in b], [r for r in recordings if r.trial in b])
+                    for b in blocks]
+
+
+def _block_ranges(blocks: Sequence[Sequence[int]]) -> list[list[int]]:
+    """Each block of trials as ``[first, last]``."""
+    return [[int(min(b)), int(max(b))] for b in blocks]
+
+
+def _fold_summary(accs: Sequence[float]) -> dict:
+    """Accuracy over folds: ``accuracy`` (mean), ``accuracy_std`` and ``fold_accuracy``."""
+    return {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
+            "fold_accuracy": [float(a) for a in accs]}
+
+
 def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int = 3,
              test_windows: Sequence[str] | None = None) -> dict:
     """Cross-validation over trials: each block of trials is the test set once.
@@ -449,25 +469,17 @@ def trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, folds: int 
     every test window specification (:func:`evaluate_many`), and the result
     holds one summary per specification under ``by_test_window``.
     """
-    trials = sorted({r.trial for r in recordings})
-    blocks = trial_folds(trials, folds)
+    blocks, splits = _trial_splits(recordings, folds)
     specs = list(test_windows) if test_windows else [cfg.test_window or cfg.window]
-    per_fold = []
-    for block in blocks:
-        test = [r for r in recordings if r.trial in block]
-        train = [r for r in recordings if r.trial not in block]
-        per_fold.append(evaluate_many(train, test, cfg, specs))
+    per_fold = [evaluate_many(train, test, cfg, specs) for train, test in splits]
 
     def summary(spec: str) -> dict:
-        out: dict = {"folds": [[int(min(b)), int(max(b))] for b in blocks], "classifiers": {}}
-        for name in cfg.classifiers:
-            accs = [r[spec]["classifiers"][name]["accuracy"] for r in per_fold]
-            out["classifiers"][name] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
-                                        "fold_accuracy": accs}
-        return out
+        return {"folds": _block_ranges(blocks),
+                "classifiers": {name: _fold_summary([r[spec]["classifiers"][name]["accuracy"] for r in per_fold])
+                                for name in cfg.classifiers}}
 
     if test_windows:
-        return {"folds": [[int(min(b)), int(max(b))] for b in blocks],
+        return {"folds": _block_ranges(blocks),
                 "by_test_window": {spec: summary(spec) for spec in specs}}
     return summary(specs[0])
 
@@ -585,25 +597,19 @@ def _select(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Seque
         raise ConfigError("no candidate mode to select from", key="select")
     runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s, rockets)
     name = cfg.classifiers[0]
-    trials = sorted({r.trial for r in train})
-    fold_trials = trial_folds(trials, folds)
+    fold_trials, splits = _trial_splits(train, folds)
     scores: dict[str, dict] = {}
     for label, run_cfg in runs.items():
-        accs = []
-        for block in fold_trials:
-            inner_test = [r for r in train if r.trial in block]
-            inner_train = [r for r in train if r.trial not in block]
-            res = evaluate(inner_train, inner_test, replace(run_cfg, classifiers=(name,), test_window=None))
-            accs.append(res["classifiers"][name]["accuracy"])
+        accs = [evaluate(inner_train, inner_test, replace(run_cfg, classifiers=(name,), test_window=None)
+                         )["classifiers"][name]["accuracy"] for inner_train, inner_test in splits]
         scores[label] = {"mode": run_cfg.mode, "block_s": run_cfg.block_s, "rocket_file": run_cfg.rocket_file,
-                         "accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
-                         "fold_accuracy": [float(a) for a in accs]}
+                         **_fold_summary(accs)}
     best = max(v["accuracy"] for v in scores.values())
     chosen = next(k for k, v in scores.items() if v["accuracy"] >= best - 1e-12)
     pick = runs[chosen]
     return ({"chosen": pick.mode, "block_s": pick.block_s, "block_hop_s": pick.block_hop_s,
              "rocket_file": pick.rocket_file, "chosen_label": chosen, "candidates": scores, "skipped": skipped,
-             "classifier": name, "folds": [[int(min(b)), int(max(b))] for b in fold_trials]}, pick)
+             "classifier": name, "folds": _block_ranges(fold_trials)}, pick)
 
 
 def evaluate_selected(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording], cfg: EvalConfig,
@@ -638,17 +644,10 @@ def selected_trial_cv(recordings: Sequence[BiotacRecording], cfg: EvalConfig, ca
         ``folds``, ``candidates`` and per classifier ``accuracy``,
         ``accuracy_std``, ``fold_accuracy`` and ``chosen`` (the mode chosen in each fold).
     """
-    blocks = trial_folds(sorted({r.trial for r in recordings}), folds)
-    out: dict = {"folds": [[int(min(b)), int(max(b))] for b in blocks], "candidates": list(candidates),
-                 "classifiers": {}}
+    blocks, splits = _trial_splits(recordings, folds)
+    out: dict = {"folds": _block_ranges(blocks), "candidates": list(candidates), "classifiers": {}}
     for name in cfg.classifiers:
-        accs, chosen = [], []
-        for block in blocks:
-            test = [r for r in recordings if r.trial in block]
-            train = [r for r in recordings if r.trial not in block]
-            res = evaluate_selected(train, test, replace(cfg, classifiers=(name,)), candidates)
-            accs.append(float(res["classifiers"][name]["accuracy"]))
-            chosen.append(res["selection"]["chosen"])
-        out["classifiers"][name] = {"accuracy": float(np.mean(accs)), "accuracy_std": float(np.std(accs)),
-                                    "fold_accuracy": accs, "chosen": chosen}
+        runs = [evaluate_selected(train, test, replace(cfg, classifiers=(name,)), candidates) for train, test in splits]
+        out["classifiers"][name] = {**_fold_summary([r["classifiers"][name]["accuracy"] for r in runs]),
+                                    "chosen": [r["selection"]["chosen"] for r in runs]}
     return out
