@@ -19,7 +19,7 @@ another.  This runs the same protocol on each layout the readers take:
 For each: cross-validation over contiguous blocks of trials (each block the
 test set once, :func:`~.experiments.trial_cv`), ``plain`` (mean, sd, min and
 max of every channel) against the evaluation's default mode less the groups
-the cell type cannot feed (:func:`~.bank.default_mode_for`: what ``tactile
+the cell type cannot feed (:func:`~.bank.fed_mode`: what ``tactile
 evaluate`` runs without ``--mode``), with the same classifiers, windows and
 seeds; and the choice between the two made inside each fold's training
 trials (``tactile evaluate --select plain,<default>``), which is how a
@@ -48,7 +48,7 @@ from tactile_descriptors_lab.datasets.layouts import (
 )
 from tactile_descriptors_lab.datasets.readers import read_source
 from tactile_descriptors_lab.datasets.recording import BiotacRecording
-from tactile_descriptors_lab.evaluation.bank import default_mode_for, recordings_cell_type
+from tactile_descriptors_lab.evaluation.bank import fed_mode, recordings_cell_type
 from tactile_descriptors_lab.evaluation.experiments import EvalConfig, selected_trial_cv, trial_cv
 
 __all__ = ["DatasetPlan", "FULL_DATASETS", "QUICK_DATASETS", "FLOOR_MODE", "write_sources", "evaluate_datasets",
@@ -211,7 +211,7 @@ def evaluate_datasets(recs: Sequence[BiotacRecording], folder: str | Path, cfg: 
         sets[name] = {**src, "records": read_source(src["source"], src["mapping"])}
     for name, src in sets.items():
         records = src["records"]
-        mode, left, _ = default_mode_for(recordings_cell_type(records))
+        mode, left, _ = fed_mode(recordings_cell_type(records))
         row = {"about": src["about"], "source": Path(src["source"]).name, "mapping": Path(src["mapping"]).name,
                "classes": len({r.class_name for r in records}), "trials": len(records),
                "window": plan.window, "mode": mode, "left_out": list(left), "cv": {}}

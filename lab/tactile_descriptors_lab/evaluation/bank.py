@@ -306,16 +306,17 @@ def cell_type_groups(cell_type: CellType) -> tuple[tuple[str, ...], dict[str, st
     return tuple(able), why
 
 
-def default_mode_for(cell_type: CellType) -> tuple[str, tuple[str, ...], str]:
-    """The default mode's groups that a cell type can feed, as a mode; the groups left out; why the first was.
+def fed_mode(cell_type: CellType, mode: str = DEFAULT_MODE) -> tuple[str, tuple[str, ...], str]:
+    """A mode less the groups a cell type cannot feed: the mode that is left, the groups left out, and why
+    the first of them was.
 
-    ``(DEFAULT_MODE, (), "")`` when the cell type feeds every group of the default mode.
+    ``(mode, (), "")`` when the cell type feeds every group of ``mode``.
     """
     _, why = cell_type_groups(cell_type)
-    groups = mode_groups(DEFAULT_MODE)
+    groups = mode_groups(mode)
     left = tuple(g for g in groups if g.partition(":")[0] in why)
     if not left:
-        return DEFAULT_MODE, (), ""
+        return mode, (), ""
     return "+".join(g for g in groups if g not in left), left, why[left[0].partition(":")[0]]
 
 

@@ -123,23 +123,13 @@ def resolve_mode(recordings, mode: str | None) -> str:
         For a mode asked for with a group the cell type cannot feed (a vibration rate without a band below
         Nyquist for ``bands``), naming the group, why, and the groups it can feed.
     """
-    from tactile_descriptors_lab.evaluation.bank import (
-        DEFAULT_MODE,
-        cell_type_groups,
-        default_mode_for,
-        mode_groups,
-        recordings_cell_type,
-    )
+    from tactile_descriptors_lab.evaluation.bank import DEFAULT_MODE, cell_type_groups, fed_mode, recordings_cell_type
 
     ct = recordings_cell_type(recordings)
-    if mode is not None:
-        able, why = cell_type_groups(ct)
-        left = [g for g in mode_groups(mode) if g.partition(":")[0] in why]
-        if left:
-            raise ConfigError(f"mode {mode!r}: {why[left[0].partition(':')[0]]}; the groups it can feed: "
-                              f"{', '.join(able)}", key="channels")
-        return mode
-    kept, left, reason = default_mode_for(ct)
+    kept, left, reason = fed_mode(ct, DEFAULT_MODE if mode is None else mode)
+    if left and mode is not None:
+        raise ConfigError(f"mode {mode!r}: {reason}; the groups it can feed: {', '.join(cell_type_groups(ct)[0])}",
+                          key="channels")
     if left:
         print(f"note: descriptor mode {DEFAULT_MODE} without {', '.join(left)} ({reason}): "
               f"{kept}; --mode {DEFAULT_MODE} asks for every group", file=sys.stderr)
