@@ -99,7 +99,6 @@ def skin_columns(tr: dict) -> dict[str, np.ndarray]:
     return cols
 
 
-
 def write_skin_hdf5(path: Path, trials: list[dict]) -> Path:
     """One HDF5 file, a group ``<class>/trial_<n>`` a trial, a dataset a column."""
     import h5py
@@ -123,7 +122,6 @@ def skin_hdf5_mapping() -> dict:
             "class": {"from": "group", "pattern": "^([^/]+)/"}, "trial": {"from": "group", "pattern": r"trial_(\d+)$"},
             "samples_per_frame": SKIN_SAMPLES_PER_FRAME, "channels": dict(SKIN_CHANNELS),
             "stamps": {"column": "t_ns", "unit": "ns"}, "tare": "none"}
-
 
 
 # --------------------------------------------------------------------------- other labs' layouts

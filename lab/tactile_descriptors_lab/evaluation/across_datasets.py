@@ -209,14 +209,14 @@ def evaluate_datasets(recs: Sequence[BiotacRecording], folder: str | Path, cfg: 
                                        f"{trials[0]}-{trials[-1]} (CSV)"}}
     for name, src in write_sources(recs, folder, plan).items():
         sets[name] = {**src, "records": read_source(src["source"], src["mapping"])}
+    run = replace(cfg, window=plan.window,
+                  train_per_trial=cfg.train_per_trial if plan.train_per_trial is None else plan.train_per_trial)
     for name, src in sets.items():
         records = src["records"]
         mode, left, _ = fed_mode(recordings_cell_type(records))
         row = {"about": src["about"], "source": Path(src["source"]).name, "mapping": Path(src["mapping"]).name,
                "classes": len({r.class_name for r in records}), "trials": len(records),
                "window": plan.window, "mode": mode, "left_out": list(left), "cv": {}}
-        run = replace(cfg, window=plan.window,
-                      train_per_trial=cfg.train_per_trial if plan.train_per_trial is None else plan.train_per_trial)
         for m in (FLOOR_MODE, mode):
             if progress is not None:
                 progress(f"{name}: {m}")

@@ -8,19 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from writers import (
-    simulated_skin_trials,
-    write_hdf5,
-    write_npy_split,
-    write_npz,
-    write_old_shadow_bag,
-    write_penn_bolt,
-    write_ros1_bag,
-    write_ros2_shadow_bag,
-    write_skin_hdf5,
-)
+from writers import write_hdf5, write_npz, write_old_shadow_bag, write_ros1_bag, write_ros2_shadow_bag
 
 from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
+from tactile_descriptors_lab.datasets.layouts import (
+    simulated_skin_trials,
+    write_npy_split,
+    write_penn_bolt,
+    write_skin_hdf5,
+)
 from tactile_descriptors_lab.datasets.mapping import load_mapping
 from tactile_descriptors_lab.datasets.readers import read_source
 from tactile_descriptors_ros.tools.cli import main

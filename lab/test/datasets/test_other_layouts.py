@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from writers import (
+from writers import write_ros1_bag
+
+from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
+from tactile_descriptors_lab.datasets.layouts import (
     PENN_OBJECTS,
     icub_mapping,
     icub_robot_yaml,
@@ -26,10 +29,7 @@ from writers import (
     write_icub_split,
     write_npy_split,
     write_penn_bolt,
-    write_ros1_bag,
 )
-
-from tactile_descriptors_lab.datasets.biotac_slide import load_recordings
 from tactile_descriptors_lab.datasets.mapping import parse_mapping
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
 from tactile_descriptors_lab.datasets.recording import CellRecording

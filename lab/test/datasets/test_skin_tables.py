@@ -15,9 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from writers import SKIN_SAMPLES_PER_FRAME, simulated_skin_trials, write_skin_csv, write_skin_hdf5, write_skin_npz
+from writers import write_skin_csv, write_skin_npz
 
-from tactile_descriptors_lab.datasets.layouts import SKIN_CHANNELS, skin_hdf5_mapping
+from tactile_descriptors_lab.datasets.layouts import (
+    SKIN_CHANNELS,
+    SKIN_SAMPLES_PER_FRAME,
+    simulated_skin_trials,
+    skin_hdf5_mapping,
+    write_skin_hdf5,
+)
 from tactile_descriptors_lab.datasets.mapping import load_mapping
 from tactile_descriptors_lab.datasets.readers import LoadReport, read_source
 from tactile_descriptors_lab.datasets.recording import CellRecording

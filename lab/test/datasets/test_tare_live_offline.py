@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from writers import simulated_skin_trials, write_skin_csv
+from writers import write_skin_csv
 
 from tactile_descriptors_lab.datasets.biotac_slide import MAPPING, load_recordings
+from tactile_descriptors_lab.datasets.layouts import simulated_skin_trials
 from tactile_descriptors_lab.datasets.readers import read_source
 from tactile_descriptors_lab.datasets.recording import trial_rest
 from tactile_descriptors_ros.codecs import biotac_spi as spi

@@ -13,25 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_descriptors_lab.datasets.layouts import (  # noqa: F401 (the tests' writers, in one place)
-    ICUB_TAXELS,
-    ICUB_UNITS_PER_COUNT,
-    NPY_COLUMNS,
-    PENN_OBJECTS,
-    SKIN_SAMPLES_PER_FRAME,
-    icub_mapping,
-    icub_robot_yaml,
-    icub_taxel_counts,
-    npy_split_mapping,
-    penn_bolt_mapping,
-    penn_run_name,
-    simulated_skin_trials,
-    skin_columns,
-    write_icub_split,
-    write_npy_split,
-    write_penn_bolt,
-    write_skin_hdf5,
-)
+from tactile_descriptors_lab.datasets.layouts import SKIN_SAMPLES_PER_FRAME, skin_columns
 from tactile_descriptors_lab.datasets.msgdefs import SHADOW_ALL, UPENN_HAND, foreign_typestore
 from tactile_descriptors_lab.datasets.recording import BiotacRecording
 
