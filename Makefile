@@ -10,6 +10,7 @@
 #   make report-length  only its touch-length sections (minutes, not an hour)
 #   make report-headline  only its headline table (the figures the README quotes first)
 #   make report-datasets  only its table across data sets (other labs' layouts, the simulated NAO)
+#   make report-convolutions  only its section on the convolution group (1 s SVM, 2 s online)
 #   make protocols  the paper's protocols on simulated robots (lab/docs/simulated.md)
 #   make bench    time the descriptor path against a naive baseline
 #   make clean    remove the venv and build products
@@ -43,7 +44,7 @@ export AMENT_PREFIX_PATH := $(VIRTUAL_ENV)$(if $(AMENT_PREFIX_PATH),:$(AMENT_PRE
 
 PIP := $(VPY) -m pip --disable-pip-version-check -q
 
-.PHONY: setup test browser demo demo-nao report report-length report-headline report-datasets protocols bench fuzz clean
+.PHONY: setup test browser demo demo-nao report report-length report-headline report-datasets report-convolutions protocols bench fuzz clean
 
 setup: $(VENV)/.installed $(VENV)/.ament $(VENV)/setup.bash $(VENV)/.ros2cli $(VENV)/.kernel
 
@@ -166,6 +167,9 @@ report-length: setup
 
 report-datasets: setup
 	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --only datasets --readme README.md
+
+report-convolutions: setup
+	$(VENV)/bin/tactile report --data $(SHARED)/data/biotac_slide_20_50 --out lab/docs --only convolutions --readme README.md
 
 protocols: setup
 	$(VENV)/bin/tactile protocols --out lab/docs

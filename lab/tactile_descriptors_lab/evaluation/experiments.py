@@ -47,7 +47,7 @@ from tactile_descriptors_ros.errors import ConfigError
 
 __all__ = ["EvalConfig", "CLASSIFIERS", "DEFAULT_BLOCK_S", "DEFAULT_BLOCK_HOP_S", "evaluate", "evaluate_many",
            "trial_folds", "trial_cv", "descriptor_seconds", "draw_spec_windows", "describe_windows",
-           "select_mode", "evaluate_selected", "selected_trial_cv", "SELECTION_FOLDS"]
+           "select_mode", "selection_candidates", "evaluate_selected", "selected_trial_cv", "SELECTION_FOLDS"]
 
 
 #: Learners of ``tactile evaluate --classifier``.
@@ -492,7 +492,7 @@ def _block_label(block_s: float | None) -> str:
     return f"{block_s:g} s blocks" if block_s else "whole window"
 
 
-def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
+def selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
                           block_hop_s: float, rockets: Sequence[str] | None = None
                           ) -> tuple[dict[str, EvalConfig], dict[str, str]]:
     """The configurations a selection compares, by label, and the pairs it cannot run, with why.
@@ -524,7 +524,7 @@ def _selection_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequenc
 
 def _mode_block_candidates(cfg: EvalConfig, modes: Sequence[str], blocks: Sequence[float] | None,
                            block_hop_s: float) -> tuple[dict[str, EvalConfig], dict[str, str]]:
-    """:func:`_selection_candidates` without the transform files."""
+    """:func:`selection_candidates` without the transform files."""
     for mode in modes:
         mode_groups(mode)  # unknown modes are refused before any work
     if blocks is None:
@@ -595,7 +595,7 @@ def _select(train: Sequence[BiotacRecording], cfg: EvalConfig, candidates: Seque
     and transform)."""
     if not candidates:
         raise ConfigError("no candidate mode to select from", key="select")
-    runs, skipped = _selection_candidates(cfg, candidates, blocks, block_hop_s, rockets)
+    runs, skipped = selection_candidates(cfg, candidates, blocks, block_hop_s, rockets)
     name = cfg.classifiers[0]
     fold_trials, splits = _trial_splits(train, folds)
     scores: dict[str, dict] = {}

@@ -29,6 +29,12 @@ from tactile_descriptors_lab.evaluation.across_datasets import (
 )
 from tactile_descriptors_lab.evaluation.bank import BANK_VERSION, DEFAULT_MODE
 from tactile_descriptors_lab.evaluation.classifiers import C_GRID_TEXT
+from tactile_descriptors_lab.evaluation.convolutions import (
+    FULL_CONVOLUTIONS,
+    QUICK_CONVOLUTIONS,
+    ConvolutionPlan,
+    evaluate_convolutions,
+)
 from tactile_descriptors_lab.evaluation.experiments import (
     DEFAULT_BLOCK_S,
     EvalConfig,
@@ -46,7 +52,7 @@ __all__ = ["ReportPlan", "FULL_PLAN", "QUICK_PLAN", "SECTIONS", "LENGTH_SECTIONS
 
 #: Sections of results.json, in report order.
 SECTIONS: tuple[str, ...] = ("headline", "sweep", "length", "length_cv", "short", "ablation", "trial_cv",
-                             "datasets")
+                             "datasets", "convolutions")
 
 #: The sections ``tactile report --only length`` recomputes (the rest is kept from results.json).
 LENGTH_SECTIONS: tuple[str, ...] = ("length", "length_cv", "short")
@@ -86,6 +92,8 @@ class ReportPlan:
     ``trial_cv_modes`` are scored by trial cross-validation at the ablation
     window (default: the ablation modes); the full plan adds ``plain`` (mean,
     sd, min, max of every channel), the floor the shipped groups must clear.
+    ``datasets`` plans the table across data sets, ``convolutions`` the
+    section on the ``rocket`` group (1 s SVM, 2 s online).
     """
 
     def __init__(self, *, headline_modes: Sequence[str], headline_windows: Sequence[str],
@@ -95,7 +103,8 @@ class ReportPlan:
                  ablation_modes: Sequence[str], ablation_window: str, headline_repeats: int,
                  sweep_repeats: int, cv_folds: int, train_per_trial: int, test_per_trial: int,
                  pa_orders: int, length_repeats: int = 1, short_train_per_trial: int | None = None,
-                 trial_cv_modes: Sequence[str] | None = None, datasets: DatasetPlan = FULL_DATASETS) -> None:
+                 trial_cv_modes: Sequence[str] | None = None, datasets: DatasetPlan = FULL_DATASETS,
+                 convolutions: ConvolutionPlan = FULL_CONVOLUTIONS) -> None:
         self.headline_modes = tuple(headline_modes)
         self.headline_windows = tuple(headline_windows)
         self.sweep_modes = tuple(sweep_modes)
@@ -116,6 +125,7 @@ class ReportPlan:
         self.test_per_trial = test_per_trial
         self.pa_orders = pa_orders
         self.datasets = datasets
+        self.convolutions = convolutions
 
 
 FULL_PLAN = ReportPlan(
@@ -139,7 +149,7 @@ QUICK_PLAN = ReportPlan(
     short_windows=("0.5",), short_train_per_trial=1,
     ablation_modes=("paper",), ablation_window="1", trial_cv_modes=("paper", "plain"),
     headline_repeats=1, sweep_repeats=1, cv_folds=2, train_per_trial=1, test_per_trial=1, pa_orders=1,
-    datasets=QUICK_DATASETS)
+    datasets=QUICK_DATASETS, convolutions=QUICK_CONVOLUTIONS)
 
 
 def _pct(x: float) -> str:
@@ -287,6 +297,7 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
     for m in plan.trial_cv_modes:
         todo.append(("trial_cv", (m, plan.ablation_window), replace(abl, mode=m), "cv"))
     todo.append(("datasets", ("every layout",), abl, "datasets"))
+    todo.append(("convolutions", ("1 s SVM and 2 s online",), base, "convolutions"))
     todo = [t for t in todo if t[0] in wanted]
 
     results: dict = {sec: {} for sec in wanted}
@@ -304,6 +315,11 @@ def build_report(data_dir: str | Path, out_dir: str | Path, *, plan: ReportPlan 
             with tempfile.TemporaryDirectory(prefix="tactile_report_datasets_") as tmp:
                 rows = evaluate_datasets(dev, tmp, cfg, plan.datasets,
                                          progress=lambda text: bar.set_postfix_str(f"datasets {text}"))
+            for name, row in rows.items():
+                results[section][(name,)] = row
+        elif kind == "convolutions":
+            rows = evaluate_convolutions(train, test, dev, cfg, plan.convolutions,
+                                         progress=lambda text: bar.set_postfix_str(f"convolutions {text}"))
             for name, row in rows.items():
                 results[section][(name,)] = row
         elif kind == "many":
@@ -349,6 +365,8 @@ def _plan_record(plan: ReportPlan, sections: Sequence[str]) -> dict:
                    length_repeats=plan.length_repeats)
     if "datasets" in sections:
         rec.update(datasets_window=plan.datasets.window, datasets_folds=plan.datasets.folds)
+    if "convolutions" in sections:
+        rec.update(convolutions_folds=plan.convolutions.folds)
     return rec
 
 
@@ -606,6 +624,8 @@ def render_markdown(serial: dict, figs: dict[str, str]) -> str:
         a("")
     if serial.get("datasets"):
         _datasets_markdown(serial, a)
+    if serial.get("convolutions"):
+        _convolutions_markdown(serial, a)
     return "\n".join(L) + "\n"
 
 
@@ -645,6 +665,79 @@ def _datasets_markdown(serial: dict, a) -> None:
         a(f"| {name}: {r['about']} | {r['classes']} | {r['trials']} | {r['window']} s | {mode} | "
           f"{_cv_cell(floor, 'svm')} | {_cv_cell(mine, 'svm')} | {_selected_cell(sel, 'svm', r['mode'])} | "
           f"{_cv_cell(floor, 'pa')} | {_cv_cell(mine, 'pa')} | {_selected_cell(sel, 'pa', r['mode'])} | {verdict} |")
+    a("")
+
+
+def _convolutions_markdown(serial: dict, a) -> None:
+    """The section of :mod:`.convolutions`: the ``rocket`` group beside the shipped ones, 1 s SVM and 2 s online,
+    each candidate on the development split and by trial CV, and the choice made inside the training trials."""
+    plan = serial["plan"]
+    split = serial["split"]
+    rows = serial["convolutions"]
+    a("## With the convolutions: 1 s windows (SVM) and 2 s windows (online)")
+    a("")
+    for line in _provenance_lines(serial, "convolutions"):
+        a(line)
+    first = next(iter(rows.values()))
+    transform = first["transform"]
+    a("The `rocket` group (random convolutions of PAC and of the slow channels, their biases from "
+      f"`config/rocket/{transform['file']}`, {transform['description']}) joined to the shipped groups is "
+      f"`combined_rocket`. Each candidate is scored on the development split (train {format_trials(split['train_trials'])}, test "
+      f"{format_trials(split['test_trials'])}) and by cross-validation over "
+      f"{plan.get('convolutions_folds', plan['cv_folds'])} contiguous blocks of trials; a fold that tests trials "
+      "the transform was fitted on has seen their signals, never their labels. *Chosen* is what a selection "
+      "inside the training trials picks (`tactile evaluate --select`, with `--select-blocks` online; "
+      f"{len(first['selection']['folds'])} inner blocks of the training trials, ties to the candidate listed "
+      "first); it then scores the test split once, "
+      "the *dev split* figure of its row. The other rows choose nothing: they show what the choice leaves.")
+    a("")
+    a("| window, learner | candidate | values | dev split % | trial CV % (mean +- sd; folds) | inner % (selection) |")
+    a("|---|---|---|---|---|---|")
+    for r in rows.values():
+        sel = r["selection"]
+        if r["classifier"] == "svm":
+            c_grid = ", ".join(f"{c:g}" for c in r["c_grid"])
+            learner = (f"{r['window']} s, linear SVM ({r['train_per_trial']} training windows a trial; C over "
+                       f"{c_grid} by {r['cv_folds']}-fold x {r['cv_repeats']} CV)")
+        else:
+            orders = next(iter(r["candidates"].values()))["split"].get("orders")
+            learner = (f"{r['window']} s, {_online_of(serial, short=True)}, one pass ({r['train_per_trial']} "
+                       f"training windows a trial; mean +- sd over {orders} orders on the dev split)")
+        for label, c in r["candidates"].items():
+            s = c["split"]
+            dev = _pct(s["accuracy"]) + (f" +- {_pct(s['accuracy_std'])}" if "accuracy_std" in s else "")
+            cv = c["cv"]
+            folds = ", ".join(f"{_pct(x)}" for x in cv["fold_accuracy"])
+            inner = sel["inner"].get(label)
+            inner_cell = f"{_pct(inner['accuracy'])} +- {_pct(inner['accuracy_std'])}" if inner else "-"
+            name = f"`{label}`" + (" **(chosen)**" if label == sel["chosen_label"] else "")
+            a(f"| {learner} | {name} | {s['n_features']} | {dev} | {_pct(cv['accuracy'])} +- "
+              f"{_pct(cv['accuracy_std'])} ({folds}) | {inner_cell} |")
+            learner = ""  # named on its first row
+    a("")
+    for r in rows.values():
+        sel = r["selection"]
+        best = max(r["candidates"].items(), key=lambda kv: kv[1]["split"]["accuracy"])
+        a(f"- **{r['window']} s, {'the SVM' if r['classifier'] == 'svm' else 'online'}**: the selection keeps "
+          f"`{sel['chosen_label']}` and scores the test split once: {_pct(sel['test']['accuracy'])} %. "
+          f"The best candidate on the dev split, known only afterwards: `{best[0]}`, "
+          f"{_pct(best[1]['split']['accuracy'])} %.")
+    a("")
+    svm, online = rows.get("svm"), rows.get("online")
+    commands = []
+    if svm:
+        commands.append(f"`--window {svm['window']} --train-windows {svm['train_per_trial']} --select "
+                        f"{','.join(svm['candidates'])} --cv-repeats {svm['cv_repeats']} --c-grid "
+                        f"{','.join(f'{c:g}' for c in svm['c_grid'])}` (SVM)")
+    if online:
+        modes = ",".join(dict.fromkeys(c["mode"] for c in online["candidates"].values()))
+        blocks = ",".join(dict.fromkeys(f"{c['block_s'] or 0:g}" for c in online["candidates"].values()))
+        commands.append(f"`--window {online['window']} --train-windows {online['train_per_trial']} --classifier pa "
+                        f"--select {modes} --select-blocks {blocks}` (online)")
+    a(f"Reproduce the choices with `tactile evaluate --train DATA --test DATA --train-trials "
+      f"{format_trials(split['train_trials'])} --test-trials {format_trials(split['test_trials'])}` and "
+      + " or ".join(commands) + "; one candidate with `--channels MODE` (and `--block 0` for the whole window), "
+      "a fold of the trial CV with its trials as the test trials.")
     a("")
 
 
@@ -807,6 +900,7 @@ def what_to_expect(serial: dict) -> str:
     length_min = serial.get("section_runtime_s", {}).get("length")
     headline_min = serial.get("section_runtime_s", {}).get("headline")
     datasets_min = serial.get("section_runtime_s", {}).get("datasets")
+    convolutions_min = serial.get("section_runtime_s", {}).get("convolutions")
 
     def svm(r: dict) -> str:
         return f"{_pct(r['classifiers']['svm']['accuracy'])} %"
@@ -841,7 +935,9 @@ def what_to_expect(serial: dict) -> str:
         "cores" + "".join(f"; `make report-{name}` {what} in about {minutes / 60:.0f} minutes"
                           for name, what, minutes in (("headline", "its headline table", headline_min),
                                                       ("length", "its touch-length sections", length_min),
-                                                      ("datasets", "its table across data sets", datasets_min))
+                                                      ("datasets", "its table across data sets", datasets_min),
+                                                      ("convolutions", "its section on the convolution group",
+                                                       convolutions_min))
                           if minutes) + ".",
     ]
     if serial.get("datasets"):
@@ -855,6 +951,18 @@ def what_to_expect(serial: dict) -> str:
                      "over trials, the default descriptor against plain per-channel statistics, linear SVM, on "
                      + "; ".join(f"the {name} {pair(r, 'svm')}" for name, r in rows.items())
                      + when("datasets") + ".")
+    if serial.get("convolutions"):
+        conv = serial["convolutions"]
+
+        def chosen(setting: str) -> str:
+            r = conv[setting]
+            sel = r["selection"]
+            return (f"{r['window']} s {'SVM' if r['classifier'] == 'svm' else 'online'} "
+                    f"{_pct(sel['test']['accuracy'])} % (`{sel['chosen_label']}`)")
+
+        lines.insert(2, "- **With the convolution group** (`rocket`, not in the shipped configurations; "
+                     "`lab/docs/results.md`): chosen inside the training trials and scored once on the test "
+                     "trials, " + " and ".join(chosen(k) for k in conv) + when("convolutions") + ".")
     return "\n".join([README_BEGIN, *lines, README_END])
 
 

@@ -70,6 +70,22 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
             assert set(row["selected"]["classifiers"][c]["chosen"]) <= {"plain", row["mode"]}
     assert "## Across data sets: the default descriptor against plain statistics" in md
     assert "| iCub taxel pad: 3 materials, 36 trials of a 60-taxel pressure-only pad at 50 Hz" in md
+    # the convolution group beside the shipped ones: every candidate on the dev split and by trial CV, and the
+    # choice made inside the training trials, scored once on the test split
+    conv = res["convolutions"]
+    assert list(conv) == ["svm", "online"]
+    assert list(conv["svm"]["candidates"]) == ["plain", "combined_rocket"]
+    assert conv["svm"]["candidates"]["combined_rocket"]["split"]["n_features"] == 1521
+    assert list(conv["online"]["candidates"]) == ["combined_rocket, 1 s blocks", "combined_rocket, whole window"]
+    assert conv["online"]["candidates"]["combined_rocket, whole window"]["block_s"] is None
+    assert conv["svm"]["transform"].startswith("biotac.json: fitted by tactile fit-rocket")
+    for r in conv.values():
+        sel = r["selection"]
+        assert set(sel["inner"]) == set(r["candidates"]) and len(sel["folds"]) == 3
+        assert sel["test"] == r["candidates"][sel["chosen_label"]]["split"]  # the same windows and seeds
+        assert all(len(c["cv"]["fold_accuracy"]) == 2 for c in r["candidates"].values())
+    assert "## With the convolutions: 1 s windows (SVM) and 2 s windows (online)" in md
+    assert md.count("**(chosen)**") == 2
 
     # --only length recomputes those sections alone, keeps the rest and renders the page again
     head_before = res["headline"]
