@@ -78,7 +78,8 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
     assert conv["svm"]["candidates"]["combined_rocket"]["split"]["n_features"] == 1521
     assert list(conv["online"]["candidates"]) == ["combined_rocket, 1 s blocks", "combined_rocket, whole window"]
     assert conv["online"]["candidates"]["combined_rocket, whole window"]["block_s"] is None
-    assert conv["svm"]["transform"].startswith("biotac.json: fitted by tactile fit-rocket")
+    assert conv["svm"]["transform"]["file"] == "biotac.json"
+    assert conv["svm"]["transform"]["description"].startswith("fitted by tactile fit-rocket")
     for r in conv.values():
         sel = r["selection"]
         assert set(sel["inner"]) == set(r["candidates"]) and len(sel["folds"]) == 3
