@@ -76,6 +76,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
 
 from ..errors import ConfigError, SignalError
 from .cell_types import CellType
@@ -103,6 +104,7 @@ __all__ = [
     "selection_name",
     "groups_in_labels",
     "ROCKET_SIGNALS",
+    "rocket_parameters_path",
     "rocket_parameters",
     "fitted",
 ]
@@ -246,6 +248,17 @@ def group_channels(cell_type: CellType, group: str) -> tuple[str, ...]:
     return cell_type.vibration.channels + cell_type.deformation.channels
 
 
+def rocket_parameters_path(cell_type: CellType) -> Path:
+    """Where a cell type's fitted transforms of the ``rocket`` group live: ``config/rocket/<cell type>.json``.
+
+    Raises
+    ------
+    ConfigError
+        When the config directory cannot be found.
+    """
+    return config_dir() / "rocket" / f"{cell_type.name}.json"
+
+
 def rocket_parameters(cell_type: CellType, *, key: str = "descriptor.groups", source: str | None = None) -> dict:
     """The fitted transforms of the ``rocket`` group for a cell type: ``config/rocket/<cell type>.json``.
 
@@ -264,7 +277,7 @@ def rocket_parameters(cell_type: CellType, *, key: str = "descriptor.groups", so
     from . import rocket  # the transform and its files (numpy; its kernel loads on first use)
 
     try:
-        path = config_dir() / "rocket" / f"{cell_type.name}.json"
+        path = rocket_parameters_path(cell_type)
     except ConfigError as exc:
         raise ConfigError(f"feature group 'rocket': {exc}", key=key, source=source) from None
     if not path.is_file():

@@ -37,7 +37,7 @@ from tactile_descriptors_lab.evaluation.experiments import (
     selection_candidates,
     trial_cv,
 )
-from tactile_descriptors_ros.core.yamlreader import config_dir
+from tactile_descriptors_ros.core.groups import rocket_parameters_path
 
 __all__ = ["ConvolutionPlan", "FULL_CONVOLUTIONS", "QUICK_CONVOLUTIONS", "evaluate_convolutions",
            "transform_description"]
@@ -97,7 +97,7 @@ QUICK_CONVOLUTIONS = ConvolutionPlan(svm_train_per_trial=2, svm_modes=("plain", 
 def transform_description(recordings: Sequence[BiotacRecording]) -> dict:
     """The transform file of the recordings' cell type: its ``file`` name and the ``description`` it holds
     (``tactile fit-rocket`` records the recordings, classes, trials and seed it was fitted on)."""
-    path = config_dir() / "rocket" / f"{recordings_cell_type(recordings).name}.json"
+    path = rocket_parameters_path(recordings_cell_type(recordings))
     return {"file": path.name, "description": json.loads(path.read_text()).get("description", "no description")}
 
 
