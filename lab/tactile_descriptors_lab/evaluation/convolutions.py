@@ -8,8 +8,8 @@ stop short of the data:
 * **1 s windows, linear SVM**: every mode of :attr:`ConvolutionPlan.svm_modes`
   (``plain``, ``combined``, ``combined_rocket``) on the development split and
   by cross-validation over blocks of trials, and the choice among them made
-  inside the training trials (``tactile evaluate --select``), which scores the
-  test split once;
+  inside the training trials (``tactile evaluate --select``, :func:`~.experiments.select_mode`), which
+  scores the test split once;
 * **2 s windows, the online learner** (the classifier node's default, one
   pass): every mode of :attr:`ConvolutionPlan.online_modes` with each block
   length of :attr:`ConvolutionPlan.online_blocks` (1 s blocks, and one
@@ -33,7 +33,7 @@ from tactile_descriptors_lab.evaluation.experiments import (
     DEFAULT_BLOCK_HOP_S,
     EvalConfig,
     evaluate,
-    evaluate_selected,
+    select_mode,
     selection_candidates,
     trial_cv,
 )
@@ -133,12 +133,13 @@ def _setting(train: Sequence[BiotacRecording], test: Sequence[BiotacRecording],
                                     "split": _split_row(evaluate(train, test, run), name),
                                     "cv": {"folds": cv["folds"], **cv["classifiers"][name]}}
     progress(f"{name} selection")
-    chosen = evaluate_selected(train, test, cfg, modes, blocks=blocks, block_hop_s=DEFAULT_BLOCK_HOP_S)
-    sel = chosen["selection"]
+    sel = select_mode(train, cfg, modes, blocks=blocks, block_hop_s=DEFAULT_BLOCK_HOP_S)
+    # the choice is one of the candidates above, with the same configuration, windows and seeds: its score on the
+    # test split is that candidate's development-split row (what evaluate_selected would compute once more)
     out["selection"] = {"chosen_label": sel["chosen_label"], "folds": sel["folds"],
                         "inner": {k: {"accuracy": v["accuracy"], "accuracy_std": v["accuracy_std"],
                                       "fold_accuracy": v["fold_accuracy"]} for k, v in sel["candidates"].items()},
-                        "test": _split_row(chosen, name)}
+                        "test": out["candidates"][sel["chosen_label"]]["split"]}
     return out
 
 

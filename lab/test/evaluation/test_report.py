@@ -84,6 +84,9 @@ def test_quick_report_writes_every_section_and_figure(biotac_data_dir, tmp_path,
         sel = r["selection"]
         assert set(sel["inner"]) == set(r["candidates"]) and len(sel["folds"]) == 3
         assert sel["test"] == r["candidates"][sel["chosen_label"]]["split"]  # the same windows and seeds
+        # the choice is the best by inner accuracy, the first listed on a tie
+        best = max(v["accuracy"] for v in sel["inner"].values())
+        assert sel["chosen_label"] == next(k for k, v in sel["inner"].items() if v["accuracy"] >= best - 1e-12)
         assert all(len(c["cv"]["fold_accuracy"]) == 2 for c in r["candidates"].values())
     assert "## With the convolutions: 1 s windows (SVM) and 2 s windows (online)" in md
     assert md.count("**(chosen)**") == 2
