@@ -475,9 +475,13 @@ def _json_default(obj):
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
-def _cv_cell(r: dict, name: str) -> str:
-    c = r["classifiers"].get(name)
+def _mean_sd(c: dict | None) -> str:
+    """An accuracy with its spread, ``mean +- sd`` in %, from ``accuracy`` and ``accuracy_std`` (``-`` for None)."""
     return f"{_pct(c['accuracy'])} +- {_pct(c['accuracy_std'])}" if c else "-"
+
+
+def _cv_cell(r: dict, name: str) -> str:
+    return _mean_sd(r["classifiers"].get(name))
 
 
 def _provenance(serial: dict, section: str) -> dict | None:
@@ -705,14 +709,11 @@ def _convolutions_markdown(serial: dict, a) -> None:
                        f"training windows a trial; mean +- sd over {orders} orders on the dev split)")
         for label, c in r["candidates"].items():
             s = c["split"]
-            dev = _pct(s["accuracy"]) + (f" +- {_pct(s['accuracy_std'])}" if "accuracy_std" in s else "")
-            cv = c["cv"]
-            folds = ", ".join(f"{_pct(x)}" for x in cv["fold_accuracy"])
-            inner = sel["inner"].get(label)
-            inner_cell = f"{_pct(inner['accuracy'])} +- {_pct(inner['accuracy_std'])}" if inner else "-"
+            dev = _mean_sd(s) if "accuracy_std" in s else _pct(s["accuracy"])
+            folds = ", ".join(f"{_pct(x)}" for x in c["cv"]["fold_accuracy"])
             name = f"`{label}`" + (" **(chosen)**" if label == sel["chosen_label"] else "")
-            a(f"| {learner} | {name} | {s['n_features']} | {dev} | {_pct(cv['accuracy'])} +- "
-              f"{_pct(cv['accuracy_std'])} ({folds}) | {inner_cell} |")
+            a(f"| {learner} | {name} | {s['n_features']} | {dev} | {_mean_sd(c['cv'])} ({folds}) | "
+              f"{_mean_sd(sel['inner'].get(label))} |")
             learner = ""  # named on its first row
     a("")
     for r in rows.values():
@@ -906,7 +907,7 @@ def what_to_expect(serial: dict) -> str:
         return f"{_pct(r['classifiers']['svm']['accuracy'])} %"
 
     def cv_svm(r: dict) -> str:
-        return f"{_pct(r['classifiers']['svm']['accuracy'])} +- {_pct(r['classifiers']['svm']['accuracy_std'])} %"
+        return f"{_mean_sd(r['classifiers']['svm'])} %"
 
     def when(*sections: str) -> str:
         """`` (measured <date> with ...)`` for figures of sections measured with another feature definition."""
